@@ -1,0 +1,29 @@
+"""Exceptions raised by dualid. Every message names what was expected and what was received."""
+
+
+class DualidError(Exception):
+    """Base class of dualid's errors."""
+
+
+class DataError(DualidError, ValueError):
+    """Input data with wrong shapes, non-finite values, missing columns or inconsistent units."""
+
+
+class IdentifiabilityError(DualidError):
+    """The regressor does not determine the parameters (too few samples or rank deficiency)."""
+
+
+class ConsistencyError(DualidError, ValueError):
+    """A parameter vector (e.g. a nominal θ₀) is not physically consistent."""
+
+
+class MetricError(DualidError):
+    """The metric M_i(θ) is not (or cannot be made) positive definite where it must be."""
+
+
+class SolverError(DualidError):
+    """A numerical solver failed; the message carries its status."""
+
+    def __init__(self, message: str, status: str | None = None):
+        super().__init__(message)
+        self.status = status

@@ -1,0 +1,7 @@
+"""The estimator family, all under the same physical-consistency constraints."""
+
+from dualid.estimators.dual_metric import DualMetric
+from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS
+from dualid.estimators.result import BodyProperties, IdentificationResult
+
+__all__ = ["OLS", "WLS", "EnergyLS", "RegularizedWLS", "DualMetric", "IdentificationResult", "BodyProperties"]

@@ -1,0 +1,147 @@
+"""What every estimator shares: checks on the problem, physical-consistency constraints, solving.
+
+Estimators take hyperparameters in their constructor and the problem in ``fit``; they hold no
+state between fits and return an immutable ``IdentificationResult``.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from dualid.errors import ConsistencyError, IdentifiabilityError, SolverError
+from dualid.problem.parameters import ParameterSpace
+from dualid.problem.problem import IdentificationProblem
+
+SOLVERS = ("CLARABEL", "SCS")
+DEFAULT_OPTIONS = {
+    "CLARABEL": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10, "max_iter": 500},
+    "SCS": {"eps": 1e-9, "max_iters": 200000},
+}
+
+
+def check_identifiable(problem: IdentificationProblem, rank: int | None = None, what: str = "regressor") -> None:
+    """Raise IdentifiabilityError when the data do not determine θ (too few equations or rank < p)."""
+    N, n, p = problem.N, problem.n, problem.p
+    if N * n < p:
+        raise IdentifiabilityError(
+            f"too few samples: {N} samples × {n} coordinates = {N * n} equations for {p} parameters; "
+            f"need at least {int(np.ceil(p / n))} exciting samples (or pass allow_unidentifiable=True)"
+        )
+    ident = problem.identifiability()
+    if rank is None:
+        rank = ident.rank
+    if rank < p:
+        raise IdentifiabilityError(
+            f"the {what} has rank {rank} < {p} parameters, so θ is not unique. "
+            f"Not identifiable: {', '.join(ident.unidentifiable) or '(combinations below)'}.\n"
+            f"{ident.describe()}\n"
+            "Excite the system more, fix or regularize these parameters, or pass allow_unidentifiable=True "
+            "to accept one of the minimisers."
+        )
+
+
+def check_nominal(parameters: ParameterSpace, theta0: np.ndarray, strict: bool) -> np.ndarray:
+    """θ₀ must have p finite entries and be physically consistent (strictly, for log-det priors)."""
+    theta0 = np.asarray(theta0, dtype=float)
+    if theta0.shape != (parameters.p,):
+        raise ValueError(f"nominal θ₀: expected shape ({parameters.p},), got {theta0.shape}")
+    if not np.all(np.isfinite(theta0)):
+        raise ValueError("nominal θ₀ has non-finite entries (NaN or inf)")
+    for name, margin in parameters.consistency_margins(theta0).items():
+        if margin < 0 or (strict and margin <= 0):
+            need = "positive definite" if strict else "positive semidefinite"
+            raise ConsistencyError(
+                f"nominal θ₀ is not physically consistent: block {name!r} has constraint-matrix "
+                f"smallest eigenvalue {margin:.3g}; it must be {need}"
+            )
+    return theta0
+
+
+def parameter_scale(problem: IdentificationProblem) -> np.ndarray:
+    """Per-parameter scale s_k (θ = s ⊙ φ) so the solver sees unit-norm regressor columns."""
+    s = np.linalg.norm(problem.Y.reshape(-1, problem.p), axis=0)
+    ok = s > 0
+    s[ok] = 1.0 / s[ok]
+    s[~ok] = 1.0
+    return s
+
+
+def consistency_constraints(theta, parameters: ParameterSpace) -> list:
+    """cvxpy constraints C_b(θ_b) ⪰ 0 for every block, and the per-parameter bounds."""
+    import cvxpy as cp
+
+    cons = []
+    for b in parameters.blocks:
+        V = b.constraint_basis
+        if V is None:
+            continue
+        th = theta[list(b.indices)]
+        if b.kind in ("drag_diagonal", "nonnegative"):
+            cons.append(th >= 0)  # diag(θ_b) ⪰ 0 is plain non-negativity
+            continue
+        k, m, _ = V.shape
+        C = cp.reshape(V.reshape(k, m * m).T @ th, (m, m), order="C")
+        cons.append(0.5 * (C + C.T) >> 0)
+    if parameters.lower is not None:
+        lo = np.asarray(parameters.lower)
+        fin = np.isfinite(lo)
+        if fin.any():
+            cons.append(theta[np.flatnonzero(fin)] >= lo[fin])
+    if parameters.upper is not None:
+        hi = np.asarray(parameters.upper)
+        fin = np.isfinite(hi)
+        if fin.any():
+            cons.append(theta[np.flatnonzero(fin)] <= hi[fin])
+    return cons
+
+
+@dataclass(frozen=True)
+class Solved:
+    value: np.ndarray
+    status: str
+    solver: str
+    solve_time: float
+    iterations: int | None
+
+
+def solve_cvxpy(problem, variable, solver: str, solver_options: dict | None, what: str) -> Solved:
+    """Solve a cvxpy problem; raise SolverError with the status unless it is optimal."""
+    import cvxpy as cp
+
+    if solver not in SOLVERS:
+        raise ValueError(f"solver: expected one of {SOLVERS}, got {solver!r}")
+    options = dict(DEFAULT_OPTIONS.get(solver, {}))
+    options.update(solver_options or {})
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*dimension greater than 2.*")
+        try:
+            problem.solve(solver=solver, **options)
+        except cp.error.SolverError as exc:
+            raise SolverError(f"{what}: {solver} failed: {exc}", status="solver_error") from exc
+    elapsed = time.perf_counter() - t0
+    status = problem.status
+    if status in (cp.INFEASIBLE, cp.INFEASIBLE_INACCURATE):
+        raise SolverError(
+            f"{what}: the problem is infeasible ({solver} status {status!r}); the constraints "
+            "(physical consistency, bounds, positive-definite metric) admit no θ",
+            status=status,
+        )
+    if status in (cp.UNBOUNDED, cp.UNBOUNDED_INACCURATE):
+        raise SolverError(f"{what}: the problem is unbounded ({solver} status {status!r})", status=status)
+    if status != cp.OPTIMAL and not (status == cp.OPTIMAL_INACCURATE and variable.value is not None):
+        raise SolverError(f"{what}: {solver} returned status {status!r} without a solution", status=status)
+    if variable.value is None or not np.all(np.isfinite(variable.value)):
+        raise SolverError(f"{what}: {solver} reported {status!r} but returned no finite solution", status=status)
+    stats = problem.solver_stats
+    return Solved(
+        np.array(variable.value, dtype=float),
+        status,
+        solver,
+        elapsed,
+        getattr(stats, "num_iters", None) if stats is not None else None,
+    )

@@ -1,0 +1,310 @@
+"""The quadratic estimators: OLS, covariance-weighted LS, energy LS and regularized WLS.
+
+Each minimises Σ r_iᵀ W_i r_i (+ γ R(θ)) with r_i = Y_i θ − τ_i. The data enter only through the
+sufficient statistics H = Σ Y_iᵀ W_i Y_i, g = Σ Y_iᵀ W_i τ_i, c = Σ τ_iᵀ W_i τ_i (one pass over
+the samples), so the conic problem handed to the solver has the size of θ, not of the data.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dualid.estimators.base import (
+    check_identifiable,
+    check_nominal,
+    consistency_constraints,
+    parameter_scale,
+    solve_cvxpy,
+)
+from dualid.estimators.result import IdentificationResult
+from dualid.problem.parameters import ParameterSpace
+from dualid.problem.problem import IdentificationProblem
+
+
+@dataclass(frozen=True)
+class Statistics:
+    """Sufficient statistics of Σ r_iᵀ W_i r_i = θᵀHθ − 2gᵀθ + c, and the weight they came from."""
+
+    H: np.ndarray  # (p, p)
+    g: np.ndarray  # (p,)
+    c: float
+    W: np.ndarray | None = None  # (n, n) constant weight; None: identity (or energy if energy=True)
+    energy: bool = False
+
+    def objective(self, problem: IdentificationProblem, theta: np.ndarray) -> float:
+        """Σ r_iᵀ W_i r_i from the residuals (no cancellation, unlike θᵀHθ − 2gᵀθ + c)."""
+        r = problem.residual(theta)
+        if self.energy:
+            return float(np.sum(np.einsum("na,na->n", problem.v, r) ** 2))
+        if self.W is None:
+            return float(np.sum(r * r))
+        return float(np.einsum("na,ab,nb->", r, self.W, r))
+
+
+def statistics(problem: IdentificationProblem, W: np.ndarray | None = None, chunk: int = 65536) -> Statistics:
+    """H, g, c for a constant weight W (n, n) (None: identity), accumulated in chunks of samples."""
+    p = problem.p
+    H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
+    for start in range(0, problem.N, chunk):
+        Y = problem.Y[start : start + chunk].reshape(-1, p) if W is None else None
+        tau = problem.tau[start : start + chunk]
+        if W is None:
+            t = tau.reshape(-1)
+            H += Y.T @ Y
+            g += Y.T @ t
+            c += float(t @ t)
+        else:
+            Yc = problem.Y[start : start + chunk]
+            WY = np.einsum("ab,nbp->nap", W, Yc)
+            H += np.einsum("nap,naq->pq", Yc, WY)
+            g += np.einsum("nap,na->p", WY, tau)
+            c += float(np.einsum("na,ab,nb->", tau, W, tau))
+    return Statistics(0.5 * (H + H.T), g, c, W)
+
+
+def energy_statistics(problem: IdentificationProblem) -> Statistics:
+    """W_i = v_i v_iᵀ: the rows e_i = Y_iᵀ v_i and targets v_iᵀ τ_i."""
+    e = np.einsum("nap,na->np", problem.Y, problem.v)
+    y = np.einsum("na,na->n", problem.tau, problem.v)
+    return Statistics(e.T @ e, e.T @ y, float(y @ y), energy=True)
+
+
+def _rank(H: np.ndarray, rtol: float = 1e-10) -> int:
+    d = np.sqrt(np.clip(np.diag(H), 0, None))
+    d[d == 0] = 1.0
+    w = np.linalg.eigvalsh(H / np.outer(d, d))
+    return int(np.sum(w > rtol * max(w.max(), 1e-300)))
+
+
+def _regularizer_terms(kind: str, parameters: ParameterSpace, theta0: np.ndarray):
+    """Per block: (indices, V (k, m, m), C0 (m, m)) for the blocks a geometric prior applies to."""
+    out = []
+    for b in parameters.blocks:
+        V = b.constraint_basis
+        if V is None:
+            continue
+        out.append((list(b.indices), V, b.constraint_matrix(theta0)))
+    if not out:
+        raise ValueError(f"{kind} regularization: the parameter space has no constrained blocks to regularize")
+    return out
+
+
+def pullback_metric(V: np.ndarray, C0: np.ndarray) -> np.ndarray:
+    """g_kl = tr(C0⁻¹ V_k C0⁻¹ V_l): the constant pullback of the affine-invariant metric at C0."""
+    A = np.linalg.solve(C0, V)  # (k, m, m): C0⁻¹ V_k
+    return np.einsum("kab,lba->kl", A, A)
+
+
+def regularizer_value(kind: str, parameters: ParameterSpace, theta: np.ndarray, theta0: np.ndarray) -> float:
+    """R(θ): Σ_b log-det divergence D(C_b(θ)‖C_b(θ₀)) or Σ_b (θ_b − θ_b0)ᵀ g_b (θ_b − θ_b0)."""
+    total = 0.0
+    for idx, V, C0 in _regularizer_terms(kind, parameters, theta0):
+        if kind == "logdet":
+            C = np.tensordot(theta[idx], V, axes=1)
+            sign, logdet = np.linalg.slogdet(C)
+            if sign <= 0:
+                return float("inf")
+            total += -logdet + np.linalg.slogdet(C0)[1] + np.trace(np.linalg.solve(C0, C)) - C.shape[0]
+        else:
+            d = theta[idx] - theta0[idx]
+            total += float(d @ pullback_metric(V, C0) @ d)
+    return float(total)
+
+
+def fit_quadratic(
+    problem: IdentificationProblem,
+    stats: Statistics,
+    *,
+    method: str,
+    constrained: bool,
+    solver: str,
+    solver_options: dict | None,
+    allow_unidentifiable: bool,
+    regularizer: tuple[str, np.ndarray, float] | None = None,
+    info: dict | None = None,
+) -> IdentificationResult:
+    """min θᵀHθ − 2gᵀθ + c (+ γ R(θ)) under the problem's constraints, in scaled variables θ = s ⊙ φ."""
+    import cvxpy as cp
+
+    p = problem.p
+    info = dict(info or {})
+    rank = _rank(stats.H)
+    info["rank"] = rank
+    if regularizer is None and not allow_unidentifiable:
+        check_identifiable(problem, rank=rank if rank < p else None, what=f"{method} weighted regressor")
+
+    s = parameter_scale(problem)
+    Hs = s[:, None] * stats.H * s[None, :]
+    gs = s * stats.g
+
+    if not constrained and regularizer is None:
+        import time
+
+        t0 = time.perf_counter()
+        phi = np.linalg.lstsq(Hs, gs, rcond=None)[0]  # minimum-norm minimiser (in scaled variables)
+        theta = s * phi
+        return IdentificationResult(
+            method, theta, problem.parameters, stats.objective(problem, theta), "optimal", "lstsq",
+            time.perf_counter() - t0, None, False, info,
+        )
+
+    w, U = np.linalg.eigh(Hs)
+    keep = w > 1e-13 * max(w.max(), 1e-300)
+    R = np.sqrt(w[keep])[:, None] * U[:, keep].T
+    b = (U[:, keep].T @ gs) / np.sqrt(w[keep])
+    # f(θ) = ‖Rφ − b‖² + f_min with f_min the unconstrained minimum; normalise by f_min so the
+    # solver's tolerances are relative to the attainable fit even when the data fit exactly
+    f_min = max(stats.c - float(b @ b), 0.0)
+    norm = max(f_min, 1e-10 * stats.c, 1e-300)
+    phi = cp.Variable(p)
+    theta = cp.multiply(s, phi)
+    if regularizer is None:
+        objective = cp.norm(R @ phi - b) / np.sqrt(norm)  # same minimiser, better conditioned
+    else:
+        objective = cp.sum_squares(R @ phi - b) / norm
+    if regularizer is not None:
+        kind, theta0, gamma = regularizer
+        terms = _regularizer_terms(kind, problem.parameters, theta0)
+        reg = 0
+        for idx, V, C0 in terms:
+            th = theta[idx]
+            k, m, _ = V.shape
+            if kind == "logdet":
+                C = cp.reshape(V.reshape(k, m * m).T @ th, (m, m), order="C")
+                C0inv = np.linalg.inv(C0)
+                reg = reg - cp.log_det(0.5 * (C + C.T)) + cp.sum(cp.multiply(C0inv, C))
+            else:
+                G = pullback_metric(V, C0)
+                L = np.linalg.cholesky(0.5 * (G + G.T) + 1e-12 * np.trace(G) * np.eye(k))
+                reg = reg + cp.sum_squares(L.T @ (th - theta0[idx]))
+        objective = objective + (gamma / norm) * reg
+    constraints = consistency_constraints(theta, problem.parameters) if constrained else []
+    cvx = cp.Problem(cp.Minimize(objective), constraints)
+    solved = solve_cvxpy(cvx, phi, solver, solver_options, what=f"{method} fit")
+    theta_hat = s * solved.value
+    value = stats.objective(problem, theta_hat)
+    if regularizer is not None:
+        kind, theta0, gamma = regularizer
+        info["data_objective"] = value
+        value += gamma * regularizer_value(kind, problem.parameters, theta_hat, theta0)
+    return IdentificationResult(
+        method, theta_hat, problem.parameters, value, solved.status, solved.solver,
+        solved.solve_time, solved.iterations, constrained, info,
+    )
+
+
+@dataclass(frozen=True)
+class _Common:
+    constrained: bool = True  # physical-consistency constraints (pseudo-inertia ⪰ 0, drag ⪰ 0, bounds)
+    solver: str = "CLARABEL"  # or "SCS"
+    solver_options: dict | None = None
+    allow_unidentifiable: bool = False  # accept one minimiser when the data do not determine θ
+
+
+@dataclass(frozen=True)
+class OLS(_Common):
+    """Ordinary least squares: Σ ‖Y_i θ − τ_i‖²."""
+
+    name = "ols"
+
+    def fit(self, problem: IdentificationProblem) -> IdentificationResult:
+        return fit_quadratic(
+            problem, statistics(problem), method=self.name, constrained=self.constrained, solver=self.solver,
+            solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
+        )
+
+
+def residual_covariance(problem: IdentificationProblem, theta: np.ndarray, floor: float = 1e-9) -> np.ndarray:
+    """Σ̂ = (1/N) Σ r_i r_iᵀ, with eigenvalues floored at floor·tr(Σ̂)/n (and an absolute 1e-300).
+
+    The floor keeps W = Σ̂⁻¹ finite when a coordinate fits exactly (noiseless data, or a passive
+    joint whose modelled torque is identically zero).
+    """
+    r = problem.residual(theta)
+    S = r.T @ r / problem.N
+    w, U = np.linalg.eigh(0.5 * (S + S.T))
+    w = np.maximum(w, max(floor * np.trace(S) / problem.n, 1e-300))
+    return (U * w) @ U.T
+
+
+def _weight(problem: IdentificationProblem, covariance, reference: _Common) -> tuple[np.ndarray, dict]:
+    """W = Σ̂⁻¹ from a given covariance, or from the residuals of OLS under the same constraints."""
+    if covariance is None:
+        ols = OLS(reference.constrained, reference.solver, reference.solver_options, reference.allow_unidentifiable)
+        covariance = residual_covariance(problem, ols.fit(problem).theta)
+        source = "ols residuals"
+    else:
+        covariance = np.asarray(covariance, dtype=float)
+        source = "given"
+        if covariance.shape != (problem.n, problem.n):
+            raise ValueError(f"covariance: expected shape ({problem.n}, {problem.n}), got {covariance.shape}")
+        if not np.allclose(covariance, covariance.T) or np.linalg.eigvalsh(covariance)[0] <= 0:
+            raise ValueError("covariance: expected a symmetric positive-definite matrix")
+    W = np.linalg.inv(covariance)
+    return 0.5 * (W + W.T), {"covariance": source, "covariance_diag": covariance.diagonal().tolist()}
+
+
+@dataclass(frozen=True)
+class WLS(_Common):
+    """Covariance-weighted least squares: Σ r_iᵀ Σ̂⁻¹ r_i, Σ̂ given or from the OLS residuals."""
+
+    covariance: np.ndarray | None = None  # (n, n)
+    name = "wls"
+
+    def fit(self, problem: IdentificationProblem) -> IdentificationResult:
+        W, info = _weight(problem, self.covariance, self)
+        return fit_quadratic(
+            problem, statistics(problem, W), method=self.name, constrained=self.constrained, solver=self.solver,
+            solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
+            info={k: v for k, v in info.items() if k == "covariance"},
+        )
+
+
+@dataclass(frozen=True)
+class EnergyLS(_Common):
+    """Energy (power) residual: Σ (v_iᵀ r_i)²; rank one per sample."""
+
+    name = "energy"
+
+    def fit(self, problem: IdentificationProblem) -> IdentificationResult:
+        return fit_quadratic(
+            problem, energy_statistics(problem), method=self.name, constrained=self.constrained, solver=self.solver,
+            solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
+        )
+
+
+@dataclass(frozen=True)
+class RegularizedWLS(_Common):
+    """WLS + γ R(θ) with a geometric prior around a nominal θ₀ (Lee, Wensing & Park 2020).
+
+    regularizer = "logdet": R = Σ_b −log det C_b(θ) + log det C_b0 + tr(C_b0⁻¹ C_b(θ)) − m_b
+    regularizer = "pullback": R = Σ_b (θ_b − θ_b0)ᵀ g_b (θ_b − θ_b0), g_kl = tr(C_b0⁻¹V_k C_b0⁻¹V_l)
+    C_b is each block's constraint matrix (pseudo-inertia for rigid bodies, drag matrix for drag).
+    """
+
+    theta0: np.ndarray | None = None  # (p,) nominal parameters (e.g. CAD), physically consistent
+    gamma: float = 1.0  # weight of the prior, in units of the data objective
+    regularizer: str = "logdet"  # "logdet" | "pullback"
+    covariance: np.ndarray | None = None  # (n, n); None: from the unregularized (OLS) residuals
+
+    @property
+    def name(self) -> str:
+        return f"{self.regularizer}_wls"
+
+    def fit(self, problem: IdentificationProblem) -> IdentificationResult:
+        if self.regularizer not in ("logdet", "pullback"):
+            raise ValueError(f"regularizer: expected 'logdet' or 'pullback', got {self.regularizer!r}")
+        if self.theta0 is None:
+            raise ValueError("RegularizedWLS needs a nominal θ₀ (theta0=...)")
+        if not (np.isfinite(self.gamma) and self.gamma >= 0):
+            raise ValueError(f"gamma: expected a finite number ≥ 0, got {self.gamma}")
+        theta0 = check_nominal(problem.parameters, self.theta0, strict=True)
+        W, info = _weight(problem, self.covariance, self)
+        return fit_quadratic(
+            problem, statistics(problem, W), method=self.name, constrained=self.constrained, solver=self.solver,
+            solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
+            regularizer=(self.regularizer, theta0, float(self.gamma)),
+            info={"covariance": info["covariance"], "gamma": float(self.gamma)},
+        )

@@ -1,0 +1,220 @@
+"""The metric M_i(θ) = M_i0 + Σ_k θ_k M_ik, affine in θ, stored in factored form.
+
+A rigid body contributes J_bᵀ G_b(θ_b) J_b to the mass matrix (J_b its 6×n body Jacobian, G_b its
+spatial inertia, linear in its 10 parameters); a drag body contributes J_bᵀ D_b(θ_b) J_b. So the
+metric is a sum of *terms*, each
+
+    J_iᵀ G(θ) J_i,   G(θ) = Σ_k θ[indices_k] E_k,   J_i ∈ R^{d×n},  E_k ∈ S^d
+
+and we never materialise the dense N·p·n² tensor M_ik unless asked (``basis()``, for the SDP).
+E may be shared by all samples (k, d, d) or per sample (N, k, d, d) (the generic dense case).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a = np.asarray(a, dtype=float)
+    if a.flags.writeable and a.base is None:
+        a.setflags(write=False)
+        return a
+    b = np.array(a, dtype=float)
+    b.setflags(write=False)
+    return b
+
+
+@dataclass(frozen=True, eq=False)
+class MetricTerm:
+    """J_iᵀ (Σ_k θ[indices_k] E_k) J_i for every sample i."""
+
+    indices: tuple[int, ...]  # (k,) parameter indices
+    E: np.ndarray  # (k, d, d) or (N, k, d, d), symmetric, in units of the parameters' coefficients
+    J: np.ndarray  # (N, d, n) Jacobian from coordinates to the term's frame
+
+    def __post_init__(self) -> None:
+        E = np.asarray(self.E, dtype=float)
+        J = np.asarray(self.J, dtype=float)
+        if J.ndim != 3:
+            raise ValueError(f"MetricTerm: J must have shape (N, d, n), got {J.shape}")
+        N, d, _ = J.shape
+        k = len(self.indices)
+        if E.shape not in ((k, d, d), (N, k, d, d)):
+            raise ValueError(f"MetricTerm: E must have shape ({k}, {d}, {d}) or ({N}, {k}, {d}, {d}), got {E.shape}")
+        if not np.allclose(E, np.swapaxes(E, -1, -2)):
+            raise ValueError("MetricTerm: every E_k must be symmetric")
+        object.__setattr__(self, "indices", tuple(int(i) for i in self.indices))
+        object.__setattr__(self, "E", _readonly(E))
+        object.__setattr__(self, "J", _readonly(J) if J.strides[0] != 0 else J)
+
+    @property
+    def per_sample(self) -> bool:
+        return self.E.ndim == 4
+
+    def G(self, theta: np.ndarray) -> np.ndarray:
+        """(d, d) or (N, d, d): Σ_k θ[indices_k] E_k."""
+        t = np.asarray(theta)[list(self.indices)]
+        return np.tensordot(t, self.E, axes=([0], [-3]))
+
+    def take(self, idx: np.ndarray) -> "MetricTerm":
+        return MetricTerm(self.indices, self.E[idx] if self.per_sample else self.E, self.J[idx])
+
+
+@dataclass(frozen=True, eq=False)
+class AffineMetric:
+    """M_i(θ) for N samples of an n-dimensional system with p parameters."""
+
+    n_params: int  # p
+    terms: tuple[MetricTerm, ...]
+    M0: np.ndarray | None = None  # (N, n, n) parameter-free part, e.g. known rotor inertia
+
+    def __post_init__(self) -> None:
+        if not self.terms and self.M0 is None:
+            raise ValueError("AffineMetric needs at least one term or a constant part M0")
+        shapes = {(t.J.shape[0], t.J.shape[2]) for t in self.terms}
+        if self.M0 is not None:
+            M0 = _readonly(self.M0)
+            if M0.ndim != 3 or M0.shape[1] != M0.shape[2]:
+                raise ValueError(f"AffineMetric: M0 must have shape (N, n, n), got {M0.shape}")
+            object.__setattr__(self, "M0", M0)
+            shapes.add((M0.shape[0], M0.shape[1]))
+        if len(shapes) != 1:
+            raise ValueError(f"AffineMetric: terms disagree on (N, n): {sorted(shapes)}")
+        for t in self.terms:
+            bad = [i for i in t.indices if not 0 <= i < self.n_params]
+            if bad:
+                raise ValueError(f"AffineMetric: term indices {bad} outside 0..{self.n_params - 1}")
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(N, n)."""
+        if self.terms:
+            return self.terms[0].J.shape[0], self.terms[0].J.shape[2]
+        return self.M0.shape[0], self.M0.shape[1]
+
+    # --- evaluation -------------------------------------------------------------------------
+    def evaluate(self, theta: np.ndarray, rows: slice | np.ndarray = slice(None)) -> np.ndarray:
+        """M_i(θ) for the selected samples, (N', n, n)."""
+        theta = np.asarray(theta, dtype=float)
+        M = None
+        for t in self.terms:
+            G = t.G(theta)
+            if t.per_sample:
+                G = G[rows]
+            J = t.J[rows]
+            term = np.swapaxes(J, 1, 2) @ G @ J
+            M = term if M is None else M + term
+        if self.M0 is not None:
+            M = self.M0[rows].copy() if M is None else M + self.M0[rows]
+        return 0.5 * (M + np.swapaxes(M, 1, 2))
+
+    def quad(self, w: np.ndarray, rows: slice | np.ndarray = slice(None)) -> np.ndarray:
+        """(N', p): w_iᵀ M_ik w_i for w (N', n)."""
+        out = np.zeros((w.shape[0], self.n_params))
+        for t in self.terms:
+            u = np.einsum("ndj,nj->nd", t.J[rows], w)
+            if t.per_sample:
+                q = np.einsum("nd,nkde,ne->nk", u, t.E[rows], u)
+            else:
+                q = np.einsum("nd,kde,ne->nk", u, t.E, u)
+            out[:, list(t.indices)] += q
+        return out
+
+    def apply(self, w: np.ndarray, rows: slice | np.ndarray = slice(None)) -> np.ndarray:
+        """(N', n, p): the columns M_ik w_i for w (N', n)."""
+        N, n = w.shape
+        out = np.zeros((N, n, self.n_params))
+        for t in self.terms:
+            J = t.J[rows]
+            u = np.einsum("ndj,nj->nd", J, w)
+            if t.per_sample:
+                Eu = np.einsum("nkde,ne->nkd", t.E[rows], u)
+            else:
+                Eu = np.einsum("kde,ne->nkd", t.E, u)
+            out[:, :, list(t.indices)] += np.einsum("ndj,nkd->njk", J, Eu)
+        return out
+
+    def basis(self, rows: slice | np.ndarray = slice(None)) -> tuple[np.ndarray, np.ndarray]:
+        """Dense (M_0 (N', n, n), M_k (N', p, n, n)); costs N'·p·n² memory: the SDP's form."""
+        N, n = self.shape
+        idx = np.arange(N)[rows]
+        Mk = np.zeros((len(idx), self.n_params, n, n))
+        for t in self.terms:
+            J = t.J[rows]
+            E = t.E[rows] if t.per_sample else t.E[None]
+            Mk[:, list(t.indices)] += np.einsum("ndi,nkde,nej->nkij", J, E, J)
+        M0 = self.M0[rows] if self.M0 is not None else np.zeros((len(idx), n, n))
+        return M0, Mk
+
+    # --- transformations --------------------------------------------------------------------
+    def take(self, idx: np.ndarray) -> "AffineMetric":
+        """The metric at samples idx."""
+        return AffineMetric(
+            self.n_params,
+            tuple(t.take(idx) for t in self.terms),
+            None if self.M0 is None else self.M0[idx],
+        )
+
+    def pullback(self, B: np.ndarray) -> "AffineMetric":
+        """M̃_i = B_iᵀ M_i B_i for a change of coordinates q = φ(q̃), B = ∂φ/∂q̃ ((n, n) or (N, n, n))."""
+        N, n = self.shape
+        B = np.broadcast_to(np.asarray(B, dtype=float), (N, n, n))
+        terms = tuple(MetricTerm(t.indices, t.E, t.J @ B) for t in self.terms)
+        M0 = None if self.M0 is None else np.swapaxes(B, 1, 2) @ self.M0 @ B
+        return AffineMetric(self.n_params, terms, M0)
+
+    def with_n_params(self, p: int, offset: int = 0) -> "AffineMetric":
+        """The same metric inside a larger θ ∈ R^p whose slice [offset, offset+self.p) is this θ."""
+        if offset + self.n_params > p:
+            raise ValueError(f"with_n_params: {offset} + {self.n_params} > {p}")
+        terms = tuple(MetricTerm(tuple(i + offset for i in t.indices), t.E, t.J) for t in self.terms)
+        return AffineMetric(p, terms, self.M0)
+
+    def plus(self, other: "AffineMetric") -> "AffineMetric":
+        """The sum of two metrics over the same samples and parameter vector."""
+        if other.n_params != self.n_params or other.shape != self.shape:
+            raise ValueError(
+                f"AffineMetric.plus: shapes differ ({self.shape}, p={self.n_params}) vs "
+                f"({other.shape}, p={other.n_params})"
+            )
+        if self.M0 is None:
+            M0 = other.M0
+        elif other.M0 is None:
+            M0 = self.M0
+        else:
+            M0 = self.M0 + other.M0
+        return AffineMetric(self.n_params, self.terms + other.terms, M0)
+
+    @staticmethod
+    def from_dense(Mk: np.ndarray, M0: np.ndarray | None = None) -> "AffineMetric":
+        """A metric from dense per-sample bases M_k (N, p, n, n) (costly; prefer factored terms)."""
+        Mk = np.asarray(Mk, dtype=float)
+        if Mk.ndim != 4 or Mk.shape[2] != Mk.shape[3]:
+            raise ValueError(f"from_dense: Mk must have shape (N, p, n, n), got {Mk.shape}")
+        N, p, n, _ = Mk.shape
+        J = np.broadcast_to(np.eye(n), (N, n, n))
+        return AffineMetric(p, (MetricTerm(tuple(range(p)), Mk, J),), M0)
+
+    @staticmethod
+    def concatenate(metrics: list["AffineMetric"]) -> "AffineMetric":
+        """Stack the samples of several metrics with the same term structure (e.g. several runs)."""
+        first = metrics[0]
+        if len(metrics) == 1:
+            return first
+        for m in metrics[1:]:
+            if m.n_params != first.n_params or len(m.terms) != len(first.terms):
+                raise ValueError("AffineMetric.concatenate: metrics have different structure")
+        terms = []
+        for j, t in enumerate(first.terms):
+            parts = [m.terms[j] for m in metrics]
+            if any(q.indices != t.indices for q in parts):
+                raise ValueError("AffineMetric.concatenate: terms have different parameter indices")
+            E = np.concatenate([q.E for q in parts]) if t.per_sample else t.E
+            terms.append(MetricTerm(t.indices, E, np.concatenate([np.asarray(q.J) for q in parts])))
+        if any((m.M0 is None) != (first.M0 is None) for m in metrics):
+            raise ValueError("AffineMetric.concatenate: some metrics have M0 and some do not")
+        M0 = None if first.M0 is None else np.concatenate([m.M0 for m in metrics])
+        return AffineMetric(first.n_params, tuple(terms), M0)

@@ -1,0 +1,3 @@
+from dualid.trajectories.trajectory import Trajectory
+
+__all__ = ["Trajectory"]
