@@ -83,9 +83,10 @@ def simulate_run(
         raise RuntimeError(f"pan-tilt simulation failed: {sol.message}")
     q_true, v_true = sol.y[:2].T, sol.y[2:].T
     tau_true = np.array([control(ti, qi, vi) for ti, qi, vi in zip(t, q_true, v_true)])
-    if noise.filter_window == 0.0 and not coulomb.any():  # noiseless: exact states and accelerations
+    if noise.filter_window == 0.0:  # exact states and accelerations; force noise only
         a_true = np.array([accel(qi, vi, ui) for qi, vi, ui in zip(q_true, v_true, tau_true)])
-        return Trajectory(t, q_true, v_true, tau_true, a_true, model.coordinates, name)
+        tau_meas = tau_true + noise.torque_std * rng.standard_normal(tau_true.shape)
+        return Trajectory(t, q_true, v_true, tau_meas, a_true, model.coordinates, name)
     q_meas = q_true + noise.angle_std * rng.standard_normal(q_true.shape)
     q_s, v_s, a_s = savgol_derivatives(q_meas, rate, noise.filter_window)
     tau_meas = tau_true + noise.torque_std * rng.standard_normal(tau_true.shape)
@@ -102,3 +103,31 @@ def dataset(seed: int = 0, n_train: int = 3, n_test: int = 3, noise: PanTiltNois
     train = [simulate_run(model, TRUE_THETA, rng, noise=noise, name=f"train_{k}", **kw) for k in range(n_train)]
     test = [simulate_run(model, TRUE_THETA, rng, noise=noise, name=f"test_{k}", **kw) for k in range(n_test)]
     return model, train, test, TRUE_THETA.copy()
+
+
+def make(seed: int = 0, noise: str = "realistic", size: str = "default"):
+    """The pan–tilt ``SystemData`` (see dualid.systems.base)."""
+    from dualid.systems.base import SystemData
+
+    levels = {
+        "realistic": PanTiltNoise(),
+        "ideal": PanTiltNoise(angle_std=0.0, torque_std=0.02, coulomb=(0.0, 0.0), filter_window=0.0),
+        "none": PanTiltNoise.noiseless(),
+    }
+    if noise not in levels:
+        raise ValueError(f"noise: expected one of {sorted(levels)}, got {noise!r}")
+    n_train, n_test, duration = (3, 3, 10.0) if size == "default" else (1, 2, 3.0)
+    model, train, test, theta = dataset(seed, n_train, n_test, noise=levels[noise], duration=duration)
+    return SystemData(
+        name="pan-tilt",
+        model=model,
+        train=tuple(train),
+        test=tuple(test),
+        theta_true=theta,
+        theta_nominal=NOMINAL_THETA.copy(),
+        low_data_samples=10,
+        slowest_period=1 / 0.15,
+        shape_coordinates=("tilt",),
+        gamma=1e-2,
+        description="point mass on a pan–tilt link (teaching example)",
+    )
