@@ -214,3 +214,74 @@ def test_floating_base_from_urdf(tmp_path):
         np.testing.assert_allclose(M[t], np.triu(Mref) + np.triu(Mref, 1).T, atol=1e-10)
     with pytest.raises(FileNotFoundError, match="no URDF file at"):
         RigidBodyModel.from_urdf(tmp_path / "missing.urdf")
+
+
+# --- joint friction and armature (dualid.models.joint_terms) ---------------------------------------
+from dualid.models.joint_terms import with_joint_terms  # noqa: E402
+from dualid.models.pan_tilt import PanTilt, jacobian  # noqa: E402
+
+
+def test_joint_terms_closed_form_on_pan_tilt():
+    """τ = τ_pan_tilt + b v + fc tanh(v / v_c) + Ia a and M = m JᵀJ + diag(Ia), by hand."""
+    base = PanTilt()
+    model = with_joint_terms(base, armature=True, coulomb_velocity=0.05)
+    assert isinstance(model, Model)
+    assert model.parameters.names[3:] == (
+        "pan.b", "tilt.b", "pan.fc", "tilt.fc", "pan.Ia", "tilt.Ia",
+    )
+    assert model.parameters.units[3:] == ("N m s/rad",) * 2 + ("N m",) * 2 + ("kg m^2",) * 2
+    assert [(b.name, b.kind, b.indices) for b in model.parameters.blocks[2:]] == [
+        ("viscous", "nonnegative", (3, 4)),
+        ("coulomb", "nonnegative", (5, 6)),
+        ("armature", "nonnegative", (7, 8)),
+    ]
+    rng = np.random.default_rng(0)
+    q, v, a = rng.normal(size=(3, 6, 2))
+    m, b, fc, Ia = 0.7, np.array([0.1, 0.2]), np.array([0.03, 0.05]), np.array([0.004, 0.006])
+    theta = np.concatenate([[m, 0.0, 0.0], b, fc, Ia])
+    tau_base = base.regressor(q, v, a) @ np.array([m, 0.0, 0.0])
+    expected = tau_base + b * v + fc * np.tanh(v / 0.05) + Ia * a
+    np.testing.assert_allclose(model.regressor(q, v, a) @ theta, expected, atol=1e-12)
+    h_expected = base.bias_regressor(q, v) @ np.array([m, 0, 0]) + b * v + fc * np.tanh(v / 0.05)
+    np.testing.assert_allclose(model.bias_regressor(q, v) @ theta, h_expected, atol=1e-12)
+    J = jacobian(q, base.length)
+    M_expected = m * np.swapaxes(J, 1, 2) @ J + np.diag(Ia)
+    np.testing.assert_allclose(model.metric(q).evaluate(theta), M_expected, atol=1e-12)
+
+
+def test_joint_terms_selection_and_errors():
+    base = PanTilt()
+    model = with_joint_terms(base, coulomb=False, joints=["tilt"])
+    assert model.parameters.names[3:] == ("tilt.b",)
+    v = np.array([[1.0, 2.0]])
+    Y = model.regressor(np.zeros((1, 2)), v, np.zeros((1, 2)))
+    np.testing.assert_array_equal(Y[0, :, 3], [0.0, 2.0])
+    assert len(model.metric(np.zeros((1, 2))).terms) == 1  # no armature: the base metric only
+    with pytest.raises(ValueError, match=r"unknown joints \['elbow'\]; valid joints are \['pan', 'tilt'\]"):
+        with_joint_terms(base, joints=["elbow"])
+    with pytest.raises(ValueError, match="choose at least one of viscous, coulomb, armature"):
+        with_joint_terms(base, viscous=False, coulomb=False)
+    with pytest.raises(ValueError, match="coulomb_velocity must be > 0"):
+        with_joint_terms(base, coulomb_velocity=0.0)
+
+
+def test_joint_terms_skip_free_flyer_root_and_match_pinocchio():
+    hum = humanoid()
+    model = with_joint_terms(hum, armature=True)
+    assert len(model.dofs) == hum.nv - 6 and model.dofs[0] == 6
+    assert model.parameters.names[hum.parameters.p] == "lleg1_joint.b"
+    q, v, a = random_states(hum, 2, 9)
+    rng = np.random.default_rng(1)
+    extra = rng.uniform(0.01, 0.1, size=3 * len(model.dofs))
+    theta = np.concatenate([hum.nominal, extra])
+    Ia = extra[2 * len(model.dofs):]
+    # Pinocchio's own armature (model.armature) as the reference for the mass matrix
+    ref = pin.Model(hum.model)
+    arm = np.zeros(hum.nv)
+    arm[6:] = Ia
+    ref.armature = arm
+    data = ref.createData()
+    M = model.metric(q).evaluate(theta)
+    for t in range(2):
+        Mref = pin.crba(ref, data, q[t])
+        np.testing.assert_allclose(M[t], np.triu(Mref) + np.triu(Mref, 1).T, atol=1e-10)
