@@ -14,6 +14,7 @@ Ixz, Iyz, Izz], expressed in the joint frame (inertia about the joint-frame orig
 from __future__ import annotations
 
 import dataclasses
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -63,6 +64,22 @@ def _joint_coordinates(model: pin.Model) -> tuple[tuple[str, ...], tuple[str, ..
         else:
             names += [f"{name}_{k}" for k in range(joint.nv)]
     return tuple(names), base
+
+
+def _with_implicit_world(path: Path) -> str | None:
+    """The URDF text with ``<link name="world"/>`` declared, when a joint uses an undeclared "world" parent.
+
+    Many URDFs (e.g. Gazebo-style ones such as the DFKI pendulum's) weld the robot to a "world" link
+    they never declare; urdfdom (hence Pinocchio) rejects that. Declaring the empty link is exactly
+    what those files mean. Returns None when the file needs no change.
+    """
+    root = ET.parse(path).getroot()
+    links = {link.get("name") for link in root.findall("link")}
+    parents = {p.get("link") for joint in root.findall("joint") for p in joint.findall("parent")}
+    if "world" in links or "world" not in parents:
+        return None
+    root.insert(0, ET.Element("link", {"name": "world"}))
+    return ET.tostring(root, encoding="unicode")
 
 
 def _as_samples(x, width: int, label: str) -> np.ndarray:
@@ -124,10 +141,14 @@ class RigidBodyModel:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"RigidBodyModel.from_urdf: no URDF file at {path}")
-        if floating_base:
-            model = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
+        root_joint = (pin.JointModelFreeFlyer(),) if floating_base else ()
+        xml = _with_implicit_world(path)
+        if xml is None:
+            model = pin.buildModelFromUrdf(str(path), *root_joint)
+        elif floating_base:
+            model = pin.buildModelFromXML(xml, pin.JointModelFreeFlyer())
         else:
-            model = pin.buildModelFromUrdf(str(path))
+            model = pin.buildModelFromXML(xml)
         return cls(model, gravity)
 
     def with_gravity(self, gravity) -> "RigidBodyModel":
