@@ -285,3 +285,32 @@ def test_joint_terms_skip_free_flyer_root_and_match_pinocchio():
     for t in range(2):
         Mref = pin.crba(ref, data, q[t])
         np.testing.assert_allclose(M[t], np.triu(Mref) + np.triu(Mref, 1).T, atol=1e-10)
+
+
+def test_undeclared_world_root_link_is_declared(tmp_path):
+    """Gazebo-style URDFs weld to a "world" link they never declare; urdfdom rejects them as is."""
+    urdf = tmp_path / "welded.urdf"
+    urdf.write_text(
+        """<robot name="welded">
+  <joint name="weld" type="fixed"><parent link="world"/><child link="base"/></joint>
+  <link name="base"/>
+  <link name="arm"><inertial><origin xyz="0 0 -0.3"/><mass value="0.5"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.001"/></inertial></link>
+  <joint name="shoulder" type="revolute"><parent link="base"/><child link="arm"/>
+    <axis xyz="1 0 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+</robot>"""
+    )
+    rbm = RigidBodyModel.from_urdf(urdf)
+    assert rbm.coordinates == ("shoulder",)
+    np.testing.assert_allclose(rbm.nominal[:4], [0.5, 0.0, 0.0, -0.15])
+    assert RigidBodyModel.from_urdf(urdf, floating_base=True).coordinates[-1] == "shoulder"
+
+
+def test_joint_terms_refuse_drag_models():
+    class Drag:
+        kind = "drag"
+        coordinates = ("x",)
+        parameters = PanTilt.parameters
+
+    with pytest.raises(ValueError, match="expected an inertia-dominated model, got kind 'drag'"):
+        with_joint_terms(Drag())
