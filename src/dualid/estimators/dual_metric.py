@@ -57,16 +57,37 @@ def _schur_blocks(problem: IdentificationProblem, s_theta: np.ndarray, s_slack: 
     return A_theta, A_s, b.reshape(-1)
 
 
+def reference_theta(problem: IdentificationProblem) -> np.ndarray:
+    """Unconstrained least-squares θ in scaled variables: only used to pick numerical scalings."""
+    s = parameter_scale(problem)
+    A = problem.Y.reshape(-1, problem.p) * s
+    return s * np.linalg.lstsq(A, problem.tau.reshape(-1), rcond=None)[0]
+
+
+def internal_chart(problem: IdentificationProblem) -> np.ndarray:
+    """B_i (N, n, n) diagonal, such that B_iᵀ M_i(θ_ref) B_i has unit diagonal.
+
+    The dual-metric objective is unchanged by any change of coordinates (r̃ᵀM̃⁻¹r̃ = rᵀM⁻¹r), so the
+    solver may work in this chart: it undoes the user's units and scalings, sample by sample, and
+    keeps the LMI entries O(1). Falls back to the median diagonal where M_i(θ_ref) has a
+    non-positive diagonal entry.
+    """
+    M = problem.metric.evaluate(reference_theta(problem))
+    d = np.diagonal(M, axis1=1, axis2=2).copy()  # (N, n)
+    med = np.median(np.abs(d), axis=0)
+    med[~(med > 0)] = 1.0
+    bad = ~(d > 1e-12 * med)
+    d[bad] = np.broadcast_to(med, d.shape)[bad]
+    B = np.zeros_like(M)
+    idx = np.arange(problem.n)
+    B[:, idx, idx] = 1.0 / np.sqrt(d)
+    return B
+
+
 def _slack_scale(problem: IdentificationProblem) -> float:
-    """Typical size of s_i ≈ τ_iᵀ M_i⁻¹ τ_i, with M at the unconstrained least-squares θ (for scaling only)."""
-    A = problem.Y.reshape(-1, problem.p)
-    theta_ref = np.linalg.lstsq(A, problem.tau.reshape(-1), rcond=None)[0]
-    M = problem.metric.evaluate(theta_ref)
-    m_scale = float(np.median(np.trace(M, axis1=1, axis2=2))) / problem.n
+    """Typical size of s_i ≈ τ_iᵀ M_i⁻¹ τ_i in the internal chart (M_i has unit diagonal there)."""
     t_scale = float(np.mean(np.sum(problem.tau**2, axis=1)))
-    if not (np.isfinite(m_scale) and m_scale > 0 and t_scale > 0):
-        return 1.0
-    return t_scale / m_scale
+    return t_scale if np.isfinite(t_scale) and t_scale > 0 else 1.0
 
 
 def fit_dual_metric_sdp(
@@ -80,6 +101,8 @@ def fit_dual_metric_sdp(
     """The Schur-complement SDP in cvxpy; the reference solution of the dual-metric problem."""
     import cvxpy as cp
 
+    original = problem
+    problem = problem.in_coordinates(internal_chart(problem), problem.coordinates)
     N, n, p = problem.N, problem.n, problem.p
     s_theta = parameter_scale(problem)
     s_slack = _slack_scale(problem)
@@ -101,9 +124,9 @@ def fit_dual_metric_sdp(
             ) from exc
         raise
     theta = s_theta * solved.value
-    objective = problem.dual_metric_objective(theta)
+    objective = original.dual_metric_objective(theta)
     if not np.isfinite(objective):
-        lam = np.linalg.eigvalsh(problem.metric.evaluate(theta))[:, 0]
+        lam = np.linalg.eigvalsh(original.metric.evaluate(theta))[:, 0]
         raise MetricError(
             f"dual-metric SDP: M_i(θ̂) is not positive definite at {int(np.sum(lam <= 0))} of {N} samples "
             f"(smallest eigenvalue {lam.min():.3g}); the data do not keep the metric away from singular"
@@ -126,7 +149,7 @@ class DualMetric:
     constrained: bool = True
     solver: str = "sdp"
     sdp_solver: str = "CLARABEL"  # cvxpy solver for solver="sdp": "CLARABEL" or "SCS"
-    solver_options: dict | None = None
+    solver_options: dict | None = None  # sdp: cvxpy solver options; newton: tol, max_iter, chunk
     allow_unidentifiable: bool = False
     name = "dual_metric"
 
@@ -138,4 +161,10 @@ class DualMetric:
                 problem, constrained=self.constrained, solver=self.sdp_solver, solver_options=self.solver_options,
                 method=self.name,
             )
-        raise ValueError(f"solver: expected 'sdp', got {self.solver!r}")
+        if self.solver == "newton":
+            from dualid.estimators.newton import fit_dual_metric_newton
+
+            return fit_dual_metric_newton(
+                problem, constrained=self.constrained, method=self.name, **(self.solver_options or {})
+            )
+        raise ValueError(f"solver: expected 'sdp' or 'newton', got {self.solver!r}")

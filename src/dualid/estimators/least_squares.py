@@ -157,7 +157,8 @@ def fit_quadratic(
     # f(θ) = ‖Rφ − b‖² + f_min with f_min the unconstrained minimum; normalise by f_min so the
     # solver's tolerances are relative to the attainable fit even when the data fit exactly
     f_min = max(stats.c - float(b @ b), 0.0)
-    norm = max(f_min, 1e-10 * stats.c, 1e-300)
+    gamma = regularizer[2] if regularizer is not None else 0.0  # R is O(1) per block near θ₀
+    norm = max(f_min, gamma, 1e-10 * stats.c, 1e-300)
     phi = cp.Variable(p)
     theta = cp.multiply(s, phi)
     if regularizer is None:

@@ -1,0 +1,162 @@
+"""Every estimator recovers the truth from noiseless exciting data; constraints hold; errors are explicit."""
+
+import numpy as np
+import pytest
+
+from dualid import OLS, WLS, DualMetric, EnergyLS, RegularizedWLS
+from dualid.errors import ConsistencyError, DataError, IdentifiabilityError, MetricError, SolverError
+from dualid.models import build_problem
+from dualid.problem.metric import AffineMetric
+from dualid.problem.problem import IdentificationProblem
+from dualid.systems import pan_tilt
+from tests.factories import drag_problem
+
+ESTIMATORS = {
+    "ols": OLS(),
+    "ols_unconstrained": OLS(constrained=False),
+    "wls": WLS(),
+    "energy": EnergyLS(),
+    "dm": DualMetric(),
+    "dm_unconstrained": DualMetric(constrained=False),
+}
+
+
+@pytest.fixture(scope="module")
+def pan_tilt_noiseless():
+    model, train, _, theta = pan_tilt.dataset(1, n_train=1, n_test=0, noise=pan_tilt.PanTiltNoise.noiseless(), duration=3)
+    return build_problem(model, train).subset(slice(0, None, 4)), theta
+
+
+# The Schur-complement SDP is degenerate on exact data (every slack is 0 at the optimum), so the
+# interior-point reference reaches ~1e-5 there; the quadratic estimators are solved to ~1e-9.
+RTOL = {"dm": 1e-4, "dm_unconstrained": 1e-4}
+
+
+@pytest.mark.parametrize("name", sorted(ESTIMATORS))
+def test_recovers_truth_from_noiseless_drag_data(name):
+    problem, theta = drag_problem(np.random.default_rng(0), N=40, n=3)
+    result = ESTIMATORS[name].fit(problem)
+    np.testing.assert_allclose(result.theta, theta, rtol=RTOL.get(name, 1e-6))
+    if name != "wls":  # W = Σ̂⁻¹ grows without bound as the residuals vanish
+        assert result.objective == pytest.approx(0.0, abs=1e-7)
+
+
+@pytest.mark.parametrize("name", sorted(ESTIMATORS))
+def test_recovers_truth_from_noiseless_pan_tilt_data(name, pan_tilt_noiseless):
+    problem, theta = pan_tilt_noiseless
+    np.testing.assert_allclose(ESTIMATORS[name].fit(problem).theta, theta, rtol=RTOL.get(name, 1e-5))
+
+
+@pytest.mark.parametrize("regularizer", ["logdet", "pullback"])
+def test_regularized_wls_recovers_truth(regularizer):
+    problem, theta = drag_problem(np.random.default_rng(1), N=40, n=3)
+    eye = np.eye(3)  # a given covariance keeps the data term's scale fixed (Σ r_iᵀ r_i)
+    at_truth = RegularizedWLS(theta0=theta, gamma=10.0, regularizer=regularizer, covariance=eye).fit(problem)
+    np.testing.assert_allclose(at_truth.theta, theta, rtol=1e-6)
+    off = RegularizedWLS(theta0=1.3 * theta, gamma=1e-6, regularizer=regularizer, covariance=eye).fit(problem)
+    np.testing.assert_allclose(off.theta, theta, rtol=1e-4)
+    strong = RegularizedWLS(theta0=1.3 * theta, gamma=1e7, regularizer=regularizer, covariance=eye).fit(problem)
+    np.testing.assert_allclose(strong.theta, 1.3 * theta, rtol=1e-3)  # the prior dominates
+
+
+
+def test_constraints_hold_where_the_unconstrained_fit_violates_them():
+    rng = np.random.default_rng(2)
+    theta = rng.uniform(0.5, 2.0, 9)
+    theta[[2, 5]] = 0.0  # two coefficients on the boundary: noise pushes them negative
+    problem, _ = drag_problem(rng, N=30, n=3, noise=0.5, theta=theta)
+    free = OLS(constrained=False).fit(problem)
+    assert free.theta.min() < 0
+    for est in (OLS(), WLS(), EnergyLS(), DualMetric()):
+        result = est.fit(problem)
+        assert result.theta.min() >= -1e-8, est
+        assert result.is_consistent
+
+
+def test_result_is_immutable_and_reports_the_solver():
+    problem, _ = drag_problem(np.random.default_rng(0), N=20, n=3)
+    result = DualMetric().fit(problem)
+    with pytest.raises(ValueError):
+        result.theta[0] = 1.0
+    with pytest.raises(AttributeError):
+        result.objective = 0.0
+    assert result.status == "optimal" and result.solver == "sdp/CLARABEL" and result.solve_time > 0
+    assert [b.name for b in result.bodies] == ["body0", "body1", "body2"]
+    assert result.as_dict()["parameters"][0]["name"] == "body0.d_long"
+
+
+# --- bad input ----------------------------------------------------------------------------------
+def test_problem_shape_and_finiteness_errors():
+    problem, _ = drag_problem(np.random.default_rng(0), N=10, n=3)
+    with pytest.raises(DataError, match=r"tau: expected shape \(10, 3\), got \(10, 2\)"):
+        IdentificationProblem(problem.Y, problem.tau[:, :2], problem.metric, problem.v, problem.parameters)
+    Y = problem.Y.copy()
+    Y[4, 1, 2] = np.nan
+    with pytest.raises(DataError, match=r"Y: 1 non-finite values \(NaN or inf\), first at index \[4, 1, 2\]"):
+        IdentificationProblem(Y, problem.tau, problem.metric, problem.v, problem.parameters)
+    with pytest.raises(DataError, match=r"metric: expected N=5 samples of 3×3 matrices in p=9 parameters, got N=10"):
+        IdentificationProblem(problem.Y[:5], problem.tau[:5], problem.metric, problem.v[:5], problem.parameters)
+    with pytest.raises(DataError, match=r"kind: expected 'inertia' or 'drag', got 'viscous'"):
+        IdentificationProblem(problem.Y, problem.tau, problem.metric, problem.v, problem.parameters, "viscous")
+
+
+def test_too_few_samples_is_an_identifiability_error():
+    problem, _ = drag_problem(np.random.default_rng(0), N=2, n=3)
+    for est in (OLS(), DualMetric(), WLS()):
+        with pytest.raises(IdentifiabilityError, match=r"too few samples: 2 samples × 3 coordinates = 6 equations for 9 parameters"):
+            est.fit(problem)
+
+
+def test_rank_deficiency_names_the_unidentifiable_parameters():
+    problem, theta = drag_problem(np.random.default_rng(0), N=30, n=3)
+    # body1's rotational drag never acts: its Jacobian row is zero at every sample
+    J = np.array(problem.metric.terms[1].J)
+    J[:, 2, :] = 0.0
+    terms = list(problem.metric.terms)
+    terms[1] = type(terms[1])(terms[1].indices, terms[1].E, J)
+    metric = AffineMetric(problem.p, tuple(terms))
+    broken = IdentificationProblem(metric.apply(problem.v), metric.apply(problem.v) @ theta, metric, problem.v, problem.parameters, "drag")
+    for est in (OLS(), DualMetric(), EnergyLS()):
+        with pytest.raises(IdentifiabilityError, match=r"rank 8 < 9 parameters.*Not identifiable: body1\.d_rot"):
+            est.fit(broken)
+    lenient = OLS(allow_unidentifiable=True).fit(broken)
+    np.testing.assert_allclose(broken.residual(lenient.theta), 0.0, atol=1e-8)
+
+
+def test_nominal_must_be_physically_consistent():
+    problem, theta = drag_problem(np.random.default_rng(0), N=20, n=3)
+    bad = theta.copy()
+    bad[4] = -1.0
+    with pytest.raises(ConsistencyError, match=r"nominal θ₀ is not physically consistent: block 'body1' has constraint-matrix smallest eigenvalue -1; it must be positive definite"):
+        RegularizedWLS(theta0=bad).fit(problem)
+    with pytest.raises(ValueError, match=r"nominal θ₀: expected shape \(9,\), got \(3,\)"):
+        RegularizedWLS(theta0=theta[:3]).fit(problem)
+    with pytest.raises(ValueError, match=r"regularizer: expected 'logdet' or 'pullback', got 'l2'"):
+        RegularizedWLS(theta0=theta, regularizer="l2").fit(problem)
+
+
+def test_infeasible_constraints_raise_with_the_solver_status():
+    problem, _ = drag_problem(np.random.default_rng(0), N=20, n=3)
+    impossible = IdentificationProblem(
+        problem.Y, problem.tau, problem.metric, problem.v, problem.parameters.with_bounds(upper=np.full(9, -1.0)), "drag"
+    )
+    with pytest.raises(SolverError, match=r"ols fit: the problem is infeasible \(CLARABEL status 'infeasible'\)") as info:
+        OLS().fit(impossible)
+    assert info.value.status == "infeasible"
+
+
+def test_metric_that_cannot_be_positive_definite_is_a_metric_error():
+    problem, _ = drag_problem(np.random.default_rng(0), N=20, n=3)
+    M0 = np.zeros((20, 3, 3))
+    M0[7] = -1e3 * np.eye(3)  # sample 7 is negative definite unless θ is huge
+    metric = AffineMetric(problem.p, problem.metric.terms, M0)
+    bounded = problem.parameters.with_bounds(upper=np.full(9, 2.0))
+    bad = IdentificationProblem(problem.Y, problem.tau, metric, problem.v, bounded, "drag")
+    with pytest.raises(MetricError, match=r"no θ makes every M_i\(θ\) positive semidefinite under the constraints"):
+        DualMetric().fit(bad)
+
+
+def test_unknown_solver_names_are_rejected():
+    problem, _ = drag_problem(np.random.default_rng(0), N=20, n=3)
+    with pytest.raises(ValueError, match=r"solver: expected one of \('CLARABEL', 'SCS'\), got 'MOSEK'"):
+        OLS(solver="MOSEK").fit(problem)
