@@ -1,0 +1,258 @@
+"""Loading logs through a column map, the on-disk data set format, and the DFKI real-data workflow."""
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from dualid.errors import DataError
+from dualid.logs import ColumnMap, load_dataset, load_log, load_logs, save_dataset
+from dualid.trajectories import Trajectory
+from dualid.trajectories.preprocessing import differentiate, preprocess, sample_rate
+
+JOINTS = ["Joint1", "Joint2"]
+SHARED = Path(__file__).resolve().parents[2] / "shared"
+DFKI = SHARED / "datasets" / "dfki-double-pendulum"
+
+
+def frame(T=200, rate=100.0):
+    t = np.arange(T) / rate
+    return pd.DataFrame(
+        {
+            "time": t,
+            "pos_meas1": np.sin(t),
+            "pos_meas2": np.cos(t),
+            "vel_meas1": np.cos(t),
+            "vel_meas2": -np.sin(t),
+            "tau_meas1": 0.1 * t,
+            "tau_meas2": -0.2 * t,
+            "other": 1.0,
+        }
+    )
+
+
+def write(df, path: Path) -> Path:
+    if path.suffix == ".csv":
+        df.to_csv(path, index=False)
+    elif path.suffix == ".parquet":
+        df.to_parquet(path, index=False)
+    else:
+        np.savez(path, **{c: df[c].to_numpy() for c in df.columns})
+    return path
+
+
+# --- column maps ---------------------------------------------------------------------------------
+def test_column_map_from_dict_equals_pattern():
+    d = {
+        "time": "time",
+        "joints": {
+            "Joint1": {"position": "pos_meas1", "velocity": "vel_meas1", "effort": "tau_meas1"},
+            "Joint2": {"position": "pos_meas2", "velocity": "vel_meas2", "effort": "tau_meas2"},
+        },
+        "units": {"position": "rad"},
+    }
+    a, b = ColumnMap.from_dict(d), ColumnMap.pattern(JOINTS)
+    assert a == b
+    assert ColumnMap.from_dict(a.to_dict()) == a
+    assert a.unit("effort") == "N m" and a.joint_names == tuple(JOINTS)
+    c = ColumnMap.pattern(JOINTS, position="{name}_q", velocity=None, effort="{name}_tau")
+    assert c.joints[1].position == "Joint2_q" and c.joints[0].velocity is None
+
+
+def test_column_map_errors():
+    with pytest.raises(DataError, match=r"column map: unknown position unit 'grad'; allowed: \['rad', 'deg'\]"):
+        ColumnMap.pattern(JOINTS, units={"position": "grad"})
+    with pytest.raises(DataError, match=r"column map: unknown time unit 'min'; allowed: \['s', 'ms', 'us'\]"):
+        ColumnMap.pattern(JOINTS, units={"time": "min"})
+    with pytest.raises(DataError, match=r"column map: unknown effort unit 'Nm'; allowed: \['N m', 'N mm'\]"):
+        ColumnMap.from_dict({"time": "t", "joints": {"j": {"position": "p", "effort": "e"}}, "units": {"effort": "Nm"}})
+    with pytest.raises(DataError, match=r"column map: unknown quantity 'angle' in units"):
+        ColumnMap.pattern(JOINTS, units={"angle": "rad"})
+    with pytest.raises(DataError, match=r"column map: joint 'j' needs columns for \['effort'\]"):
+        ColumnMap.from_dict({"joints": {"j": {"position": "p"}}})
+    with pytest.raises(DataError, match=r"column map: joint 'j' has unknown keys \['torque'\]"):
+        ColumnMap.from_dict({"joints": {"j": {"position": "p", "torque": "x", "effort": "e"}}})
+    with pytest.raises(DataError, match=r"column map: unknown keys \['rate'\]"):
+        ColumnMap.from_dict({"joints": {}, "rate": 3})
+
+
+# --- loading -------------------------------------------------------------------------------------
+@pytest.mark.parametrize("ext", [".csv", ".parquet", ".npz"])
+def test_load_log_each_format(tmp_path, ext):
+    df = frame()
+    path = write(df, tmp_path / f"run{ext}")
+    traj = load_log(path, ColumnMap.pattern(JOINTS), JOINTS)
+    assert isinstance(traj, Trajectory) and traj.name == "run"
+    np.testing.assert_allclose(traj.t, df.time)
+    np.testing.assert_allclose(traj.q, df[["pos_meas1", "pos_meas2"]])
+    np.testing.assert_allclose(traj.v, df[["vel_meas1", "vel_meas2"]])
+    np.testing.assert_allclose(traj.tau, df[["tau_meas1", "tau_meas2"]])
+    assert traj.a is None and traj.coordinates == tuple(JOINTS)
+    assert traj.meta["source"] == str(path)
+    assert traj.meta["columns"] == ColumnMap.pattern(JOINTS).to_dict()
+    assert traj.meta["units"]["position"] == "rad" and traj.meta["logged"] == ["q", "tau", "v"]
+
+
+def test_units_are_converted_to_si(tmp_path):
+    df = frame()
+    raw = df.copy()
+    raw["time"] *= 1e3
+    for c in ("pos_meas1", "pos_meas2", "vel_meas1", "vel_meas2"):
+        raw[c] = np.degrees(df[c])
+    for c in ("tau_meas1", "tau_meas2"):
+        raw[c] = df[c] * 1e3
+    raw["acc1"], raw["acc2"] = np.degrees(-df.pos_meas1), np.degrees(-df.pos_meas2)
+    units = {"time": "ms", "position": "deg", "velocity": "deg/s", "effort": "N mm", "acceleration": "deg/s^2"}
+    cmap = ColumnMap.pattern(JOINTS, acceleration="acc{i}", units=units)
+    traj = load_log(write(raw, tmp_path / "run.csv"), cmap)
+    np.testing.assert_allclose(traj.t, df.time, atol=1e-12)
+    np.testing.assert_allclose(traj.q, df[["pos_meas1", "pos_meas2"]], atol=1e-12)
+    np.testing.assert_allclose(traj.v, df[["vel_meas1", "vel_meas2"]], atol=1e-12)
+    np.testing.assert_allclose(traj.tau, df[["tau_meas1", "tau_meas2"]], atol=1e-12)
+    np.testing.assert_allclose(traj.a, -df[["pos_meas1", "pos_meas2"]].to_numpy(), atol=1e-12)
+    assert traj.meta["units"] == units
+
+
+def test_model_joint_order_and_mismatches(tmp_path):
+    path = write(frame(), tmp_path / "run.csv")
+    swapped = load_log(path, ColumnMap.pattern(JOINTS), ["Joint2", "Joint1"])
+    assert swapped.coordinates == ("Joint2", "Joint1")
+    np.testing.assert_allclose(swapped.q[:, 0], frame().pos_meas2)
+    with pytest.raises(DataError, match=r"column map names joints \['Joint2'\] that are not in the model; "
+                       r"model joints: \['Joint1', 'shoulder'\]"):
+        load_log(path, ColumnMap.pattern(JOINTS), ["Joint1", "shoulder"])
+    with pytest.raises(DataError, match=r"column map has no columns for model joints \['Joint3'\]; "
+                       r"mapped: \['Joint1', 'Joint2'\]"):
+        load_log(path, ColumnMap.pattern(JOINTS), JOINTS + ["Joint3"])
+
+
+def test_load_errors(tmp_path):
+    cmap = ColumnMap.pattern(JOINTS)
+    missing = tmp_path / "nope.csv"
+    with pytest.raises(FileNotFoundError, match=f"log file not found: {missing}"):
+        load_log(missing, cmap)
+    txt = tmp_path / "run.txt"
+    txt.write_text("time\n0\n")
+    with pytest.raises(DataError, match=r"run.txt: unknown log format '.txt'; expected one of .csv, .parquet, .npz"):
+        load_log(txt, cmap)
+    df = frame().drop(columns=["tau_meas2", "vel_meas1"])
+    with pytest.raises(DataError, match=r"missing columns \['vel_meas1', 'tau_meas2'\]; available columns: "
+                       r"\['time', 'pos_meas1', 'pos_meas2', 'vel_meas2', 'tau_meas1', 'other'\]"):
+        load_log(write(df, tmp_path / "cols.csv"), cmap)
+    df = frame()
+    df.loc[7, "time"] = df.loc[6, "time"]
+    with pytest.raises(DataError, match=r"time column 'time' must be strictly increasing; row 6 has 0.06 and row 7 has 0.06"):
+        load_log(write(df, tmp_path / "mono.csv"), cmap)
+    df = frame()
+    df.loc[12, "pos_meas2"] = np.nan
+    df.loc[30, "pos_meas2"] = np.inf
+    with pytest.raises(DataError, match=r"column 'pos_meas2' has non-finite values \(NaN or inf\), first at row 12"):
+        load_log(write(df, tmp_path / "nan.csv"), cmap)
+    df = frame()
+    df.loc[3, "tau_meas1"] = -np.inf
+    with pytest.raises(DataError, match=r"column 'tau_meas1' has non-finite values \(NaN or inf\), first at row 3"):
+        load_log(write(df, tmp_path / "inf.npz"), cmap)
+    empty = tmp_path / "empty.csv"
+    empty.write_text("")
+    with pytest.raises(DataError, match=r"empty.csv: log is empty \(no rows\)"):
+        load_log(empty, cmap)
+    header = write(frame().iloc[:0], tmp_path / "header.csv")
+    with pytest.raises(DataError, match=r"header.csv: log is empty \(no rows\)"):
+        load_log(header, cmap)
+    with pytest.raises(DataError, match=r"header.parquet: log is empty \(no rows\)"):
+        load_log(write(frame().iloc[:0], tmp_path / "header.parquet"), cmap)
+
+
+def test_missing_velocity_needs_explicit_choice(tmp_path):
+    df = frame(T=500, rate=200.0)
+    path = write(df.drop(columns=["vel_meas1", "vel_meas2"]), tmp_path / "nov.parquet")
+    cmap = ColumnMap.pattern(JOINTS, velocity=None)
+    with pytest.raises(DataError, match=r"column map has no velocity columns: map a velocity column for each "
+                       r"joint, or load with velocity='gradient' and then call preprocessing.differentiate"):
+        load_log(path, cmap)
+    traj = load_log(path, cmap, velocity="gradient")
+    assert traj.meta["logged"] == ["q", "tau"]
+    np.testing.assert_allclose(traj.v[5:-5], df[["vel_meas1", "vel_meas2"]][5:-5], atol=1e-4)
+    out = differentiate(traj, window=0.1)  # v not logged: replaced
+    assert out.meta["steps"][-1]["differentiate"]["velocity"] is True
+    np.testing.assert_allclose(out.v[20:-20], df[["vel_meas1", "vel_meas2"]][20:-20], atol=1e-6)
+
+
+def test_load_logs_list(tmp_path):
+    paths = [write(frame(), tmp_path / f"r{k}.csv") for k in range(3)]
+    runs = load_logs(paths, ColumnMap.pattern(JOINTS).to_dict(), JOINTS)
+    assert [r.name for r in runs] == ["r0", "r1", "r2"]
+
+
+# --- data sets -----------------------------------------------------------------------------------
+def _runs(k0, n, with_a=True):
+    out = []
+    for k in range(k0, k0 + n):
+        t = np.arange(50) / 100.0
+        q = np.stack([np.sin(t + k), np.cos(t), t], axis=1)
+        meta = {"source": f"sim{k}", "steps": [{"resample": {"rate": 100.0}}]}
+        out.append(Trajectory(t=t, q=q, v=2 * q, tau=3 * q, a=4 * q if with_a else None,
+                              coordinates=("x", "y", "z"), name=f"run{k}", meta=meta))
+    return out
+
+
+@pytest.mark.parametrize("fmt", ["parquet", "npz"])
+def test_dataset_round_trip(tmp_path, fmt):
+    splits = {"train": _runs(0, 2), "test": _runs(5, 1, with_a=False)}
+    info = {"theta_true": np.array([0.5, 0.02]), "parameter_names": ["m", "b"], "system": "toy"}
+    d = save_dataset(tmp_path / "ds", splits, info, fmt=fmt)
+    assert sorted(p.name for p in d.iterdir()) == ["dataset.json", "test", "train"]
+    assert (d / "train" / f"run_000.{fmt}").is_file()
+    back, info_back = load_dataset(d)
+    assert info_back == {"theta_true": [0.5, 0.02], "parameter_names": ["m", "b"], "system": "toy"}
+    assert list(back) == ["train", "test"]
+    for split, runs in splits.items():
+        assert len(back[split]) == len(runs)
+        for a, b in zip(runs, back[split]):
+            assert (a.name, a.coordinates, a.meta) == (b.name, b.coordinates, b.meta)
+            for key in ("t", "q", "v", "tau", "a"):
+                x, y = getattr(a, key), getattr(b, key)
+                assert (x is None) == (y is None)
+                if x is not None:
+                    np.testing.assert_array_equal(x, y)
+
+
+def test_dataset_overwrite_guard(tmp_path):
+    d = tmp_path / "ds"
+    save_dataset(d, {"train": _runs(0, 3)}, {}, fmt="npz")
+    with pytest.raises(FileExistsError, match=f"dataset directory {d} exists and is not empty; pass overwrite=True"):
+        save_dataset(d, {"train": _runs(0, 1)}, {})
+    (d / "notes.txt").write_text("keep me")
+    save_dataset(d, {"val": _runs(0, 1)}, {"v": 2}, overwrite=True)
+    back, info = load_dataset(d)
+    assert list(back) == ["val"] and info == {"v": 2}
+    assert not (d / "train").exists() and (d / "notes.txt").read_text() == "keep me"
+    with pytest.raises(DataError, match=r"save_dataset: fmt must be 'parquet' or 'npz', got 'hdf5'"):
+        save_dataset(tmp_path / "x", {"train": _runs(0, 1)}, {}, fmt="hdf5")
+    with pytest.raises(FileNotFoundError, match=r"no dataset.json in"):
+        load_dataset(tmp_path)
+
+
+# --- real data -----------------------------------------------------------------------------------
+@pytest.mark.skipif(not DFKI.is_dir(), reason=f"shared data folder not found at {DFKI} (clone shared/ beside the repo)")
+def test_dfki_double_pendulum_log():
+    raw = load_log(DFKI / "trajectory_00.csv", ColumnMap.pattern(JOINTS), JOINTS)
+    assert raw.q.shape == (raw.T, 2) and raw.T > 4000
+    with pytest.raises(DataError, match="time stamps are not uniform"):
+        sample_rate(raw.t, rtol=0.01)  # the first steps are 3.3 ms, then 2 ms
+    config = [
+        {"resample": {"rate": 500}},
+        {"differentiate": {"method": "savgol", "window": 0.05, "velocity": True}},
+        {"filter_lowpass": {"cutoff": 20}},
+        {"downsample": {"factor": 5}},
+    ]
+    out = preprocess(raw, config)
+    assert sample_rate(out.t, rtol=1e-6) == pytest.approx(100.0)
+    T = out.T
+    assert T == pytest.approx((raw.t[-1] - raw.t[0]) * 100, abs=2)
+    assert out.q.shape == out.v.shape == out.a.shape == out.tau.shape == (T, 2)
+    assert [next(iter(s)) for s in out.meta["steps"]] == [next(iter(c)) for c in config]
+    logged_v = np.stack([np.interp(out.t, raw.t, raw.v[:, j]) for j in range(2)], axis=1)
+    for j in range(2):
+        assert np.corrcoef(out.v[:, j], logged_v[:, j])[0, 1] > 0.95
