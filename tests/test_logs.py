@@ -179,6 +179,18 @@ def test_missing_velocity_needs_explicit_choice(tmp_path):
     np.testing.assert_allclose(out.v[20:-20], df[["vel_meas1", "vel_meas2"]][20:-20], atol=1e-6)
 
 
+def test_partial_maps_and_single_row(tmp_path):
+    path = write(frame(), tmp_path / "run.csv")
+    d = ColumnMap.pattern(JOINTS).to_dict()
+    del d["joints"]["Joint2"]["velocity"]
+    with pytest.raises(DataError, match=r"velocity columns for some joints only \(missing for \['Joint2'\]\)"):
+        load_log(path, d)
+    with pytest.raises(DataError, match=r"one.csv: log has 1 row; need at least 2"):
+        load_log(write(frame().iloc[:1], tmp_path / "one.csv"), ColumnMap.pattern(JOINTS))
+    with pytest.raises(DataError, match=r"load_log: velocity must be 'logged' or 'gradient', got 'none'"):
+        load_log(path, ColumnMap.pattern(JOINTS), velocity="none")
+
+
 def test_load_logs_list(tmp_path):
     paths = [write(frame(), tmp_path / f"r{k}.csv") for k in range(3)]
     runs = load_logs(paths, ColumnMap.pattern(JOINTS).to_dict(), JOINTS)

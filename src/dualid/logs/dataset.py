@@ -128,11 +128,14 @@ def _remove_dataset(directory: Path) -> None:
         files = [e["file"] for runs in doc.get("splits", {}).values() for e in runs]
     except (ValueError, KeyError, TypeError, AttributeError):
         files = []
+    root = directory.resolve()
     for rel in files:
-        p = directory / rel
+        p = (directory / rel).resolve()
+        if root not in p.parents:
+            continue  # never delete outside the data set directory
         if p.is_file():
             p.unlink()
-        if p.parent != directory and p.parent.is_dir() and not any(p.parent.iterdir()):
+        if p.parent != root and p.parent.is_dir() and not any(p.parent.iterdir()):
             p.parent.rmdir()
     index.unlink()
 
