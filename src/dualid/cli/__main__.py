@@ -1,0 +1,3 @@
+from dualid.cli import app
+
+app(prog_name="dualid")

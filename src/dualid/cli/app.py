@@ -1,0 +1,30 @@
+"""The typer application; importing the command modules registers their commands."""
+
+from __future__ import annotations
+
+import importlib
+
+import typer
+
+app = typer.Typer(
+    name="dualid",
+    help="Coordinate-independent robot model identification (dual-metric least squares).",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+
+
+@app.callback()
+def main() -> None:
+    """dualid: identify robot models whose fit does not depend on coordinates, units or scaling."""
+
+
+for _module in ("simulate", "reproduce", "fit", "bench"):
+    try:
+        importlib.import_module(f"dualid.cli.{_module}")
+    except ModuleNotFoundError as exc:  # a command group not written yet
+        if exc.name != f"dualid.cli.{_module}":
+            raise
