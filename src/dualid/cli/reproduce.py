@@ -1,0 +1,47 @@
+"""``dualid reproduce SYSTEM``: the paper's comparison in simulation, with tables and figures."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from dualid.cli.app import app
+from dualid.cli.common import console, fail
+
+
+@app.command()
+def reproduce(
+    system: str = typer.Argument(..., help="crazyflie, landsalp or pan-tilt"),
+    out: Path = typer.Option(None, "--out", help="output directory (default: results/SYSTEM)"),
+    case: str = typer.Option("both", "--case", help="low, high or both"),
+    seeds: int = typer.Option(5, "--seeds", help="random low-data subsamples"),
+    noise: str = typer.Option("realistic", "--noise", help="realistic, ideal (Gaussian force noise only) or none"),
+    size: str = typer.Option("default", "--size", help="default or small (a quick smoke run)"),
+    ablation: str = typer.Option(None, "--ablation", help="'units': fit in re-charted coordinates (mm, degrees)"),
+    force: bool = typer.Option(False, "--force", help="overwrite an existing output directory"),
+) -> None:
+    """Simulate SYSTEM, fit every estimator in the low- and high-data cases and write
+    results.json, results.md and the score and trajectory figures."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from dualid.errors import DualidError
+    from dualid.studies.reproduce import reproduce as run
+    from dualid.systems.base import system_names
+
+    if system not in system_names():
+        fail(f"unknown system {system!r}; expected one of {', '.join(system_names())}")
+    if case not in ("low", "high", "both"):
+        fail(f"--case: expected low, high or both, got {case!r}")
+    out = out or Path("results") / system
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    try:
+        with Progress(*columns, console=console) as progress:
+            result = run(system, out, case=case, seeds=seeds, noise=noise, size=size, ablation=ablation,
+                         overwrite=force, progress=progress)
+    except FileExistsError as exc:
+        fail(f"{exc}; pass --force to overwrite it")
+    except (DualidError, ValueError) as exc:
+        fail(str(exc))
+    console.print(result.to_markdown())
+    console.print(f"[green]wrote[/] {out}/results.json, results.md and figures")
