@@ -62,7 +62,7 @@ def score_bars(result: StudyResult, case: str, path) -> Path:
             lows.extend((s.score_mean - s.score_std)[np.isfinite(s.score_mean)].tolist())
     ymin = min(lows)
     ymin = 0.0 if ymin >= 0 else max(-1.05, np.floor(ymin * 10) / 10 - 0.05)
-    width_in = max(8.0, 1.1 * n * len(panels) + 2)
+    width_in = min(16.0, max(8.0, 0.8 * n * len(panels) + 2))
     fig, axes = plt.subplots(1, len(panels), figsize=(width_in, 4.2), sharey=True, squeeze=False)
     x = np.arange(n)
     for ax, panel in zip(axes[0], panels):
@@ -141,9 +141,9 @@ def trajectory_plot(result: StudyResult, case: str, path, coordinate: str | None
         if tr.predicted is None:
             failed.append(_label(m))
             continue
-        score = result.summary(case, m).score_mean[k]
+        score = _run_score(result, tr, k)
         style = {"lw": 1.8, "ls": "-", "zorder": 2} if m == "dm" else {"lw": 1.1, "ls": "--", "zorder": 3}
-        ax.plot(t[keep], tr.predicted[keep, k], color=COLORS.get(m), label=f"{_label(m)} (score {score:.3f})", **style)
+        ax.plot(t[keep], tr.predicted[keep, k], color=COLORS.get(m), label=f"{_label(m)} (score {score:.3f} on this run)", **style)
     unit = "acceleration" if result.signal == "acceleration" else "velocity"
     ax.set_xlabel("time [s]")
     ax.set_ylabel(f"{_coord_label(result, coordinate)}")
@@ -158,6 +158,18 @@ def trajectory_plot(result: StudyResult, case: str, path, coordinate: str | None
     fig.savefig(path, dpi=150)
     plt.close(fig)
     return path
+
+
+def _run_score(result: StudyResult, trace, k: int) -> float:
+    """The score of coordinate k on the trace's run, from the fit the trace came from (first seed)."""
+    j = result.test_runs.index(trace.run)
+    if trace.method == "truth":
+        recs = []
+    else:
+        recs = [r for r in result.records if r.case == trace.case and r.method == trace.method and r.ok]
+    if not recs:
+        return float("nan")
+    return float(recs[0].scores[j, k])  # records are in seed order; traces keep the first seed
 
 
 def check_out_dir(out_dir, overwrite: bool = False) -> Path:
