@@ -1,0 +1,539 @@
+"""Dual-metric least squares by a structure-exploiting primal–dual interior-point Newton method.
+
+    min_θ f(θ) = Σ_i r_iᵀ M_i(θ)⁻¹ r_i,   r_i = Y_i θ − τ_i,   M_i(θ) ≻ 0 (the domain),
+    s.t.  C_b(θ) = C_b0 + Σ_k θ_k V_bk ⪰ 0   (pseudo-inertia / drag matrices: small LMIs)
+          G θ + h ≥ 0                        (diagonal blocks and per-parameter bounds)
+
+With w_i = M_i⁻¹ r_i the derivatives are (M affine in θ, so the Hessian below is *exact*, not an
+approximation: d/dθ_l of 2Y_kᵀw − wᵀM_k w is 2(Y_k − M_k w)ᵀ dw/dθ_l, dw/dθ_l = M⁻¹(Y_l − M_l w)):
+
+    ∂f/∂θ_k        = Σ_i 2 Y_ikᵀ w_i − w_iᵀ M_ik w_i
+    ∂²f/∂θ_k∂θ_l   = Σ_i 2 (Y_ik − M_ik w_i)ᵀ M_i⁻¹ (Y_il − M_il w_i)      (PSD: f is convex)
+
+Both are accumulated over chunks of samples with batched Cholesky factors, using the factored
+metric (``AffineMetric.quad`` / ``apply``), so memory is O(chunk·n·p) beyond Y itself.
+
+Constraints: primal–dual (HKM) Newton steps on C_b Z_b = σμ I (and s_j z_j = σμ), where the dual
+variables are eliminated: (∇²f + Ψ) Δθ = −∇f + σμ A*(C⁻¹), Ψ_kl = Σ_b tr(V_k Z_b V_l C_b⁻¹). The
+step is a descent direction of the barrier merit f − σμ Σ log det C_b, on which a backtracking line
+search keeps every C_b ≻ 0 and every M_i ≻ 0 (every Cholesky must succeed). Stops when the
+duality gap Σ⟨C_b, Z_b⟩ plus the Newton decrement of the Lagrangian is below tol·f.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from dualid.errors import MetricError, SolverError
+from dualid.estimators.result import IdentificationResult
+from dualid.problem.problem import IdentificationProblem
+
+
+class _NotPositiveDefinite(Exception):
+    """Some M_i(θ) is not positive definite (θ outside the domain)."""
+
+
+# --- constraints --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _LMI:
+    """C(θ) = C0 + Σ_k θ[idx_k] V_k ⪰ 0, an m×m block."""
+
+    name: str
+    idx: np.ndarray  # (k,) parameter indices
+    V: np.ndarray  # (k, m, m)
+    C0: np.ndarray  # (m, m)
+
+    def C(self, theta: np.ndarray) -> np.ndarray:
+        return self.C0 + np.tensordot(theta[self.idx], self.V, axes=1)
+
+    def dC(self, d: np.ndarray) -> np.ndarray:
+        return np.tensordot(d[self.idx], self.V, axes=1)
+
+
+@dataclass(frozen=True)
+class _Constraints:
+    """The feasible set: LMIs (rigid bodies, drag matrices) and linear rows G θ + h ≥ 0."""
+
+    lmis: tuple[_LMI, ...]
+    G: np.ndarray  # (q, p)
+    h: np.ndarray  # (q,)
+    names: tuple[str, ...]  # (q,) what each linear row is, for messages
+
+    @property
+    def size(self) -> int:
+        """Σ block sizes (the barrier parameter's ν)."""
+        return sum(c.V.shape[1] for c in self.lmis) + len(self.h)
+
+    @property
+    def empty(self) -> bool:
+        return self.size == 0
+
+    def margin(self, theta: np.ndarray) -> float:
+        """Smallest eigenvalue over all blocks and rows (> 0: strictly feasible)."""
+        m = [np.linalg.eigvalsh(c.C(theta))[0] for c in self.lmis]
+        if len(self.h):
+            m.append((self.G @ theta + self.h).min())
+        return float(min(m)) if m else np.inf
+
+    def max_step(self, theta: np.ndarray, d: np.ndarray) -> float:
+        """Largest α with every constraint strictly feasible on [θ, θ + α d) (inf if unbounded)."""
+        alpha = np.inf
+        for c in self.lmis:
+            alpha = min(alpha, _max_step_psd(c.C(theta), c.dC(d)))
+        if len(self.h):
+            s, ds = self.G @ theta + self.h, self.G @ d
+            neg = ds < 0
+            if neg.any():
+                alpha = min(alpha, float(np.min(-s[neg] / ds[neg])))
+        return alpha
+
+
+def _max_step_psd(X: np.ndarray, dX: np.ndarray) -> float:
+    """Largest α with X + α dX ≻ 0 for X ≻ 0."""
+    L = np.linalg.cholesky(X)
+    Li = np.linalg.inv(L)
+    lam = np.linalg.eigvalsh(Li @ dX @ Li.T)[0]
+    return np.inf if lam >= 0 else float(-1.0 / lam)
+
+
+def build_constraints(parameters, constrained: bool = True, fixed: np.ndarray | None = None) -> _Constraints:
+    """LMIs for rigid-body and drag-matrix blocks; linear rows for diagonal blocks and bounds."""
+    p = parameters.p
+    lmis, rows, h, names = [], [], [], []
+    if constrained:
+        for b in parameters.blocks:
+            V = b.constraint_basis
+            if V is None:
+                continue
+            idx = np.asarray(b.indices)
+            if b.kind in ("drag_diagonal", "nonnegative"):
+                for i in idx:
+                    g = np.zeros(p)
+                    g[i] = 1.0
+                    rows.append(g), h.append(0.0), names.append(f"{parameters.names[i]} ≥ 0")
+                continue
+            lmis.append(_LMI(b.name, idx, np.asarray(V, dtype=float), np.zeros(V.shape[1:])))
+        for bound, sign in ((parameters.lower, 1.0), (parameters.upper, -1.0)):
+            if bound is None:
+                continue
+            for i, x in enumerate(bound):
+                if np.isfinite(x):
+                    g = np.zeros(p)
+                    g[i] = sign
+                    rows.append(g), h.append(-sign * x)
+                    names.append(f"{parameters.names[i]} {'≥' if sign > 0 else '≤'} {x:g}")
+    G = np.array(rows).reshape(-1, p)
+    return _Constraints(tuple(lmis), G, np.asarray(h, dtype=float), tuple(names))
+
+
+# --- objective ----------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Derivatives:
+    f: float
+    grad: np.ndarray | None = None  # (p,)
+    hess: np.ndarray | None = None  # (p, p)
+
+
+def dual_metric_derivatives(
+    problem: IdentificationProblem, theta: np.ndarray, order: int = 2, chunk: int = 50_000
+) -> _Derivatives:
+    """f (and ∇f, ∇²f for order 2) accumulated over chunks of samples.
+
+    Raises _NotPositiveDefinite when some M_i(θ) is not positive definite.
+    """
+    N, n, p = problem.N, problem.n, problem.p
+    theta = np.asarray(theta, dtype=float)
+    f = 0.0
+    grad = np.zeros(p) if order else None
+    hess = np.zeros((p, p)) if order else None
+    for start in range(0, N, chunk):
+        rows = slice(start, min(start + chunk, N))
+        Y = problem.Y[rows]  # (c, n, p)
+        r = Y @ theta - problem.tau[rows]  # (c, n)
+        M = problem.metric.evaluate(theta, rows)  # (c, n, n)
+        try:
+            L = np.linalg.cholesky(M)
+        except np.linalg.LinAlgError:
+            raise _NotPositiveDefinite from None
+        Li = np.linalg.inv(L)  # (c, n, n) lower-triangular L⁻¹
+        z = np.einsum("cab,cb->ca", Li, r)  # L⁻¹ r
+        f += float(np.sum(z * z))
+        if not order:
+            continue
+        w = np.einsum("cba,cb->ca", Li, z)  # M⁻¹ r = L⁻ᵀ L⁻¹ r
+        Mw, wMw = _apply_quad(problem.metric, w, rows)  # (c, n, p) columns M_ik w_i, (p,) Σ_i w_iᵀ M_ik w_i
+        grad += 2.0 * (w.reshape(-1) @ Y.reshape(-1, p)) - wMw
+        Z = np.matmul(Li, Y - Mw).reshape(-1, p)  # L⁻¹ (Y_i − M_ik w_i)
+        hess += 2.0 * (Z.T @ Z)
+    if not np.isfinite(f):
+        raise _NotPositiveDefinite
+    return _Derivatives(f, grad, None if hess is None else 0.5 * (hess + hess.T))
+
+
+def _apply_quad(metric, w: np.ndarray, rows: slice) -> tuple[np.ndarray, np.ndarray]:
+    """(M_ik w_i columns (c, n, p), Σ_i w_iᵀ M_ik w_i (p,)) in one pass over the metric's factors.
+
+    The same quantities as ``metric.apply(w, rows)`` and ``metric.quad(w, rows).sum(0)``, sharing
+    u_i = J_i w_i and E_k u_i between the two and using batched matmul instead of einsum.
+    """
+    c, n = w.shape
+    Mw = np.zeros((c, n, metric.n_params))
+    wMw = np.zeros(metric.n_params)
+    for t in metric.terms:
+        J = t.J[rows]  # (c, d, n)
+        u = np.matmul(J, w[:, :, None])  # (c, d, 1)
+        if t.per_sample:
+            Eu = np.matmul(t.E[rows], u[:, None])[..., 0]  # (c, k, d)
+        else:
+            Eu = np.matmul(u[:, :, 0], t.E.transpose(1, 0, 2).reshape(t.E.shape[1], -1)).reshape(c, -1, t.E.shape[1])
+        idx = list(t.indices)
+        Mw[:, :, idx] += np.matmul(np.swapaxes(J, 1, 2), np.swapaxes(Eu, 1, 2))  # Jᵀ E_k u
+        wMw[idx] += np.einsum("ckd,cd->k", Eu, u[:, :, 0])
+    return Mw, wMw
+
+
+def _objective(problem, theta, chunk) -> float:
+    """f(θ), +inf outside the domain."""
+    try:
+        return dual_metric_derivatives(problem, theta, order=0, chunk=chunk).f
+    except _NotPositiveDefinite:
+        return np.inf
+
+
+# --- starting point -----------------------------------------------------------------------------
+def _ols(problem: IdentificationProblem, chunk: int) -> np.ndarray:
+    """Unconstrained least squares from the sufficient statistics (min-norm where rank deficient)."""
+    p = problem.p
+    H, g = np.zeros((p, p)), np.zeros(p)
+    for start in range(0, problem.N, chunk):
+        A = problem.Y[start : start + chunk].reshape(-1, p)
+        H += A.T @ A
+        g += A.T @ problem.tau[start : start + chunk].reshape(-1)
+    return _solve_psd(H, g, rtol=1e-10)
+
+
+def _clip_psd(C: np.ndarray, eps: float = 1e-2) -> np.ndarray:
+    lam, U = np.linalg.eigh(C)
+    top = np.abs(lam).max()
+    top = top if top > 0 else 1.0
+    return (U * np.maximum(lam, eps * top)) @ U.T
+
+
+def _central_point(theta_ols: np.ndarray, cons: _Constraints) -> np.ndarray:
+    """A strictly feasible point near θ_ols: each block's matrix with its eigenvalues lifted."""
+    theta = theta_ols.copy()
+    for c in cons.lmis:
+        k, m, _ = c.V.shape
+        target = _clip_psd(c.C(theta)) - c.C0
+        theta[c.idx] = np.linalg.lstsq(c.V.reshape(k, m * m).T, target.reshape(-1), rcond=None)[0]
+    if len(cons.h):
+        for j in range(len(cons.h)):
+            g = cons.G[j]
+            i = int(np.flatnonzero(g)[0])
+            s = g[i] * theta[i] + cons.h[j]
+            scale = max(abs(theta[i]), abs(cons.h[j]), 1e-6)
+            if s < 1e-2 * scale:
+                theta[i] += (1e-2 * scale - s) / g[i]
+    return theta
+
+
+def _phase_one(problem, cons: _Constraints, theta_ref: np.ndarray, samples: np.ndarray) -> tuple[np.ndarray, float]:
+    """max t s.t. C_b(θ) ⪰ t·c_b I, Gθ + h ≥ t·c, M_i(θ) ⪰ t·m_i I (i in samples), t ≤ 1.
+
+    A small conic problem (size p plus the listed samples), solved by cvxpy only when the cheap
+    start fails. Returns (θ, t); t ≤ 0 means no strictly feasible θ exists for these samples.
+    """
+    import cvxpy as cp
+
+    from dualid.estimators.base import parameter_scale, solve_cvxpy
+
+    s = parameter_scale(problem)
+    phi = cp.Variable(problem.p)
+    t = cp.Variable()
+    theta = cp.multiply(s, phi)
+    cons_list = [t <= 1, cp.norm(phi - theta_ref / s, "inf") <= 1e6]
+    for c in cons.lmis:
+        k, m, _ = c.V.shape
+        scale = float(np.abs(c.V * s[c.idx, None, None]).sum(axis=0).max())
+        C = c.C0 + cp.reshape(c.V.reshape(k, m * m).T @ theta[c.idx], (m, m), order="C")
+        cons_list.append(0.5 * (C + C.T) >> t * scale * np.eye(m))
+    if len(cons.h):
+        scale = np.abs(cons.G * s).sum(axis=1)
+        cons_list.append(cons.G @ theta + cons.h >= t * scale)
+    if len(samples):
+        M0, Mk = problem.metric.basis(samples)
+        n = problem.n
+        for i in range(len(samples)):
+            scale = float(np.abs(Mk[i] * s[:, None, None]).sum(axis=0).max()) or 1.0
+            Mi = M0[i] + cp.reshape(Mk[i].reshape(problem.p, n * n).T @ theta, (n, n), order="C")
+            cons_list.append(0.5 * (Mi + Mi.T) >> t * scale * np.eye(n))
+    cvx = cp.Problem(cp.Maximize(t), cons_list)
+    solved = solve_cvxpy(cvx, phi, "CLARABEL", None, what="dual-metric phase I")
+    return s * solved.value, float(t.value)
+
+
+def _not_pd_samples(problem, theta, chunk, limit=50) -> np.ndarray:
+    """Indices of (up to limit of the worst) samples where M_i(θ) is not positive definite."""
+    bad, worst = [], []
+    for start in range(0, problem.N, chunk):
+        rows = slice(start, min(start + chunk, problem.N))
+        lam = np.linalg.eigvalsh(problem.metric.evaluate(theta, rows))[:, 0]
+        scale = np.abs(lam).max() if lam.size else 1.0
+        i = np.flatnonzero(lam <= 1e-12 * scale)
+        bad.append(start + i)
+        worst.append(lam[i])
+    bad, worst = np.concatenate(bad), np.concatenate(worst)
+    return bad[np.argsort(worst)[:limit]]
+
+
+def starting_point(problem, cons: _Constraints, chunk: int) -> tuple[np.ndarray, str]:
+    """A strictly feasible θ with every M_i(θ) ≻ 0: the OLS estimate moved toward a central point."""
+    theta_ols = _ols(problem, chunk)
+    theta_c = _central_point(theta_ols, cons)
+    how = "ols→central"
+    if cons.margin(theta_c) <= 0 or not np.isfinite(_objective(problem, theta_c, chunk)):
+        samples = np.zeros(0, dtype=int)
+        if cons.margin(theta_c) > 0:
+            samples = _not_pd_samples(problem, theta_c, chunk)
+        for _ in range(20):
+            try:
+                theta_c, t = _phase_one(problem, cons, theta_c, samples)
+            except SolverError as exc:
+                raise SolverError(
+                    f"dual-metric Newton: phase I failed ({exc}); the constraints may admit no strictly feasible θ",
+                    status=exc.status,
+                ) from exc
+            if t <= 1e-9:
+                if len(samples):
+                    raise MetricError(
+                        f"dual-metric Newton: no θ satisfying the constraints makes M_i(θ) positive definite at "
+                        f"samples {samples[:10].tolist()} (phase-I margin {t:.3g} ≤ 0); check the metric's "
+                        "constant part and the parameter bounds"
+                    )
+                raise SolverError(
+                    "dual-metric Newton: the constraints (physical consistency and bounds) admit no strictly "
+                    f"feasible θ (phase-I margin {t:.3g} ≤ 0)",
+                    status="infeasible",
+                )
+            more = _not_pd_samples(problem, theta_c, chunk)
+            if not len(more):
+                break
+            samples = np.union1d(samples, more)
+        else:
+            raise MetricError("dual-metric Newton: phase I did not find θ with every M_i(θ) positive definite")
+        how = "phase-I"
+    # θ(β) = θ_c + β (θ_ols − θ_c), β ≤ 0.9 of the way to the constraint boundary, M_i ≻ 0
+    d = theta_ols - theta_c
+    beta = min(1.0, 0.9 * cons.max_step(theta_c, d)) if how != "phase-I" else 0.0
+    while beta > 1e-3:
+        if np.isfinite(_objective(problem, theta_c + beta * d, chunk)):
+            return theta_c + beta * d, how
+        beta *= 0.5
+    return theta_c, how
+
+
+# --- the interior-point method ------------------------------------------------------------------
+def _solve_psd(K: np.ndarray, b: np.ndarray, rtol: float = 1e-13) -> np.ndarray:
+    """K⁺ b for K ⪰ 0 (Jacobi-scaled; directions with eigenvalue < rtol·max are left out)."""
+    d = _jacobi(K)
+    lam, U = np.linalg.eigh(K / np.outer(d, d))
+    keep = lam > rtol * max(lam.max(), 1e-300)
+    x = U[:, keep] @ ((U[:, keep].T @ (b / d)) / lam[keep])
+    return x / d
+
+
+def _jacobi(K: np.ndarray) -> np.ndarray:
+    """√diag(K), with (numerically) empty columns given the largest scale so they drop out."""
+    d = np.sqrt(np.abs(np.diag(K)))
+    top = d.max() if d.size and d.max() > 0 else 1.0
+    d[d <= 1e-7 * top] = top
+    return d
+
+
+class _NewtonSystem:
+    """Solves K x = b for the PSD Newton matrix K: Jacobi-scaled Cholesky of K + δ·diag(K), δ = 1e-12 (a
+    Levenberg term that leaves non-identifiable directions with a zero step instead of failing); eigen
+    pseudo-inverse if even that is not positive definite numerically."""
+
+    def __init__(self, K: np.ndarray, levenberg: float = 1e-12):
+        self.d = _jacobi(K)
+        Ks = K / np.outer(self.d, self.d)
+        Ks[np.diag_indices_from(Ks)] += levenberg
+        try:
+            self.L = np.linalg.cholesky(Ks)
+            self.U = None
+        except np.linalg.LinAlgError:
+            lam, U = np.linalg.eigh(Ks)
+            keep = lam > 1e-13 * max(lam.max(), 1e-300)
+            self.L, self.U, self.lam = None, U[:, keep], lam[keep]
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        from scipy.linalg import solve_triangular
+
+        bs = b / self.d
+        if self.L is not None:
+            x = solve_triangular(self.L.T, solve_triangular(self.L, bs, lower=True), lower=False)
+        else:
+            x = self.U @ ((self.U.T @ bs) / self.lam)
+        return x / self.d
+
+
+def _dual_direction(cons: _Constraints, Z, z, Cinv, s, d, target):
+    """HKM direction: ΔZ = σμ C⁻¹ − Z − sym(Z ΔC C⁻¹); Δz = σμ/s − z − (z/s) G d."""
+    dZ = []
+    for c, Zb, Ci in zip(cons.lmis, Z, Cinv):
+        X = Zb @ c.dC(d) @ Ci
+        dZ.append(target * Ci - Zb - 0.5 * (X + X.T))
+    dz = target / s - z - (z / s) * (cons.G @ d) if len(s) else np.zeros(0)
+    return dZ, dz
+
+
+def _dual_max_step(Z, z, dZ, dz) -> float:
+    alpha = np.inf
+    for Zb, dZb in zip(Z, dZ):
+        alpha = min(alpha, _max_step_psd(Zb, dZb))
+    neg = dz < 0
+    if neg.any():
+        alpha = min(alpha, float(np.min(-z[neg] / dz[neg])))
+    return alpha
+
+
+def _gap(cons: _Constraints, theta, Z, z) -> float:
+    gap = sum(float(np.sum(c.C(theta) * Zb)) for c, Zb in zip(cons.lmis, Z))
+    if len(z):
+        gap += float((cons.G @ theta + cons.h) @ z)
+    return gap
+
+
+def _barrier(cons: _Constraints, theta) -> float:
+    """−Σ log det C_b(θ) − Σ log s_j(θ); +inf outside the interior."""
+    val = 0.0
+    for c in cons.lmis:
+        sign, logdet = np.linalg.slogdet(c.C(theta))
+        if sign <= 0:
+            return np.inf
+        val -= logdet
+    if len(cons.h):
+        s = cons.G @ theta + cons.h
+        if np.any(s <= 0):
+            return np.inf
+        val -= float(np.sum(np.log(s)))
+    return val
+
+
+def fit_dual_metric_newton(
+    problem: IdentificationProblem,
+    *,
+    constrained: bool = True,
+    tol: float = 1e-9,
+    max_iter: int = 100,
+    chunk: int = 50_000,
+    method: str = "dual_metric",
+    verbose: bool = False,
+) -> IdentificationResult:
+    """Dual-metric least squares by a primal–dual interior-point Newton method (see module doc).
+
+    tol: relative tolerance on f for (duality gap + squared Newton decrement of the Lagrangian);
+    chunk: samples per pass (memory O(chunk·n·p)); raises SolverError after max_iter iterations.
+    """
+    t0 = time.perf_counter()
+    p = problem.p
+    cons = build_constraints(problem.parameters, constrained)
+    if constrained:
+        lo = np.asarray(problem.parameters.lower if problem.parameters.lower is not None else [-np.inf] * p)
+        hi = np.asarray(problem.parameters.upper if problem.parameters.upper is not None else [np.inf] * p)
+        bad = np.flatnonzero(lo >= hi)
+        if len(bad):
+            k = int(bad[0])
+            raise SolverError(
+                f"dual-metric Newton: the bounds admit no strictly feasible θ: {problem.parameters.names[k]} has "
+                f"lower bound {lo[k]:g} ≥ upper bound {hi[k]:g}",
+                status="infeasible",
+            )
+    theta, start = starting_point(problem, cons, chunk)
+    nu = cons.size  # barrier parameter: μ = gap / ν on the central path
+    der = dual_metric_derivatives(problem, theta, 2, chunk)
+    f_start = der.f
+    mu = max(der.f, 1e-300) / max(nu, 1)  # dual start on the central path: Z_b = μ C_b⁻¹, z = μ / s
+    Z = [mu * np.linalg.inv(c.C(theta)) for c in cons.lmis]
+    z = mu / (cons.G @ theta + cons.h) if len(cons.h) else np.zeros(0)
+    history, n_evals = [], 0
+    for it in range(max_iter + 1):
+        if it:
+            der = dual_metric_derivatives(problem, theta, 2, chunk)
+        f, grad, K = der.f, der.grad, der.hess.copy()
+        Cinv = [np.linalg.inv(c.C(theta)) for c in cons.lmis]
+        s = cons.G @ theta + cons.h
+        r_dual = grad.copy()  # ∇f − A*(Z), the Lagrangian's gradient
+        barrier_grad = np.zeros(p)  # A*(C⁻¹) = −∇(barrier)
+        for c, Zb, Ci in zip(cons.lmis, Z, Cinv):
+            r_dual[c.idx] -= np.einsum("kab,ba->k", c.V, Zb)
+            barrier_grad[c.idx] += np.einsum("kab,ba->k", c.V, Ci)
+            K[np.ix_(c.idx, c.idx)] += np.einsum("kab,bc,lcd,da->kl", c.V, Zb, c.V, Ci)
+        if len(s):
+            r_dual -= cons.G.T @ z
+            barrier_grad += cons.G.T @ (1.0 / s)
+            K += cons.G.T @ ((z / s)[:, None] * cons.G)
+        system = _NewtonSystem(0.5 * (K + K.T))
+        gap = _gap(cons, theta, Z, z)
+        kkt = float(max(r_dual @ system.solve(r_dual), 0.0))  # squared Newton decrement of the Lagrangian
+        f_ref = max(f, 1e-12 * f_start, 1e-300)
+        history.append(f)
+        if verbose:
+            print(f"newton {it:3d}: f {f:.15g} gap {gap:.3g} kkt {kkt:.3g}")
+        if gap + kkt <= tol * f_ref:
+            return IdentificationResult(
+                method, theta, problem.parameters, f, "optimal", "newton", time.perf_counter() - t0, it,
+                constrained,
+                {"duality_gap": gap, "kkt_residual": float(np.sqrt(kkt)), "relative_gap": (gap + kkt) / f_ref,
+                 "start": start, "objective_start": f_start, "objective_evaluations": n_evals,
+                 "f_history": history},
+            )
+        if it == max_iter:
+            break
+        # centring: Mehrotra's heuristic σ = (μ_aff / μ)³ from the affine-scaling (σ = 0) predictor
+        mu = gap / nu if nu else 0.0
+        sigma = 0.0
+        if nu:
+            d_aff = system.solve(-grad)
+            a_p = min(1.0, cons.max_step(theta, d_aff))
+            dZa, dza = _dual_direction(cons, Z, z, Cinv, s, d_aff, 0.0)
+            a_d = min(1.0, _dual_max_step(Z, z, dZa, dza))
+            mu_aff = _gap(cons, theta + a_p * d_aff, [Zb + a_d * dZb for Zb, dZb in zip(Z, dZa)], z + a_d * dza) / nu
+            sigma = float(np.clip((max(mu_aff, 0.0) / mu) ** 3, 1e-3, 0.5))
+        target = sigma * mu
+        rhs = -grad + target * barrier_grad  # −∇ of the merit φ = f + target · barrier
+        d = system.solve(rhs)
+        slope = -float(rhs @ d)
+        alpha = min(1.0, 0.99 * cons.max_step(theta, d)) if nu else 1.0
+        phi0 = f + target * _barrier(cons, theta)
+        while True:  # backtracking: every C_b ≻ 0, every Cholesky of M_i succeeds, Armijo on φ
+            n_evals += 1
+            trial = theta + alpha * d
+            phi1 = _objective(problem, trial, chunk)
+            if np.isfinite(phi1):
+                phi1 += target * _barrier(cons, trial)
+            if phi1 <= phi0 + 1e-4 * alpha * slope or (np.isfinite(phi1) and abs(slope) <= 1e-14 * abs(phi0)):
+                break
+            alpha *= 0.5
+            if alpha < 1e-12:
+                raise SolverError(
+                    f"dual-metric Newton: line search failed at iteration {it} (relative gap "
+                    f"{(gap + kkt) / f_ref:.3g}); the problem may be badly scaled",
+                    status="line_search_failed",
+                )
+        dZ, dz = _dual_direction(cons, Z, z, Cinv, s, d, target)
+        alpha_dual = min(1.0, 0.99 * _dual_max_step(Z, z, dZ, dz))
+        theta = trial
+        Z = [Zb + alpha_dual * dZb for Zb, dZb in zip(Z, dZ)]
+        z = z + alpha_dual * dz
+        if verbose:
+            print(f"            sigma {sigma:.3g} alpha {alpha:.3g} alpha_dual {alpha_dual:.3g}")
+    raise SolverError(
+        f"dual-metric Newton: no convergence in {max_iter} iterations; relative gap reached "
+        f"{(gap + kkt) / f_ref:.3g} (duality gap {gap:.3g}, KKT residual {np.sqrt(kkt):.3g}, tol {tol:g})",
+        status="max_iterations",
+    )
