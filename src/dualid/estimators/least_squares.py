@@ -173,8 +173,12 @@ def fit_quadratic(
             th = theta[idx]
             k, m, _ = V.shape
             if kind == "logdet":
-                C = cp.reshape(V.reshape(k, m * m).T @ th, (m, m), order="C")
-                C0inv = np.linalg.inv(C0)
+                # congruence S C S with S = diag(C0)^-1/2: the cone sees O(1) entries, and
+                # −log det C + tr(C0⁻¹C) changes only by the constant 2 log det S
+                S = 1.0 / np.sqrt(np.diag(C0))
+                VS = V * S[None, :, None] * S[None, None, :]
+                C = cp.reshape(VS.reshape(k, m * m).T @ th, (m, m), order="C")
+                C0inv = np.linalg.inv(C0 * np.outer(S, S))
                 reg = reg - cp.log_det(0.5 * (C + C.T)) + cp.sum(cp.multiply(C0inv, C))
             else:
                 G = pullback_metric(V, C0)
