@@ -167,9 +167,9 @@ def test_ideal_has_exact_states_and_noisy_forces():
 
 
 def test_seeds_reproduce():
-    a = cfs.dataset(seed=7, n_train=1, n_test=1, duration=1.5, noise="realistic")
-    b = cfs.dataset(seed=7, n_train=1, n_test=1, duration=1.5, noise="realistic")
-    c = cfs.dataset(seed=8, n_train=1, n_test=1, duration=1.5, noise="realistic")
+    a = cfs.dataset(seed=7, n_train=1, n_test=0, duration=1.0, noise="realistic")
+    b = cfs.dataset(seed=7, n_train=1, n_test=0, duration=1.0, noise="realistic")
+    c = cfs.dataset(seed=8, n_train=1, n_test=0, duration=1.0, noise="realistic")
     for ra, rb, rc in zip(a[1] + a[2], b[1] + b[2], c[1] + c[2]):
         for key in ("q", "v", "a", "tau"):
             np.testing.assert_array_equal(getattr(ra, key), getattr(rb, key))
@@ -186,8 +186,9 @@ def test_bad_arguments_are_named():
 
 
 def test_registered_factory():
-    data = make_system("crazyflie", seed=5, noise="none", size="small")
-    assert data.name == "crazyflie" and len(data.train) == 2
+    # the registry reaches this module's make (checked through its argument validation, no simulation)
+    with pytest.raises(ValueError, match=r"size: expected one of \['default', 'small'\], got 'huge'"):
+        make_system("crazyflie", size="huge")
 
 
 def test_ols_fits_realistic_data_consistently(realistic):

@@ -39,7 +39,12 @@ __all__ = [
 RATE = 100.0  # [Hz] motion capture and logging
 SIM_RATE = 250.0  # [Hz] controller update and RK4 step (zero-order hold in between)
 WARMUP = 2.0  # [s] simulated before recording starts
-REFERENCE_PERIODS = (4.3, 3.1, 5.9, 8.3)  # [s] x, y, z, yaw: mutually non-harmonic (invented)
+# reference components: (axis, period [s]); axes x, y, z [m] and yaw [rad]; all periods mutually
+# non-harmonic. The slow ones carry the motion (periods 3–9 s); the two short ones (1.15 s, 1.3 s,
+# a few cm) keep the pendulum swinging, which the controller otherwise damps out within seconds
+# (invented)
+REFERENCE_COMPONENTS = ((0, 4.3), (1, 3.1), (2, 5.9), (3, 8.3), (0, 1.3), (1, 1.15))
+REFERENCE_PERIODS = tuple(period for _, period in REFERENCE_COMPONENTS)
 Z_CENTRE = 1.0  # [m] reference height (invented)
 V_CAL = 4.0  # [V] battery voltage at which the thrust curve holds (invented)
 BATTERY_DROP = 0.004  # [V/s] voltage decay over a run (invented; ~7 min flight on 250 mAh)
@@ -54,8 +59,8 @@ class CrazyflieNoise:
     angle_std: float = float(np.deg2rad(0.3))  # [rad] motion-capture orientation noise (per axis)
     voltage_std: float = 0.005  # [V] battery-voltage measurement noise
     gain_error: tuple[float, float] = (0.02, 0.04)  # |δ| range of the per-motor thrust-calibration gain error
-    joint_viscous: float = 1e-5  # [N m s/rad] universal-joint viscous friction (unmodelled)
-    joint_coulomb: float = 5e-5  # [N m] universal-joint Coulomb friction (unmodelled), smoothed by tanh
+    joint_viscous: float = 3e-6  # [N m s/rad] universal-joint viscous friction (unmodelled)
+    joint_coulomb: float = 1e-5  # [N m] universal-joint Coulomb friction (unmodelled), smoothed by tanh
     drag: tuple[float, float, float] = (6.6e-3, 6.6e-3, 7.4e-3)  # [N s/m] body drag (Förster 2015 order)
     cutoff: float = 3.0  # [Hz] zero-phase Butterworth low-pass before differentiation (0: exact states)
     window: float = 0.07  # [s] Savitzky–Golay window for the derivatives
@@ -81,39 +86,49 @@ class CrazyflieNoise:
 
 
 # --- references ---------------------------------------------------------------------------------
+_OMEGA_REF = 2 * np.pi / np.asarray(REFERENCE_PERIODS)  # (K,) [rad/s]
+_AXIS_OF = np.eye(4)[[axis for axis, _ in REFERENCE_COMPONENTS]]  # (K, 4) component → axis
+
+
 @dataclass(frozen=True)
 class Reference:
-    """Sinusoidal x, y, z, yaw references of B runs: r(t) = centre + A sin(2πt/T + φ)."""
+    """Sinusoidal x, y, z, yaw references of B runs: r(t) = centre + Σ_k A_k sin(2πt/T_k + φ_k)."""
 
-    amplitude: np.ndarray  # (B, 4) [m, m, m, rad]
-    phase: np.ndarray  # (B, 4) [rad]
+    amplitude: np.ndarray  # (B, K) [m or rad] per component of REFERENCE_COMPONENTS
+    phase: np.ndarray  # (B, K) [rad]
 
     def __call__(self, t: float):
         """(r, ṙ, r̈) each (B, 4): position x, y, z [m] and yaw [rad] with their derivatives."""
-        w = 2 * np.pi / np.asarray(REFERENCE_PERIODS)
+        w = _OMEGA_REF
         arg = w * t + self.phase
-        r = self.amplitude * np.sin(arg)
+        sin, cos = self.amplitude * np.sin(arg), self.amplitude * np.cos(arg)
+        r = sin @ _AXIS_OF
         r[:, 2] += Z_CENTRE
-        return r, self.amplitude * w * np.cos(arg), -self.amplitude * w**2 * np.sin(arg)
+        return r, (w * cos) @ _AXIS_OF, -(w * w * sin) @ _AXIS_OF
 
 
 def _random_reference(rng: np.random.Generator, B: int) -> Reference:
-    lo, hi = np.array([0.35, 0.3, 0.15, 0.6]), np.array([0.5, 0.45, 0.25, 1.0])  # invented
-    return Reference(rng.uniform(lo, hi, size=(B, 4)), rng.uniform(0, 2 * np.pi, size=(B, 4)))
+    lo = np.array([0.35, 0.3, 0.15, 0.6, 0.03, 0.03])  # [m, m, m, rad, m, m] (invented)
+    hi = np.array([0.5, 0.45, 0.25, 1.0, 0.05, 0.05])
+    K = len(REFERENCE_COMPONENTS)
+    return Reference(rng.uniform(lo, hi, size=(B, K)), rng.uniform(0, 2 * np.pi, size=(B, K)))
 
 
 # --- controller ---------------------------------------------------------------------------------
 def _rotation(quat: np.ndarray) -> np.ndarray:
     """R (B, 3, 3) from Pinocchio quaternions (B, 4) stored (x, y, z, w)."""
     x, y, z, w = quat.T
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        -2,
-    )
+    R = np.empty((quat.shape[0], 3, 3))
+    R[:, 0, 0] = 1 - 2 * (y * y + z * z)
+    R[:, 0, 1] = 2 * (x * y - z * w)
+    R[:, 0, 2] = 2 * (x * z + y * w)
+    R[:, 1, 0] = 2 * (x * y + z * w)
+    R[:, 1, 1] = 1 - 2 * (x * x + z * z)
+    R[:, 1, 2] = 2 * (y * z - x * w)
+    R[:, 2, 0] = 2 * (x * z - y * w)
+    R[:, 2, 1] = 2 * (y * z + x * w)
+    R[:, 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
 
 
 @dataclass(frozen=True)
@@ -144,7 +159,8 @@ class GeometricController:
         c, s = np.cos(yaw), np.sin(yaw)
         b2 = np.column_stack([-b3[:, 2] * s, b3[:, 2] * c, b3[:, 0] * s - b3[:, 1] * c])  # b3 × (c, s, 0)
         b2 /= np.sqrt(np.sum(b2 * b2, axis=1, keepdims=True))
-        Rd = np.stack([_cross(b2, b3), b2, b3], -1)  # columns b1, b2, b3
+        Rd = np.empty_like(R)  # columns b1 = b2 × b3, b2, b3
+        Rd[:, :, 0], Rd[:, :, 1], Rd[:, :, 2] = _cross(b2, b3), b2, b3
         E = np.swapaxes(Rd, 1, 2) @ R  # R_dᵀ R
         e_R = 0.5 * np.column_stack([E[:, 2, 1] - E[:, 1, 2], E[:, 0, 2] - E[:, 2, 0], E[:, 1, 0] - E[:, 0, 1]])
         omega = v[:, 3:6]
@@ -164,11 +180,11 @@ _MIXER_INV = np.linalg.inv(cf.mixer_matrix())
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise a × b for (B, 3) arrays (np.cross is slow on small arrays)."""
-    return np.column_stack([
-        a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
-        a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-        a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
-    ])
+    c = np.empty_like(a)
+    c[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    c[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    c[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return c
 
 
 # --- simulation ---------------------------------------------------------------------------------
@@ -403,7 +419,7 @@ def make(seed: int = 0, noise: str = "realistic", size: str = "default"):
         theta_true=theta,
         theta_nominal=np.array(NOMINAL_THETA),
         low_data_samples=20,
-        slowest_period=max(REFERENCE_PERIODS),
+        slowest_period=max(REFERENCE_PERIODS),  # the yaw period
         shape_coordinates=("alpha1", "alpha2"),
         gamma=1e-2,
         description="Crazyflie 2.0 with a universal-joint pendulum (floating base, 30 inertial parameters)",
