@@ -126,6 +126,17 @@ def test_system_data_contract(exact):
     np.testing.assert_allclose(np.linalg.norm(run.q[:, 3:7], axis=1), 1.0, atol=1e-12)
 
 
+def test_time_stamps_match_the_motion(exact):
+    # central differences of the positions over the time stamps = R(q) v_lin (Pinocchio's free flyer)
+    run = exact.train[0]
+    p_dot = (run.q[2:, :3] - run.q[:-2, :3]) / (run.t[2:] - run.t[:-2])[:, None]
+    R = Rotation.from_quat(run.q[1:-1, 3:7]).as_matrix()
+    v_world = np.einsum("tij,tj->ti", R, run.v[1:-1, :3])
+    np.testing.assert_allclose(p_dot, v_world, atol=2e-3 * np.abs(v_world).max())
+    alpha_dot = (run.q[2:, 7:] - run.q[:-2, 7:]) / (run.t[2:] - run.t[:-2])[:, None]
+    np.testing.assert_allclose(alpha_dot, run.v[1:-1, 6:], atol=2e-2 * np.abs(run.v[:, 6:]).max())
+
+
 def test_controller_tracks_references_and_pendulum_swings(realistic):
     for run in realistic.train + realistic.test:
         true_q, ref = run.meta["true"]["q"], run.meta["reference"]

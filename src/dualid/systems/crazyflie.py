@@ -3,9 +3,9 @@ x, y, z, yaw references while the pendulum swings; motion capture, differentiati
 firmware's thrust calibration turn the true motion into "measured" trajectories.
 
 Simulation: Pinocchio's ``aba`` (aerodynamic drag as an external force on the base, universal-joint
-friction as joint torque), fixed-step Lie-group RK4 at 250 Hz (``pin.integrate`` on the
+friction as joint torque), fixed-step Lie-group RK4 at 200 Hz (``pin.integrate`` on the
 configuration, so the quaternion stays on the unit sphere) with the controller's PWM commands held
-between its 250 Hz updates; all runs of a data set advance together so the controller is vectorised
+between its 200 Hz updates; all runs of a data set advance together so the controller is vectorised
 over runs. Samples are recorded at 100 Hz after a 2 s warm-up.
 """
 
@@ -37,7 +37,7 @@ __all__ = [
 ]
 
 RATE = 100.0  # [Hz] motion capture and logging
-SIM_RATE = 250.0  # [Hz] controller update and RK4 step (zero-order hold in between)
+SIM_RATE = 200.0  # [Hz] controller update and RK4 step (zero-order hold in between); a multiple of RATE
 WARMUP = 2.0  # [s] simulated before recording starts
 # reference components: (axis, period [s]); axes x, y, z [m] and yaw [rad]; all periods mutually
 # non-harmonic. The slow ones carry the motion (periods 3–9 s); the two short ones (1.15 s, 1.3 s,
@@ -265,6 +265,8 @@ def simulate(
     B = reference.amplitude.shape[0]
     gains = np.ones(4) if gains is None else np.asarray(gains, dtype=float)
     dt, sub = 1.0 / SIM_RATE, int(round(SIM_RATE / RATE))
+    if sub * RATE != SIM_RATE:
+        raise ValueError(f"simulate: SIM_RATE ({SIM_RATE} Hz) must be a multiple of RATE ({RATE} Hz)")
     T = int(round(duration * RATE))
     n_warm = int(round(WARMUP * SIM_RATE))
     n_steps = n_warm + T * sub
