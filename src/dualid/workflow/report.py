@@ -84,7 +84,7 @@ def signal_plot(validations: dict[str, Validation], run: int, path, signal: str 
             ax.plot(r.t, pred[:, j], color=_color(label, k), lw=0.8, alpha=0.85, label=f"{label} (RMSE {score:.3g})")
         ax.set_ylabel(f"{coords[j]} [{unit}]")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.12 if j == len(coords) - 1 else 1.0),
+        ax.legend(fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.28),
                   frameon=False) if j == len(coords) - 1 else None
     axes[-1, 0].set_xlabel("time [s]")
     fig.suptitle(f"held-out run {meas_run.run}: {what}", fontsize=10)
