@@ -1,0 +1,92 @@
+"""``dualid fit`` / ``dualid validate`` through typer's CliRunner (small DFKI runs)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from dualid.cli import app
+
+SHARED = Path(__file__).resolve().parents[2] / "shared"
+DFKI = SHARED / "datasets" / "dfki-double-pendulum"
+URDF = DFKI / "pendubot_model_2.1.urdf"
+pytestmark = pytest.mark.skipif(not DFKI.is_dir(), reason="shared DFKI data set not available")
+runner = CliRunner()
+
+STEPS = [
+    {"resample": {"rate": 500}},
+    {"trim": {"stop": 3.0}},
+    {"differentiate": {"method": "savgol", "window": 0.1, "velocity": True}},
+    {"downsample": {"factor": 10}},
+]
+
+
+def _config(tmp_path, **extra) -> Path:
+    d = {"model": {"urdf": str(URDF)}, "train": [str(DFKI / "trajectory_00.csv")], "preprocessing": STEPS}
+    d.update(extra)
+    path = tmp_path / "fit.yaml"
+    path.write_text(yaml.safe_dump(d))
+    return path
+
+
+def _out(result) -> str:
+    return " ".join((result.output + (result.stderr if result.stderr_bytes is not None else "")).split())
+
+
+def test_fit_and_validate_end_to_end(tmp_path):
+    cfg = _config(tmp_path)
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["fit", "--config", str(cfg), "--test", str(DFKI / "trajectory_04.csv"),
+                                 "--method", "ols", "--method", "wls", "--out", str(out)])
+    assert result.exit_code == 0, _out(result)
+    record = yaml.safe_load((out / "parameters.yaml").read_text())
+    assert list(record["methods"]) == ["ols", "wls"]  # --method overrides the config's default methods
+    assert (out / "ols.urdf").is_file() and (out / "scores.png").is_file()
+    assert "τ RMSE Joint1" in result.output
+
+    val = tmp_path / "val"
+    result = runner.invoke(app, ["validate", "--model", str(out / "ols.urdf"), "--data", str(DFKI / "trajectory_05.csv"),
+                                 "--config", str(cfg), "--out", str(val)])
+    assert result.exit_code == 0, _out(result)
+    assert (val / "validation.json").is_file() and (val / "report.md").is_file()
+
+    # an existing non-empty output directory is refused without --force
+    result = runner.invoke(app, ["fit", "--config", str(cfg), "--method", "ols", "--out", str(out)])
+    assert result.exit_code == 1
+    assert f"{out} already exists and is not empty; pass --force to overwrite it" in _out(result)
+
+
+def test_unknown_method(tmp_path):
+    result = runner.invoke(app, ["fit", "--model", str(URDF), "--data", str(DFKI / "trajectory_00.csv"),
+                                 "--method", "lasso", "--out", str(tmp_path / "o")])
+    assert result.exit_code == 1
+    assert "unknown method 'lasso'; known methods: ols, wls, energy, logdet, pullback, dm" in _out(result)
+
+
+def test_unknown_config_key(tmp_path):
+    cfg = _config(tmp_path, method=["ols"])
+    result = runner.invoke(app, ["fit", "--config", str(cfg), "--out", str(tmp_path / "o")])
+    assert result.exit_code == 1
+    assert "config: unknown keys ['method']; known keys: ['model', 'columns', 'train'" in _out(result)
+
+
+def test_missing_column_without_map_asks_for_config(tmp_path):
+    import pandas as pd
+
+    df = pd.read_csv(DFKI / "trajectory_00.csv", nrows=300).rename(columns={"tau_meas1": "effort1"})
+    log = tmp_path / "run.csv"
+    df.to_csv(log, index=False)
+    result = runner.invoke(app, ["fit", "--model", str(URDF), "--data", str(log), "--out", str(tmp_path / "o")])
+    assert result.exit_code == 1
+    text = _out(result)
+    assert "no column map given and" in text and "lacks the default DFKI columns ['tau_meas1']" in text
+    assert "give a 'columns' map in a --config file" in text
+
+
+def test_fit_needs_model_and_data(tmp_path):
+    result = runner.invoke(app, ["fit", "--out", str(tmp_path / "o")])
+    assert result.exit_code == 1
+    assert "give --model ROBOT.urdf and at least one --data RUN.csv, or a --config file" in _out(result)
