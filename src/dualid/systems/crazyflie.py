@@ -2,18 +2,18 @@
 x, y, z, yaw references while the pendulum swings; motion capture, differentiation and the
 firmware's thrust calibration turn the true motion into "measured" trajectories.
 
-Simulation: Pinocchio's ``aba`` (aerodynamic drag as an external force on the base, universal-joint
-friction as joint torque), fixed-step Lie-group RK4 at 200 Hz (``pin.integrate`` on the
-configuration, so the quaternion stays on the unit sphere) with the controller's PWM commands held
-between its 200 Hz updates; all runs of a data set advance together so the controller is vectorised
-over runs. Samples are recorded at 100 Hz after a 2 s warm-up.
+Simulation: Pinocchio's ``aba`` (aerodynamic drag as an external wrench on the base, applied as its
+exact generalized-force equivalent; universal-joint friction as joint torque), fixed-step Lie-group
+RK4 at 200 Hz (``pin.integrate`` on the configuration, so the quaternion stays on the unit sphere)
+with the controller's PWM commands held between its 200 Hz updates; all runs of a data set advance
+together so the controller is vectorised over runs. Samples are recorded at 100 Hz after a 2 s
+warm-up. See docs/crazyflie.md for every number and its source.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin

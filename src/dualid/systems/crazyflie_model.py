@@ -125,13 +125,14 @@ def _theta(model: pin.Model) -> np.ndarray:
 
 def _nominal_model() -> pin.Model:
     """A CAD-like prior, deliberately off the truth (all invented): the stock mass without the mount,
-    a diagonal inertia 25–30 % low, a CoM 2 mm off, a heavier core, and a pendulum 'drawn' 15 % too
-    heavy, 1 cm too short and with a 2 mm lateral CoM error."""
+    a diagonal inertia 25–30 % low, a CoM 2 mm off, a heavier core (+30 %), and a pendulum 'drawn'
+    15 % too light, 1 cm too short and with a 2 mm lateral CoM error (first moment −21 %, inertia
+    about the pivot −27 %)."""
     base = _base_inertia(
         CF_MASS, np.array([0.002, -0.001, -0.002]), np.diag([1.2e-5, 1.2e-5, 2.1e-5]), 0.0, np.zeros(3)
     )
     core = _core_inertia(1.3e-3, 0.008, com=(0.0, 0.0, -0.001))
-    pendulum = _pendulum_inertia(0.0025, 0.0067, 0.14, 0.007, com_xy=(0.002, 0.0))
+    pendulum = _pendulum_inertia(0.0018, 0.005, 0.14, 0.007, com_xy=(0.002, 0.0))
     return _assemble(base, core, pendulum, MOUNT_OFFSET)
 
 
