@@ -201,7 +201,7 @@ def prior_theta(config: FitConfig, rigid: RigidBodyModel, model, ols_theta: np.n
                 continue
             src = np.where(np.isnan(theta0[idx]), ols_theta[idx] if ols_theta is not None else 1.0, theta0[idx])
             theta0[idx] = np.maximum(src, max(1e-3 * float(np.max(np.abs(src))), 1e-9))
-        what += "; joint terms (not in a URDF's inertials) from the OLS estimate, floored at 1e-3 × their group's largest"
+        what += "; joint terms it lacks (a URDF has none) from the OLS estimate; all floored at 1e-3 × their group's largest"
     return theta0, what
 
 
