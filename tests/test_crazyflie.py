@@ -194,6 +194,11 @@ def test_bad_arguments_are_named():
         cfs.make(size="huge")
     with pytest.raises(ValueError, match="duration must be at least 1 s"):
         cfs.dataset(duration=0.5)
+    with pytest.raises(ValueError, match=r"cutoff = 0 means exact states and forces, but measurement errors \{'angle_std'"):
+        cfs.CrazyflieNoise(angle_std=0.01, position_std=0.0, voltage_std=0.0, gain_error=(0.0, 0.0),
+                           motor_spread=0.0, cutoff=0.0)
+    with pytest.raises(ValueError, match="force_std: expected 6 non-negative"):
+        cfs.CrazyflieNoise.none().with_force_noise((1.0, 2.0))
 
 
 def test_registered_factory():

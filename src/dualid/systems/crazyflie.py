@@ -12,6 +12,7 @@ warm-up. See docs/crazyflie.md for every number and its source.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -58,7 +59,8 @@ class CrazyflieNoise:
     position_std: float = 5e-4  # [m] motion-capture position noise
     angle_std: float = float(np.deg2rad(0.3))  # [rad] motion-capture orientation noise (per axis)
     voltage_std: float = 0.005  # [V] battery-voltage measurement noise
-    gain_error: tuple[float, float] = (0.02, 0.04)  # |δ| range of the per-motor thrust-calibration gain error
+    gain_error: tuple[float, float] = (0.02, 0.04)  # |δ| range of the common thrust-calibration gain error
+    motor_spread: float = 0.005  # std of the motors' individual gain errors around the common one
     joint_viscous: float = 3e-6  # [N m s/rad] universal-joint viscous friction (unmodelled)
     joint_coulomb: float = 1e-5  # [N m] universal-joint Coulomb friction (unmodelled), smoothed by tanh
     drag: tuple[float, float, float] = (6.6e-3, 6.6e-3, 7.4e-3)  # [N s/m] body drag (Förster 2015 order)
@@ -73,12 +75,36 @@ class CrazyflieNoise:
     @classmethod
     def ideal(cls) -> "CrazyflieNoise":
         """Exact states and accelerations, i.i.d. Gaussian force noise, no unmodelled effects."""
-        return cls(0.0, 0.0, 0.0, (0.0, 0.0), 0.0, 0.0, (0.0, 0.0, 0.0), 0.0, 0.0,
-                   force_std=(4e-3, 4e-3, 4e-3, 4e-5, 4e-5, 2e-5))
+        return cls.none().with_force_noise((4e-3, 4e-3, 4e-3, 1e-5, 1e-5, 2e-6))
 
     @classmethod
     def none(cls) -> "CrazyflieNoise":
-        return cls(0.0, 0.0, 0.0, (0.0, 0.0), 0.0, 0.0, (0.0, 0.0, 0.0), 0.0, 0.0)
+        """Exact data: true states, accelerations and forces."""
+        return cls(
+            position_std=0.0, angle_std=0.0, voltage_std=0.0, gain_error=(0.0, 0.0), motor_spread=0.0,
+            joint_viscous=0.0, joint_coulomb=0.0, drag=(0.0, 0.0, 0.0), cutoff=0.0, window=0.0,
+        )
+
+    def with_force_noise(self, force_std) -> "CrazyflieNoise":
+        """A copy with i.i.d. noise (6,) on the base wrench [N, N m]."""
+        force_std = tuple(float(x) for x in force_std)
+        if len(force_std) != 6 or min(force_std) < 0:
+            raise ValueError(f"force_std: expected 6 non-negative standard deviations, got {force_std}")
+        return dataclasses.replace(self, force_std=force_std)
+
+    def __post_init__(self) -> None:
+        if self.cutoff == 0.0:
+            measured = {"position_std": self.position_std, "angle_std": self.angle_std,
+                        "voltage_std": self.voltage_std, "gain_error": max(self.gain_error),
+                        "motor_spread": self.motor_spread}
+            bad = {k: v for k, v in measured.items() if v != 0}
+            if bad:
+                raise ValueError(
+                    f"CrazyflieNoise: cutoff = 0 means exact states and forces, but measurement errors {bad} "
+                    "are set; give a low-pass cutoff [Hz] to simulate the measurement chain"
+                )
+        if self.force_std and self.cutoff != 0.0:
+            raise ValueError("CrazyflieNoise: force_std (i.i.d. force noise) applies to exact states only (cutoff = 0)")
 
     @property
     def exact_states(self) -> bool:
@@ -395,7 +421,8 @@ def dataset(seed: int = 0, n_train: int = 6, n_test: int = 6, duration: float = 
         raise ValueError(f"dataset: duration must be at least 1 s (derivative filters), got {duration}")
     rng = np.random.default_rng(seed)
     lo, hi = noise.gain_error
-    gains = 1.0 + rng.choice([-1.0, 1.0], size=4) * rng.uniform(lo, hi, size=4)
+    # true thrust / calibrated thrust: one calibration error for the batch of motors plus a small spread
+    gains = 1.0 + rng.choice([-1.0, 1.0]) * rng.uniform(lo, hi) + noise.motor_spread * rng.standard_normal(4)
     reference = _random_reference(rng, n_train + n_test)
     raw = simulate(reference, duration, noise, rng, gains=gains)
     model = RigidBodyModel(build_model())
