@@ -28,7 +28,13 @@ from dualid.trajectories.trajectory import Trajectory
 
 __all__ = [
     "CrazyflieNoise",
+    "GeometricController",
+    "Reference",
+    "REFERENCE_COMPONENTS",
     "REFERENCE_PERIODS",
+    "shape_angles",
+    "measure_states",
+    "measured_wrench",
     "TRUE_THETA",
     "NOMINAL_THETA",
     "build_model",
