@@ -53,3 +53,21 @@ def _rotation(rng: np.random.Generator) -> np.ndarray:
     q, r = np.linalg.qr(rng.standard_normal((3, 3)))
     q = q * np.sign(np.diag(r))
     return q if np.linalg.det(q) > 0 else -q
+
+
+def arm(n_joints: int = 3, floating: bool = False):
+    """A Pinocchio chain of thin rods (nearly singular pseudo-inertias), revolute about alternating axes."""
+    import pinocchio as pin
+
+    model = pin.Model()
+    parent = 0
+    if floating:
+        parent = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "base")
+        model.appendBodyToJoint(parent, pin.Inertia.FromBox(1.0, 0.2, 0.2, 0.1), pin.SE3.Identity())
+    axes = [pin.JointModelRY(), pin.JointModelRX(), pin.JointModelRZ()]
+    for j in range(n_joints):
+        placement = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.3 if j else 0.1]))
+        parent = model.addJoint(parent, axes[j % 3], placement, f"joint{j + 1}")
+        rod = pin.Inertia.FromCylinder(0.5 - 0.1 * j, 0.005, 0.3)  # thin: near the consistency boundary
+        model.appendBodyToJoint(parent, rod, pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.15])))
+    return model
