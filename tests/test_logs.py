@@ -268,3 +268,19 @@ def test_dfki_double_pendulum_log():
     logged_v = np.stack([np.interp(out.t, raw.t, raw.v[:, j]) for j in range(2)], axis=1)
     for j in range(2):
         assert np.corrcoef(out.v[:, j], logged_v[:, j])[0, 1] > 0.95
+
+
+def test_array_meta_goes_to_a_side_file_and_comes_back(tmp_path):
+    from dualid.logs.dataset import load_dataset, save_dataset
+    from dualid.trajectories import Trajectory
+
+    t = np.arange(5) * 0.1
+    truth = {"q": np.arange(10.0).reshape(5, 2), "note": "exact"}
+    traj = Trajectory(t, np.zeros((5, 2)), np.zeros((5, 2)), np.ones((5, 2)), None, ("a", "b"), "r", {"true": truth, "k": 3})
+    save_dataset(tmp_path / "d", {"train": [traj]}, {})
+    index = (tmp_path / "d" / "dataset.json").read_text()
+    assert "meta.npz" in index and "9.0" not in index  # the array is not written into the JSON
+    runs, _ = load_dataset(tmp_path / "d")
+    meta = runs["train"][0].meta
+    np.testing.assert_array_equal(meta["true"]["q"], truth["q"])
+    assert meta["true"]["note"] == "exact" and meta["k"] == 3

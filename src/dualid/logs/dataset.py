@@ -7,7 +7,9 @@ Layout::
         <split>/<name>.parquet  (or .npz) one run: channels t, q_0.., v_<coord>, a_<coord>, tau_<coord>
 
 Arrays are stored in SI units, as a Trajectory holds them. ``info`` (e.g. true θ, parameter names)
-and each run's ``meta`` are stored as JSON: numpy arrays come back as lists, tuples as lists.
+and each run's ``meta`` are stored as JSON (tuples come back as lists), except array-valued meta
+entries (e.g. a simulator's ground truth), which go to ``<split>/<name>.meta.npz`` beside the run
+and come back as arrays.
 """
 
 from __future__ import annotations
@@ -26,6 +28,33 @@ FORMAT = "dualid-dataset"
 VERSION = 1
 UNITS = {"t": "s", "q": "rad or m (quaternion unitless)", "v": "rad/s or m/s", "a": "rad/s^2 or m/s^2", "tau": "N m or N"}
 _SAFE = re.compile(r"^[A-Za-z0-9_.-]+$")
+
+
+def _split_meta(meta: Mapping, prefix: str = "") -> tuple[dict, dict[str, np.ndarray]]:
+    """(meta without numpy arrays, {"key/sub": array}) — arrays nested in dicts are flattened."""
+    plain, arrays = {}, {}
+    for key, value in meta.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, np.ndarray) and value.ndim > 0:
+            arrays[name] = value
+        elif isinstance(value, Mapping):
+            sub_plain, sub_arrays = _split_meta(value, f"{name}/")
+            arrays.update(sub_arrays)
+            if sub_plain or not sub_arrays:
+                plain[key] = sub_plain
+        else:
+            plain[key] = value
+    return plain, arrays
+
+
+def _merge_meta(meta: dict, arrays: Mapping[str, np.ndarray]) -> dict:
+    for name, value in arrays.items():
+        node = meta
+        *parents, leaf = name.split("/")
+        for key in parents:
+            node = node.setdefault(key, {})
+        node[leaf] = value
+    return meta
 
 
 def _jsonable(x):
@@ -102,9 +131,12 @@ def save_dataset(
                 import pandas as pd
 
                 pd.DataFrame(ch).to_parquet(directory / rel, index=False)
-            entries.append(
-                {"file": rel, "name": traj.name, "nq": traj.q.shape[1], "has_a": traj.a is not None, "meta": traj.meta}
-            )
+            meta, meta_arrays = _split_meta(traj.meta)
+            entry = {"file": rel, "name": traj.name, "nq": traj.q.shape[1], "has_a": traj.a is not None, "meta": meta}
+            if meta_arrays:
+                entry["meta_arrays"] = f"{split}/{stem}.meta.npz"
+                np.savez(directory / entry["meta_arrays"], **meta_arrays)
+            entries.append(entry)
         splits[split] = entries
     doc = {
         "format": FORMAT,
@@ -125,7 +157,7 @@ def _remove_dataset(directory: Path) -> None:
         return
     try:
         doc = json.loads(index.read_text())
-        files = [e["file"] for runs in doc.get("splits", {}).values() for e in runs]
+        files = [f for runs in doc.get("splits", {}).values() for e in runs for f in (e["file"], e.get("meta_arrays")) if f]
     except (ValueError, KeyError, TypeError, AttributeError):
         files = []
     root = directory.resolve()
@@ -138,6 +170,16 @@ def _remove_dataset(directory: Path) -> None:
         if p.parent != root and p.parent.is_dir() and not any(p.parent.iterdir()):
             p.parent.rmdir()
     index.unlink()
+
+
+def _load_arrays(directory: Path, rel: str | None) -> dict[str, np.ndarray]:
+    if rel is None:
+        return {}
+    path = directory / rel
+    if not path.is_file():
+        raise FileNotFoundError(f"dataset meta file not found: {path} (listed in {directory / 'dataset.json'})")
+    with np.load(path, allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
 
 
 def load_dataset(directory) -> tuple[dict[str, list[Trajectory]], dict]:
@@ -184,7 +226,7 @@ def load_dataset(directory) -> tuple[dict[str, list[Trajectory]], dict]:
                     a=block("a", coords) if e["has_a"] else None,
                     coordinates=coords,
                     name=e["name"],
-                    meta=e["meta"],
+                    meta=_merge_meta(e["meta"], _load_arrays(directory, e.get("meta_arrays"))),
                 )
             )
         out[split] = runs
