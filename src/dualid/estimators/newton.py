@@ -130,6 +130,95 @@ def build_constraints(parameters, constrained: bool = True, fixed: np.ndarray | 
 
 
 # --- objective ----------------------------------------------------------------------------------
+# Per-sample matrices are tiny (n ≲ 10) and numerous, where LAPACK's per-matrix calls are slow: the
+# kernels below loop over the small dimensions and vectorise over the samples of a chunk instead.
+def _cholesky(M: np.ndarray) -> np.ndarray:
+    """L (c, n, n) lower triangular with M_i = L_i L_iᵀ; raises _NotPositiveDefinite."""
+    try:
+        L = np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        raise _NotPositiveDefinite from None
+    if not np.all(np.isfinite(np.diagonal(L, axis1=1, axis2=2))):
+        raise _NotPositiveDefinite
+    return L
+
+
+def _tri_inverse(L: np.ndarray) -> np.ndarray:
+    """L⁻¹ (c, n, n) of lower-triangular L, by substitution vectorised over the samples."""
+    Lt = np.ascontiguousarray(np.moveaxis(L, 0, -1))  # (n, n, c): contiguous per-entry sample vectors
+    n = Lt.shape[0]
+    X = np.zeros_like(Lt)
+    inv_diag = 1.0 / np.diagonal(Lt).T  # (n, c)
+    for a in range(n):
+        X[a, a] = inv_diag[a]
+        for b in range(a):
+            acc = Lt[a, b] * X[b, b]
+            for k in range(b + 1, a):
+                acc += Lt[a, k] * X[k, b]
+            X[a, b] = -acc * inv_diag[a]
+    return np.moveaxis(X, -1, 0)
+
+
+def _forward(L: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """L⁻¹ r for r (c, n)."""
+    z = np.empty_like(r)
+    for a in range(L.shape[1]):
+        acc = r[:, a].copy()
+        for b in range(a):
+            acc -= L[:, a, b] * z[:, b]
+        z[:, a] = acc / L[:, a, a]
+    return z
+
+
+def _metric_chunk(metric, theta: np.ndarray, rows: slice) -> np.ndarray:
+    """M_i(θ) (c, n, n) for the samples in rows: Σ_terms J_iᵀ G(θ) J_i + M0_i."""
+    M = None
+    for t in metric.terms:
+        J = t.J[rows]  # (c, d, n)
+        G = t.G(theta)  # (d, d) or (N, d, d)
+        if t.per_sample:
+            GJ = np.matmul(G[rows], J)
+        else:
+            c, d, n = J.shape
+            GJ = (G @ np.swapaxes(J, 0, 1).reshape(d, c * n)).reshape(d, c, n).swapaxes(0, 1)
+        term = np.matmul(np.swapaxes(J, 1, 2), GJ)
+        M = term if M is None else M + term
+    if metric.M0 is not None:
+        M = metric.M0[rows].copy() if M is None else M + metric.M0[rows]
+    return M  # symmetric up to rounding; the Cholesky factorisation reads the lower triangle only
+
+
+def _as_slice(indices: tuple[int, ...]):
+    """A slice when the indices are consecutive (cheap in-place updates), else the index list."""
+    if indices and list(indices) == list(range(indices[0], indices[0] + len(indices))):
+        return slice(indices[0], indices[0] + len(indices))
+    return list(indices)
+
+
+def _apply_quad(metric, w: np.ndarray, rows: slice) -> tuple[np.ndarray, np.ndarray]:
+    """(M_ik w_i columns (c, n, p), Σ_i w_iᵀ M_ik w_i (p,)) in one pass over the metric's factors.
+
+    The same quantities as ``metric.apply(w, rows)`` and ``metric.quad(w, rows).sum(0)``, sharing
+    u_i = J_i w_i and E_k u_i between the two.
+    """
+    c, n = w.shape
+    Mw = np.zeros((c, n, metric.n_params))
+    wMw = np.zeros(metric.n_params)
+    for t in metric.terms:
+        J = t.J[rows]  # (c, d, n)
+        u = np.einsum("cdn,cn->cd", J, w)  # (c, d)
+        d = u.shape[1]
+        if t.per_sample:
+            Eu = np.einsum("ckde,ce->ckd", t.E[rows], u)  # (c, k, d)
+        else:
+            k = t.E.shape[0]
+            Eu = (u @ t.E.transpose(2, 0, 1).reshape(d, k * d)).reshape(c, k, d)  # E symmetric
+        idx = _as_slice(t.indices)
+        Mw[:, :, idx] += np.matmul(np.swapaxes(J, 1, 2), np.swapaxes(Eu, 1, 2))  # J_iᵀ E_k u_i
+        wMw[idx] += np.einsum("ckd,cd->k", Eu, u)
+    return Mw, wMw
+
+
 @dataclass(frozen=True)
 class _Derivatives:
     f: float
@@ -138,9 +227,9 @@ class _Derivatives:
 
 
 def dual_metric_derivatives(
-    problem: IdentificationProblem, theta: np.ndarray, order: int = 2, chunk: int = 50_000
+    problem: IdentificationProblem, theta: np.ndarray, order: int = 2, chunk: int = 4096
 ) -> _Derivatives:
-    """f (and ∇f, ∇²f for order 2) accumulated over chunks of samples.
+    """f (and ∇f, ∇²f for order 2) accumulated over chunks of samples (memory O(chunk·n·p)).
 
     Raises _NotPositiveDefinite when some M_i(θ) is not positive definite.
     """
@@ -152,17 +241,16 @@ def dual_metric_derivatives(
     for start in range(0, N, chunk):
         rows = slice(start, min(start + chunk, N))
         Y = problem.Y[rows]  # (c, n, p)
-        r = Y @ theta - problem.tau[rows]  # (c, n)
-        M = problem.metric.evaluate(theta, rows)  # (c, n, n)
-        try:
-            L = np.linalg.cholesky(M)
-        except np.linalg.LinAlgError:
-            raise _NotPositiveDefinite from None
-        Li = np.linalg.inv(L)  # (c, n, n) lower-triangular L⁻¹
+        c = Y.shape[0]
+        r = (Y.reshape(c * n, p) @ theta).reshape(c, n) - problem.tau[rows]  # (c, n)
+        L = _cholesky(_metric_chunk(problem.metric, theta, rows))  # M_i = L_i L_iᵀ
+        if not order:
+            z = _forward(L, r)  # L⁻¹ r
+            f += float(np.sum(z * z))
+            continue
+        Li = _tri_inverse(L)  # (c, n, n)
         z = np.einsum("cab,cb->ca", Li, r)  # L⁻¹ r
         f += float(np.sum(z * z))
-        if not order:
-            continue
         w = np.einsum("cba,cb->ca", Li, z)  # M⁻¹ r = L⁻ᵀ L⁻¹ r
         Mw, wMw = _apply_quad(problem.metric, w, rows)  # (c, n, p) columns M_ik w_i, (p,) Σ_i w_iᵀ M_ik w_i
         grad += 2.0 * (w.reshape(-1) @ Y.reshape(-1, p)) - wMw
@@ -171,28 +259,6 @@ def dual_metric_derivatives(
     if not np.isfinite(f):
         raise _NotPositiveDefinite
     return _Derivatives(f, grad, None if hess is None else 0.5 * (hess + hess.T))
-
-
-def _apply_quad(metric, w: np.ndarray, rows: slice) -> tuple[np.ndarray, np.ndarray]:
-    """(M_ik w_i columns (c, n, p), Σ_i w_iᵀ M_ik w_i (p,)) in one pass over the metric's factors.
-
-    The same quantities as ``metric.apply(w, rows)`` and ``metric.quad(w, rows).sum(0)``, sharing
-    u_i = J_i w_i and E_k u_i between the two and using batched matmul instead of einsum.
-    """
-    c, n = w.shape
-    Mw = np.zeros((c, n, metric.n_params))
-    wMw = np.zeros(metric.n_params)
-    for t in metric.terms:
-        J = t.J[rows]  # (c, d, n)
-        u = np.matmul(J, w[:, :, None])  # (c, d, 1)
-        if t.per_sample:
-            Eu = np.matmul(t.E[rows], u[:, None])[..., 0]  # (c, k, d)
-        else:
-            Eu = np.matmul(u[:, :, 0], t.E.transpose(1, 0, 2).reshape(t.E.shape[1], -1)).reshape(c, -1, t.E.shape[1])
-        idx = list(t.indices)
-        Mw[:, :, idx] += np.matmul(np.swapaxes(J, 1, 2), np.swapaxes(Eu, 1, 2))  # Jᵀ E_k u
-        wMw[idx] += np.einsum("ckd,cd->k", Eu, u[:, :, 0])
-    return Mw, wMw
 
 
 def _objective(problem, theta, chunk) -> float:
@@ -430,7 +496,7 @@ def fit_dual_metric_newton(
     constrained: bool = True,
     tol: float = 1e-9,
     max_iter: int = 100,
-    chunk: int = 50_000,
+    chunk: int = 4096,
     method: str = "dual_metric",
     verbose: bool = False,
 ) -> IdentificationResult:
@@ -462,7 +528,7 @@ def fit_dual_metric_newton(
     z = mu / (cons.G @ theta + cons.h) if len(cons.h) else np.zeros(0)
     history, n_evals = [], 0
     for it in range(max_iter + 1):
-        if it:
+        if der is None:
             der = dual_metric_derivatives(problem, theta, 2, chunk)
         f, grad, K = der.f, der.grad, der.hess.copy()
         Cinv = [np.linalg.inv(c.C(theta)) for c in cons.lmis]
@@ -510,10 +576,21 @@ def fit_dual_metric_newton(
         slope = -float(rhs @ d)
         alpha = min(1.0, 0.99 * cons.max_step(theta, d)) if nu else 1.0
         phi0 = f + target * _barrier(cons, theta)
+        der_trial, first = None, True
         while True:  # backtracking: every C_b ≻ 0, every Cholesky of M_i succeeds, Armijo on φ
             n_evals += 1
             trial = theta + alpha * d
-            phi1 = _objective(problem, trial, chunk)
+            if first:
+                # the first trial is usually accepted: evaluate all derivatives there, for the next iteration
+                try:
+                    der_trial = dual_metric_derivatives(problem, trial, 2, chunk)
+                    phi1 = der_trial.f
+                except _NotPositiveDefinite:
+                    der_trial, phi1 = None, np.inf
+            else:
+                der_trial = None
+                phi1 = _objective(problem, trial, chunk)
+            first = False
             if np.isfinite(phi1):
                 phi1 += target * _barrier(cons, trial)
             if phi1 <= phi0 + 1e-4 * alpha * slope or (np.isfinite(phi1) and abs(slope) <= 1e-14 * abs(phi0)):
@@ -527,7 +604,7 @@ def fit_dual_metric_newton(
                 )
         dZ, dz = _dual_direction(cons, Z, z, Cinv, s, d, target)
         alpha_dual = min(1.0, 0.99 * _dual_max_step(Z, z, dZ, dz))
-        theta = trial
+        theta, der = trial, der_trial
         Z = [Zb + alpha_dual * dZb for Zb, dZb in zip(Z, dZ)]
         z = z + alpha_dual * dz
         if verbose:
