@@ -192,8 +192,9 @@ def test_estimators_fit_a_realistic_subsample_with_nonnegative_drag(realistic):
     assert np.all(np.abs(np.log(dm[big] / THETA[big])) < np.log(2)), dm
 
 
-def test_gaits_move_in_their_named_directions():
-    model, _, test, _ = sim.dataset(0, n_train=0, effects=sim.TrueEffects.none(), measurement=None)
+@pytest.mark.parametrize("effects", [sim.TrueEffects.none(), sim.TrueEffects()], ids=["exact", "realistic"])
+def test_gaits_move_in_their_named_directions(effects):
+    model, _, test, _ = sim.dataset(0, n_train=0, effects=effects, measurement=None)
     moves = {}
     for traj in test:
         state = traj.meta["state_true"]
