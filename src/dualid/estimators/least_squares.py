@@ -234,7 +234,7 @@ def residual_covariance(problem: IdentificationProblem, theta: np.ndarray, floor
     return (U * w) @ U.T
 
 
-def _weight(problem: IdentificationProblem, covariance, reference: _Common) -> tuple[np.ndarray, dict]:
+def covariance_weight(problem: IdentificationProblem, covariance, reference: _Common) -> tuple[np.ndarray, dict]:
     """W = Σ̂⁻¹ from a given covariance, or from the residuals of OLS under the same constraints."""
     if covariance is None:
         ols = OLS(reference.constrained, reference.solver, reference.solver_options, reference.allow_unidentifiable)
@@ -259,7 +259,7 @@ class WLS(_Common):
     name = "wls"
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
-        W, info = _weight(problem, self.covariance, self)
+        W, info = covariance_weight(problem, self.covariance, self)
         return fit_quadratic(
             problem, statistics(problem, W), method=self.name, constrained=self.constrained, solver=self.solver,
             solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
@@ -306,7 +306,7 @@ class RegularizedWLS(_Common):
         if not (np.isfinite(self.gamma) and self.gamma >= 0):
             raise ValueError(f"gamma: expected a finite number ≥ 0, got {self.gamma}")
         theta0 = check_nominal(problem.parameters, self.theta0, strict=True)
-        W, info = _weight(problem, self.covariance, self)
+        W, info = covariance_weight(problem, self.covariance, self)
         return fit_quadratic(
             problem, statistics(problem, W), method=self.name, constrained=self.constrained, solver=self.solver,
             solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,

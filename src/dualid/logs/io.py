@@ -156,7 +156,7 @@ class ColumnMap:
         return {"time": self.time, "joints": joints, "units": dict(self.units)}
 
 
-def _read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
+def read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
     """All columns of the file as float arrays (name -> (T,)) and the column order."""
     ext = path.suffix.lower()
     if ext == ".npz":
@@ -235,7 +235,7 @@ def load_log(
         raise FileNotFoundError(f"log file not found: {path}")
     if path.suffix.lower() not in FORMATS:
         raise DataError(f"{path}: unknown log format {path.suffix!r}; expected one of {', '.join(FORMATS)}")
-    data, available = _read_table(path)
+    data, available = read_table(path)
     needed = [cmap.time]
     for j in jcols:
         needed += [c for c in (j.position, j.velocity if velocity == "logged" else None, j.acceleration, j.effort) if c]

@@ -31,7 +31,7 @@ from typing import Any, Literal
 import numpy as np
 
 from dualid.errors import DualidError, IdentifiabilityError
-from dualid.estimators import OLS, WLS, DualMetric, EnergyLS, RegularizedWLS
+from dualid.estimators import registry
 from dualid.evaluation.prediction import measured_signal, predict
 from dualid.evaluation.scores import metric_rmse, rmse, score_run, shift_window
 from dualid.models.base import build_problem
@@ -61,20 +61,11 @@ def make_estimator(method: str, system: SystemData):
 
     allow_unidentifiable=True everywhere: the floating-base pendulum has an exact null space.
     """
-    common = {"allow_unidentifiable": True}
     if method == "ols_unconstrained":
-        return OLS(constrained=False, **common)
-    if method == "ols":
-        return OLS(**common)
-    if method == "wls":
-        return WLS(**common)
-    if method == "energy":
-        return EnergyLS(**common)
-    if method in ("logdet", "pullback"):
-        return RegularizedWLS(theta0=system.theta_nominal, gamma=system.gamma, regularizer=method, **common)
-    if method == "dm":
-        return DualMetric(**common)
-    raise ValueError(f"unknown method {method!r}; expected one of {list(DEFAULT_METHODS)}")
+        return registry.make_estimator("ols", constrained=False, allow_unidentifiable=True)
+    if method not in DEFAULT_METHODS:
+        raise ValueError(f"unknown method {method!r}; expected one of {list(DEFAULT_METHODS)}")
+    return registry.make_estimator(method, theta0=system.theta_nominal, gamma=system.gamma, allow_unidentifiable=True)
 
 
 def units_chart(coordinates: Sequence[str]) -> np.ndarray:

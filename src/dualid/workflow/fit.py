@@ -29,9 +29,10 @@ from typing import Callable
 import numpy as np
 
 from dualid.errors import DataError
-from dualid.estimators import OLS, WLS, DualMetric, EnergyLS, IdentificationResult, RegularizedWLS
-from dualid.estimators.least_squares import _weight, energy_statistics, statistics
-from dualid.logs.io import ColumnMap, _read_table, load_log
+from dualid.estimators import OLS, IdentificationResult
+from dualid.estimators.least_squares import covariance_weight, energy_statistics, statistics
+from dualid.estimators.registry import make_estimator
+from dualid.logs.io import ColumnMap, load_log, read_table
 from dualid.models.base import build_problem
 from dualid.models.joint_terms import JointTermsModel, with_joint_terms
 from dualid.models.rigid_body import RigidBodyModel
@@ -63,7 +64,7 @@ def column_map(config_columns, joints: tuple[str, ...], first_log: Path) -> Colu
     cmap = ColumnMap.pattern(joints)
     if not Path(first_log).exists():
         raise FileNotFoundError(f"log file not found: {first_log}")
-    _, available = _read_table(Path(first_log))
+    _, available = read_table(Path(first_log))
     missing = [c for c in cmap.columns() if c not in available]
     if missing:
         raise DataError(
@@ -207,18 +208,8 @@ def prior_theta(config: FitConfig, rigid: RigidBodyModel, model, ols_theta: np.n
 
 # --- estimators -------------------------------------------------------------------------------
 def estimator(method: str, theta0: np.ndarray | None = None, gamma: float = 1.0):
-    common = {"constrained": True, "allow_unidentifiable": True}
-    if method == "ols":
-        return OLS(**common)
-    if method == "wls":
-        return WLS(**common)
-    if method == "energy":
-        return EnergyLS(**common)
-    if method in ("logdet", "pullback"):
-        return RegularizedWLS(theta0=theta0, gamma=gamma, regularizer=method, **common)
-    if method == "dm":
-        return DualMetric(**common)
-    raise ValueError(f"unknown method {method!r}; known methods: {', '.join(METHOD_NAMES)}")
+    """Constrained estimators that accept a URDF chain's null space (never fully identifiable)."""
+    return make_estimator(method, theta0=theta0, gamma=gamma, allow_unidentifiable=True)
 
 
 def standard_errors(method: str, problem: IdentificationProblem, result: IdentificationResult,
@@ -230,7 +221,7 @@ def standard_errors(method: str, problem: IdentificationProblem, result: Identif
     if method == "ols":
         H, dof = statistics(problem).H, problem.N * problem.n
     elif method == "wls":
-        W, _ = _weight(problem, None, OLS(allow_unidentifiable=True))
+        W, _ = covariance_weight(problem, None, OLS(allow_unidentifiable=True))
         H, dof = statistics(problem, W).H, problem.N * problem.n
     else:
         H, dof = energy_statistics(problem).H, problem.N

@@ -1,0 +1,33 @@
+"""Estimators by name, as the CLI, the config files and the studies spell them."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dualid.estimators.dual_metric import DualMetric
+from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS
+
+METHODS = ("ols", "wls", "energy", "logdet", "pullback", "dm")
+
+
+def make_estimator(
+    method: str,
+    *,
+    theta0: np.ndarray | None = None,
+    gamma: float = 1.0,
+    constrained: bool = True,
+    allow_unidentifiable: bool = False,
+):
+    """The estimator called ``method``; logdet/pullback need the nominal θ₀ and the prior weight γ."""
+    common = {"constrained": constrained, "allow_unidentifiable": allow_unidentifiable}
+    if method == "ols":
+        return OLS(**common)
+    if method == "wls":
+        return WLS(**common)
+    if method == "energy":
+        return EnergyLS(**common)
+    if method in ("logdet", "pullback"):
+        return RegularizedWLS(theta0=theta0, gamma=gamma, regularizer=method, **common)
+    if method == "dm":
+        return DualMetric(**common)
+    raise ValueError(f"unknown method {method!r}; known methods: {', '.join(METHODS)}")
