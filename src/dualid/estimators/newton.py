@@ -91,9 +91,20 @@ class _Constraints:
         return alpha
 
 
+def _repair_psd(X: np.ndarray, floor: float = 1e-14) -> np.ndarray:
+    """X itself if it is numerically positive definite, else its eigenvalues lifted to ≥ floor·λ_max."""
+    X = 0.5 * (X + X.T)
+    try:
+        np.linalg.cholesky(X)
+        return X
+    except np.linalg.LinAlgError:
+        lam, U = np.linalg.eigh(X)
+        return (U * np.maximum(lam, floor * max(lam.max(), 1e-300))) @ U.T
+
+
 def _max_step_psd(X: np.ndarray, dX: np.ndarray) -> float:
     """Largest α with X + α dX ≻ 0 for X ≻ 0."""
-    L = np.linalg.cholesky(X)
+    L = np.linalg.cholesky(_repair_psd(X))
     Li = np.linalg.inv(L)
     lam = np.linalg.eigvalsh(Li @ dX @ Li.T)[0]
     return np.inf if lam >= 0 else float(-1.0 / lam)
@@ -195,14 +206,14 @@ def _as_slice(indices: tuple[int, ...]):
     return list(indices)
 
 
-def _apply_quad(metric, w: np.ndarray, rows: slice) -> tuple[np.ndarray, np.ndarray]:
-    """(M_ik w_i columns (c, n, p), Σ_i w_iᵀ M_ik w_i (p,)) in one pass over the metric's factors.
+def _apply_quad(metric, w: np.ndarray, rows: slice, out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(out − [M_ik w_i]_k (c, n, p), Σ_i w_iᵀ M_ik w_i (p,)) in one pass over the metric's factors.
 
-    The same quantities as ``metric.apply(w, rows)`` and ``metric.quad(w, rows).sum(0)``, sharing
-    u_i = J_i w_i and E_k u_i between the two.
+    With out = 0 these are ``−metric.apply(w, rows)`` and ``metric.quad(w, rows).sum(0)``; u_i = J_i w_i
+    and E_k u_i are shared between the two. ``out`` (c, n, p) is updated in place.
     """
     c, n = w.shape
-    Mw = np.zeros((c, n, metric.n_params))
+    out = np.zeros((c, n, metric.n_params)) if out is None else out
     wMw = np.zeros(metric.n_params)
     for t in metric.terms:
         J = t.J[rows]  # (c, d, n)
@@ -214,9 +225,9 @@ def _apply_quad(metric, w: np.ndarray, rows: slice) -> tuple[np.ndarray, np.ndar
             k = t.E.shape[0]
             Eu = (u @ t.E.transpose(2, 0, 1).reshape(d, k * d)).reshape(c, k, d)  # E symmetric
         idx = _as_slice(t.indices)
-        Mw[:, :, idx] += np.matmul(np.swapaxes(J, 1, 2), np.swapaxes(Eu, 1, 2))  # J_iᵀ E_k u_i
+        out[:, :, idx] -= np.matmul(np.swapaxes(J, 1, 2), np.swapaxes(Eu, 1, 2))  # J_iᵀ E_k u_i
         wMw[idx] += np.einsum("ckd,cd->k", Eu, u)
-    return Mw, wMw
+    return out, wMw
 
 
 @dataclass(frozen=True)
@@ -252,9 +263,9 @@ def dual_metric_derivatives(
         z = np.einsum("cab,cb->ca", Li, r)  # L⁻¹ r
         f += float(np.sum(z * z))
         w = np.einsum("cba,cb->ca", Li, z)  # M⁻¹ r = L⁻ᵀ L⁻¹ r
-        Mw, wMw = _apply_quad(problem.metric, w, rows)  # (c, n, p) columns M_ik w_i, (p,) Σ_i w_iᵀ M_ik w_i
+        D, wMw = _apply_quad(problem.metric, w, rows, out=Y.copy())  # D = Y_i − [M_ik w_i]_k, Σ_i w_iᵀ M_ik w_i
         grad += 2.0 * (w.reshape(-1) @ Y.reshape(-1, p)) - wMw
-        Z = np.matmul(Li, Y - Mw).reshape(-1, p)  # L⁻¹ (Y_i − M_ik w_i)
+        Z = np.matmul(Li, D).reshape(-1, p)  # L⁻¹ (Y_i − M_ik w_i)
         hess += 2.0 * (Z.T @ Z)
     if not np.isfinite(f):
         raise _NotPositiveDefinite
@@ -497,6 +508,7 @@ def fit_dual_metric_newton(
     tol: float = 1e-9,
     max_iter: int = 100,
     chunk: int = 4096,
+    warm_start_samples: int = 50_000,
     method: str = "dual_metric",
     verbose: bool = False,
 ) -> IdentificationResult:
@@ -504,6 +516,9 @@ def fit_dual_metric_newton(
 
     tol: relative tolerance on f for (duality gap + squared Newton decrement of the Lagrangian);
     chunk: samples per pass (memory O(chunk·n·p)); raises SolverError after max_iter iterations.
+    warm_start_samples: when N > 4× this, first solve on an evenly strided subsample of about this
+    size (to a loose tolerance, 1e-4) and start the full problem from its θ, with the dual variables
+    re-centred there at a small gap; 0 disables it.
     """
     t0 = time.perf_counter()
     p = problem.p
@@ -519,13 +534,46 @@ def fit_dual_metric_newton(
                 f"lower bound {lo[k]:g} ≥ upper bound {hi[k]:g}",
                 status="infeasible",
             )
-    theta, start = starting_point(problem, cons, chunk)
+    warm = None
+    if warm_start_samples and problem.N > 4 * warm_start_samples:
+        sub = problem.subset(slice(0, None, problem.N // warm_start_samples))
+        theta, start = starting_point(sub, cons, chunk)
+        try:
+            th, _, _, info_sub = _interior_point(sub, cons, theta, None, None, 1e-4, max_iter, chunk, verbose)
+            der = dual_metric_derivatives(problem, th, 2, chunk)  # M_i(θ) ≻ 0 on every sample?
+            warm = (th, der)
+            start = f"warm start from {sub.N} samples ({info_sub['iterations']} iterations)"
+        except (SolverError, _NotPositiveDefinite):
+            warm = None
+    if warm is None:
+        theta, start = starting_point(problem, cons, chunk)
+        theta, Z, z, info = _interior_point(problem, cons, theta, None, None, tol, max_iter, chunk, verbose)
+    else:
+        # primal warm start; duals re-centred at θ with a small gap (1e-3 f): the subsample's duals sit too
+        # close to its own boundary for the full problem and would jam the iterations
+        theta, Z, z, info = _interior_point(problem, cons, warm[0], None, None, tol, max_iter, chunk, verbose,
+                                            der=warm[1], gap0=1e-3)
+    f = info.pop("objective")
+    info["start"] = start
+    return IdentificationResult(
+        method, theta, problem.parameters, f, "optimal", "newton", time.perf_counter() - t0, info["iterations"],
+        constrained, info,
+    )
+
+
+def _interior_point(problem, cons: _Constraints, theta, Z, z, tol, max_iter, chunk, verbose, der=None, gap0=1.0):
+    """Primal–dual iterations from a strictly feasible θ (and dual Z, z, or None: centred at θ, gap0·f).
+
+    Returns (θ, Z, z, info) at relative gap ≤ tol; raises SolverError otherwise.
+    """
+    p = problem.p
     nu = cons.size  # barrier parameter: μ = gap / ν on the central path
-    der = dual_metric_derivatives(problem, theta, 2, chunk)
+    der = dual_metric_derivatives(problem, theta, 2, chunk) if der is None else der
     f_start = der.f
-    mu = max(der.f, 1e-300) / max(nu, 1)  # dual start on the central path: Z_b = μ C_b⁻¹, z = μ / s
-    Z = [mu * np.linalg.inv(c.C(theta)) for c in cons.lmis]
-    z = mu / (cons.G @ theta + cons.h) if len(cons.h) else np.zeros(0)
+    if Z is None:
+        mu = gap0 * max(der.f, 1e-300) / max(nu, 1)  # dual start on the central path: Z_b = μ C_b⁻¹, z = μ / s
+        Z = [mu * np.linalg.inv(c.C(theta)) for c in cons.lmis]
+        z = mu / (cons.G @ theta + cons.h) if len(cons.h) else np.zeros(0)
     history, n_evals = [], 0
     for it in range(max_iter + 1):
         if der is None:
@@ -551,13 +599,10 @@ def fit_dual_metric_newton(
         if verbose:
             print(f"newton {it:3d}: f {f:.15g} gap {gap:.3g} kkt {kkt:.3g}")
         if gap + kkt <= tol * f_ref:
-            return IdentificationResult(
-                method, theta, problem.parameters, f, "optimal", "newton", time.perf_counter() - t0, it,
-                constrained,
-                {"duality_gap": gap, "kkt_residual": float(np.sqrt(kkt)), "relative_gap": (gap + kkt) / f_ref,
-                 "start": start, "objective_start": f_start, "objective_evaluations": n_evals,
-                 "f_history": history},
-            )
+            info = {"objective": f, "iterations": it, "duality_gap": gap, "kkt_residual": float(np.sqrt(kkt)),
+                    "relative_gap": (gap + kkt) / f_ref, "objective_start": f_start,
+                    "objective_evaluations": n_evals, "f_history": history}
+            return theta, Z, z, info
         if it == max_iter:
             break
         # centring: Mehrotra's heuristic σ = (μ_aff / μ)³ from the affine-scaling (σ = 0) predictor
@@ -593,7 +638,8 @@ def fit_dual_metric_newton(
             first = False
             if np.isfinite(phi1):
                 phi1 += target * _barrier(cons, trial)
-            if phi1 <= phi0 + 1e-4 * alpha * slope or (np.isfinite(phi1) and abs(slope) <= 1e-14 * abs(phi0)):
+            # Armijo, with a tolerance for the rounding of f (ill-conditioned M_i make f noisy at ~1e-12)
+            if phi1 <= phi0 + 1e-4 * alpha * slope + 1e-12 * abs(phi0):
                 break
             alpha *= 0.5
             if alpha < 1e-12:
@@ -605,7 +651,7 @@ def fit_dual_metric_newton(
         dZ, dz = _dual_direction(cons, Z, z, Cinv, s, d, target)
         alpha_dual = min(1.0, 0.99 * _dual_max_step(Z, z, dZ, dz))
         theta, der = trial, der_trial
-        Z = [Zb + alpha_dual * dZb for Zb, dZb in zip(Z, dZ)]
+        Z = [_repair_psd(Zb + alpha_dual * dZb) for Zb, dZb in zip(Z, dZ)]  # PD up to rounding
         z = z + alpha_dual * dz
         if verbose:
             print(f"            sigma {sigma:.3g} alpha {alpha:.3g} alpha_dual {alpha_dual:.3g}")
