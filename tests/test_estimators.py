@@ -160,3 +160,12 @@ def test_unknown_solver_names_are_rejected():
     problem, _ = drag_problem(np.random.default_rng(0), N=20, n=3)
     with pytest.raises(ValueError, match=r"solver: expected one of \('CLARABEL', 'SCS'\), got 'MOSEK'"):
         OLS(solver="MOSEK").fit(problem)
+
+
+def test_per_equation_gamma_scales_with_the_number_of_equations():
+    problem, theta = drag_problem(np.random.default_rng(4), N=40, n=3, noise=0.3)
+    theta0 = 1.3 * theta
+    relative = RegularizedWLS(theta0=theta0, gamma=0.5, per_equation=True).fit(problem)
+    absolute = RegularizedWLS(theta0=theta0, gamma=0.5 * 40 * 3).fit(problem)
+    np.testing.assert_allclose(relative.theta, absolute.theta, rtol=1e-7)
+    assert relative.info["gamma"] == pytest.approx(60.0)

@@ -293,6 +293,8 @@ class RegularizedWLS(_Common):
     gamma: float = 1.0  # weight of the prior, in units of the data objective
     regularizer: str = "logdet"  # "logdet" | "pullback"
     covariance: np.ndarray | None = None  # (n, n); None: from the unregularized (OLS) residuals
+    per_equation: bool = False  # γ_eff = γ·N·n: with W = Σ̂⁻¹ the data term is ≈ N·n at its optimum,
+    # so a per-equation γ weighs the prior the same against 20 samples as against 20,000
 
     @property
     def name(self) -> str:
@@ -307,9 +309,10 @@ class RegularizedWLS(_Common):
             raise ValueError(f"gamma: expected a finite number ≥ 0, got {self.gamma}")
         theta0 = check_nominal(problem.parameters, self.theta0, strict=True)
         W, info = covariance_weight(problem, self.covariance, self)
+        gamma = float(self.gamma) * (problem.N * problem.n if self.per_equation else 1.0)
         return fit_quadratic(
             problem, statistics(problem, W), method=self.name, constrained=self.constrained, solver=self.solver,
             solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
-            regularizer=(self.regularizer, theta0, float(self.gamma)),
-            info={"covariance": info["covariance"], "gamma": float(self.gamma)},
+            regularizer=(self.regularizer, theta0, gamma),
+            info={"covariance": info["covariance"], "gamma": gamma},
         )

@@ -15,10 +15,12 @@ def make_estimator(
     *,
     theta0: np.ndarray | None = None,
     gamma: float = 1.0,
+    per_equation: bool = False,
     constrained: bool = True,
     allow_unidentifiable: bool = False,
 ):
-    """The estimator called ``method``; logdet/pullback need the nominal θ₀ and the prior weight γ."""
+    """The estimator called ``method``; logdet/pullback need the nominal θ₀ and the prior weight γ
+    (absolute, or per equation when per_equation=True, see RegularizedWLS)."""
     common = {"constrained": constrained, "allow_unidentifiable": allow_unidentifiable}
     if method == "ols":
         return OLS(**common)
@@ -27,7 +29,7 @@ def make_estimator(
     if method == "energy":
         return EnergyLS(**common)
     if method in ("logdet", "pullback"):
-        return RegularizedWLS(theta0=theta0, gamma=gamma, regularizer=method, **common)
+        return RegularizedWLS(theta0=theta0, gamma=gamma, regularizer=method, per_equation=per_equation, **common)
     if method == "dm":
         return DualMetric(**common)
     raise ValueError(f"unknown method {method!r}; known methods: {', '.join(METHODS)}")

@@ -65,7 +65,9 @@ def make_estimator(method: str, system: SystemData):
         return registry.make_estimator("ols", constrained=False, allow_unidentifiable=True)
     if method not in DEFAULT_METHODS:
         raise ValueError(f"unknown method {method!r}; expected one of {list(DEFAULT_METHODS)}")
-    return registry.make_estimator(method, theta0=system.theta_nominal, gamma=system.gamma, allow_unidentifiable=True)
+    return registry.make_estimator(
+        method, theta0=system.theta_nominal, gamma=system.gamma, per_equation=True, allow_unidentifiable=True
+    )
 
 
 def units_chart(coordinates: Sequence[str]) -> np.ndarray:

@@ -29,7 +29,7 @@ class SystemData:
     low_data_samples: int  # training samples kept in the low-data case (paper: 20 Crazyflie, 40 LandSalp)
     slowest_period: float  # [s] period of the slowest excitation; scores search shifts within ±T/72
     shape_coordinates: tuple[str, ...]  # the internal (shape) coordinates the paper highlights
-    gamma: float = 1e-2  # default weight of the regularized baselines' prior
+    gamma: float = 0.1  # prior weight of the regularized baselines, per equation (γ·N·n; see RegularizedWLS)
     description: str = ""
 
 

@@ -456,6 +456,6 @@ def make(seed: int = 0, noise: str = "realistic", size: str = "default"):
         low_data_samples=20,
         slowest_period=max(REFERENCE_PERIODS),  # the yaw period
         shape_coordinates=("alpha1", "alpha2"),
-        gamma=1e-2,
+        gamma=0.1,  # per equation: the prior counts as a tenth of the WLS data term
         description="Crazyflie 2.0 with a universal-joint pendulum (floating base, 30 inertial parameters)",
     )

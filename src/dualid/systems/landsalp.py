@@ -318,6 +318,6 @@ def make(seed: int = 0, noise: str = "realistic", size: str = "default"):
         low_data_samples=40,
         slowest_period=1.0 / GAIT_FREQUENCY,
         shape_coordinates=("alpha1", "alpha2"),
-        gamma=1e-2,
+        gamma=0.1,  # per equation: the prior counts as a tenth of the WLS data term
         description="LandSalp: three-link wheeled chain, drag-dominated (published drag values as truth)",
     )

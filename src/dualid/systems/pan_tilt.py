@@ -128,6 +128,6 @@ def make(seed: int = 0, noise: str = "realistic", size: str = "default"):
         low_data_samples=10,
         slowest_period=1 / 0.15,
         shape_coordinates=("tilt",),
-        gamma=1e-2,
+        gamma=0.1,  # per equation: the prior counts as a tenth of the WLS data term
         description="point mass on a pan–tilt link (teaching example)",
     )
