@@ -370,46 +370,45 @@ def starting_point(problem, cons: _Constraints, chunk: int) -> tuple[np.ndarray,
     """A strictly feasible θ with every M_i(θ) ≻ 0: the OLS estimate moved toward a central point."""
     theta_ols = _ols(problem, chunk)
     theta_c = _central_point(theta_ols, cons)
-    how = "ols→central"
-    if cons.margin(theta_c) <= 0 or not np.isfinite(_objective(problem, theta_c, chunk)):
-        samples = np.zeros(0, dtype=int)
-        if cons.margin(theta_c) > 0:
-            samples = _not_pd_samples(problem, theta_c, chunk)
-        for _ in range(20):
-            try:
-                theta_c, t = _phase_one(problem, cons, theta_c, samples)
-            except SolverError as exc:
-                raise SolverError(
-                    f"dual-metric Newton: phase I failed ({exc}); the constraints may admit no strictly feasible θ",
-                    status=exc.status,
-                ) from exc
-            if t <= 1e-9:
-                if len(samples):
-                    raise MetricError(
-                        f"dual-metric Newton: no θ satisfying the constraints makes M_i(θ) positive definite at "
-                        f"samples {samples[:10].tolist()} (phase-I margin {t:.3g} ≤ 0); check the metric's "
-                        "constant part and the parameter bounds"
-                    )
-                raise SolverError(
-                    "dual-metric Newton: the constraints (physical consistency and bounds) admit no strictly "
-                    f"feasible θ (phase-I margin {t:.3g} ≤ 0)",
-                    status="infeasible",
+    if cons.margin(theta_c) > 0:
+        # θ(β) = θ_c + β (θ_ols − θ_c), β ≤ 0.9 of the way to the constraint boundary, every M_i ≻ 0
+        d = theta_ols - theta_c
+        beta = min(1.0, 0.9 * cons.max_step(theta_c, d))
+        while beta > 1e-3:
+            if np.isfinite(_objective(problem, theta_c + beta * d, chunk)):
+                return theta_c + beta * d, "ols→central"
+            beta *= 0.5
+        if np.isfinite(_objective(problem, theta_c, chunk)):
+            return theta_c, "ols→central"
+    # phase I: a small conic problem over the constraints and the samples where M_i(θ_c) is not ≻ 0
+    samples = np.zeros(0, dtype=int)
+    if cons.margin(theta_c) > 0:
+        samples = _not_pd_samples(problem, theta_c, chunk)
+    for _ in range(20):
+        try:
+            theta_c, t = _phase_one(problem, cons, theta_c, samples)
+        except SolverError as exc:
+            raise SolverError(
+                f"dual-metric Newton: phase I failed ({exc}); the constraints may admit no strictly feasible θ",
+                status=exc.status,
+            ) from exc
+        if t <= 1e-9:
+            if len(samples):
+                raise MetricError(
+                    f"dual-metric Newton: no θ satisfying the constraints makes M_i(θ) positive definite at "
+                    f"samples {samples[:10].tolist()} (phase-I margin {t:.3g} ≤ 0); check the metric's "
+                    "constant part and the parameter bounds"
                 )
-            more = _not_pd_samples(problem, theta_c, chunk)
-            if not len(more):
-                break
-            samples = np.union1d(samples, more)
-        else:
-            raise MetricError("dual-metric Newton: phase I did not find θ with every M_i(θ) positive definite")
-        how = "phase-I"
-    # θ(β) = θ_c + β (θ_ols − θ_c), β ≤ 0.9 of the way to the constraint boundary, M_i ≻ 0
-    d = theta_ols - theta_c
-    beta = min(1.0, 0.9 * cons.max_step(theta_c, d)) if how != "phase-I" else 0.0
-    while beta > 1e-3:
-        if np.isfinite(_objective(problem, theta_c + beta * d, chunk)):
-            return theta_c + beta * d, how
-        beta *= 0.5
-    return theta_c, how
+            raise SolverError(
+                "dual-metric Newton: the constraints (physical consistency and bounds) admit no strictly "
+                f"feasible θ (phase-I margin {t:.3g} ≤ 0)",
+                status="infeasible",
+            )
+        more = _not_pd_samples(problem, theta_c, chunk)
+        if not len(more):
+            return theta_c, "phase-I"
+        samples = np.union1d(samples, more)
+    raise MetricError("dual-metric Newton: phase I did not find θ with every M_i(θ) positive definite")
 
 
 # --- the interior-point method ------------------------------------------------------------------
