@@ -158,7 +158,7 @@ def test_pan_tilt_agrees_with_the_sdp(seed, m, b_pan, b_tilt, length):
     problem = pan_tilt_problem(40, seed, np.array([m, b_pan, b_tilt]), length=length)
     newton, sdp = fit_both(problem)
     assert_same_optimum(newton, sdp, problem)
-    np.testing.assert_allclose(newton.theta, sdp.theta, rtol=1e-4, atol=1e-5 * np.abs(sdp.theta).max())
+    np.testing.assert_allclose(newton.theta, sdp.theta, rtol=1e-4, atol=1e-4 * np.abs(sdp.theta).max())
 
 
 @SETTINGS
@@ -168,7 +168,7 @@ def test_random_factored_metrics_agree_with_the_sdp(seed, n, p, extra):
     newton, sdp = fit_both(problem)
     assert_same_optimum(newton, sdp, problem)
     if sdp.status == "optimal":
-        np.testing.assert_allclose(newton.theta, sdp.theta, rtol=1e-4, atol=1e-5 * np.abs(sdp.theta).max())
+        np.testing.assert_allclose(newton.theta, sdp.theta, rtol=1e-4, atol=1e-4 * np.abs(sdp.theta).max())
 
 
 def test_floating_base_null_space_same_objective_and_predictions():

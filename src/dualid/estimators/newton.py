@@ -613,7 +613,7 @@ def _interior_point(problem, cons: _Constraints, theta, Z, z, tol, max_iter, chu
             dZa, dza = _dual_direction(cons, Z, z, Cinv, s, d_aff, 0.0)
             a_d = min(1.0, _dual_max_step(Z, z, dZa, dza))
             mu_aff = _gap(cons, theta + a_p * d_aff, [Zb + a_d * dZb for Zb, dZb in zip(Z, dZa)], z + a_d * dza) / nu
-            sigma = float(np.clip((max(mu_aff, 0.0) / mu) ** 3, 1e-3, 0.5))
+            sigma = float(np.clip((max(mu_aff, 0.0) / mu) ** 3, 0.05, 0.5))
         target = sigma * mu
         rhs = -grad + target * barrier_grad  # −∇ of the merit φ = f + target · barrier
         d = system.solve(rhs)
@@ -649,6 +649,12 @@ def _interior_point(problem, cons: _Constraints, theta, Z, z, tol, max_iter, chu
                 )
         dZ, dz = _dual_direction(cons, Z, z, Cinv, s, d, target)
         alpha_dual = min(1.0, 0.99 * _dual_max_step(Z, z, dZ, dz))
+        if alpha_dual < alpha:
+            # one step length for primal and dual (with σ ≥ 0.05 above): separate lengths and σ → 0 were
+            # faster but jammed against the boundary when many directions are held by the barrier alone
+            alpha = alpha_dual
+            trial, der_trial = theta + alpha * d, None
+        alpha_dual = alpha
         theta, der = trial, der_trial
         Z = [_repair_psd(Zb + alpha_dual * dZb) for Zb, dZb in zip(Z, dZ)]  # PD up to rounding
         z = z + alpha_dual * dz
