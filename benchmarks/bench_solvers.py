@@ -256,7 +256,8 @@ def markdown(result: dict) -> str:
             f"{'' if gap is None else f'{gap:.2e}'} |"
         )
     if result.get("findings"):
-        lines += ["", "## Findings", ""] + [f"- {x}" for x in result["findings"]]
+        lines += ["", "## Findings", ""] + ([result["newton_rows_note"], ""] if result.get("newton_rows_note") else [])
+        lines += [f"- {x}" for x in result["findings"]]
     return "\n".join(lines) + "\n"
 
 
