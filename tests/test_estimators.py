@@ -16,8 +16,10 @@ ESTIMATORS = {
     "ols_unconstrained": OLS(constrained=False),
     "wls": WLS(),
     "energy": EnergyLS(),
-    "dm": DualMetric(),
+    "dm": DualMetric(),  # the Newton solver
     "dm_unconstrained": DualMetric(constrained=False),
+    "dm_sdp": DualMetric(solver="sdp"),
+    "dm_sdp_unconstrained": DualMetric(solver="sdp", constrained=False),
 }
 
 
@@ -29,7 +31,7 @@ def pan_tilt_noiseless():
 
 # The Schur-complement SDP is degenerate on exact data (every slack is 0 at the optimum), so the
 # interior-point reference reaches ~1e-5 there; the quadratic estimators are solved to ~1e-9.
-RTOL = {"dm": 1e-4, "dm_unconstrained": 1e-4}
+RTOL = {"dm_sdp": 1e-4, "dm_sdp_unconstrained": 1e-4}
 
 
 @pytest.mark.parametrize("name", sorted(ESTIMATORS))
@@ -67,7 +69,7 @@ def test_constraints_hold_where_the_unconstrained_fit_violates_them():
     problem, _ = drag_problem(rng, N=30, n=3, noise=0.5, theta=theta)
     free = OLS(constrained=False).fit(problem)
     assert free.theta.min() < 0
-    for est in (OLS(), WLS(), EnergyLS(), DualMetric()):
+    for est in (OLS(), WLS(), EnergyLS(), DualMetric(), DualMetric(solver="sdp")):
         result = est.fit(problem)
         assert result.theta.min() >= -1e-8, est
         assert result.is_consistent
@@ -80,7 +82,8 @@ def test_result_is_immutable_and_reports_the_solver():
         result.theta[0] = 1.0
     with pytest.raises(AttributeError):
         result.objective = 0.0
-    assert result.status == "optimal" and result.solver == "sdp/CLARABEL" and result.solve_time > 0
+    assert result.status == "optimal" and result.solver == "newton" and result.solve_time > 0
+    assert DualMetric(solver="sdp").fit(problem).solver == "sdp/CLARABEL"
     assert [b.name for b in result.bodies] == ["body0", "body1", "body2"]
     assert result.as_dict()["parameters"][0]["name"] == "body0.d_long"
 
@@ -153,6 +156,8 @@ def test_metric_that_cannot_be_positive_definite_is_a_metric_error():
     bounded = problem.parameters.with_bounds(upper=np.full(9, 2.0))
     bad = IdentificationProblem(problem.Y, problem.tau, metric, problem.v, bounded, "drag")
     with pytest.raises(MetricError, match=r"no θ makes every M_i\(θ\) positive semidefinite under the constraints"):
+        DualMetric(solver="sdp").fit(bad)
+    with pytest.raises(MetricError, match=r"no θ satisfying the constraints makes M_i\(θ\) positive definite at samples \[7\]"):
         DualMetric().fit(bad)
 
 

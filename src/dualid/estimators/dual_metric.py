@@ -16,6 +16,7 @@ import scipy.sparse as sp
 
 from dualid.errors import MetricError, SolverError
 from dualid.estimators.base import check_identifiable, consistency_constraints, parameter_scale, solve_cvxpy
+from dualid.estimators.newton import fit_dual_metric_newton
 from dualid.estimators.result import IdentificationResult
 from dualid.problem.problem import IdentificationProblem
 
@@ -142,12 +143,14 @@ def fit_dual_metric_sdp(
 class DualMetric:
     """Dual-metric weighted least squares, Σ r_iᵀ M_i(θ)⁻¹ r_i.
 
-    solver: "sdp" (the Schur-complement SDP through cvxpy; the reference) or "newton" (the
-    structure-exploiting interior-point method, when available).
+    solver: "newton" (default: the structure-exploiting primal–dual interior-point method of
+    dualid.estimators.newton, O(N·n·p) memory, about the cost of a few least-squares passes) or
+    "sdp" (the Schur-complement SDP through cvxpy: the reference, one LMI per sample, slow for
+    large N). Both solve the same convex problem; tests hold them to the same optimum.
     """
 
     constrained: bool = True
-    solver: str = "sdp"
+    solver: str = "newton"
     sdp_solver: str = "CLARABEL"  # cvxpy solver for solver="sdp": "CLARABEL" or "SCS"
     solver_options: dict | None = None  # sdp: cvxpy solver options; newton: tol, max_iter, chunk
     allow_unidentifiable: bool = False
@@ -162,8 +165,6 @@ class DualMetric:
                 method=self.name,
             )
         if self.solver == "newton":
-            from dualid.estimators.newton import fit_dual_metric_newton
-
             return fit_dual_metric_newton(
                 problem, constrained=self.constrained, method=self.name, **(self.solver_options or {})
             )

@@ -288,6 +288,17 @@ def _objective(problem, theta, chunk) -> float:
         return np.inf
 
 
+def _force_scale(problem, theta, chunk) -> float:
+    """Σ τ_iᵀ M_i(θ)⁻¹ τ_i: the size of the measured forces in the dual metric (the objective's scale)."""
+    total = 0.0
+    for start in range(0, problem.N, chunk):
+        rows = slice(start, start + chunk)
+        L = np.linalg.cholesky(problem.metric.evaluate(theta, rows))
+        z = np.linalg.solve(L, problem.tau[rows][..., None])
+        total += float(np.sum(z * z))
+    return total
+
+
 # --- starting point -----------------------------------------------------------------------------
 def _ols(problem: IdentificationProblem, chunk: int) -> np.ndarray:
     """Unconstrained least squares from the sufficient statistics (min-norm where rank deficient)."""
@@ -577,6 +588,7 @@ def _interior_point(problem, cons: _Constraints, theta, Z, z, tol, max_iter, chu
     nu = cons.size  # barrier parameter: μ = gap / ν on the central path
     der = dual_metric_derivatives(problem, theta, 2, chunk) if der is None else der
     f_start = der.f
+    f_scale = max(f_start, _force_scale(problem, theta, chunk))  # exact data drive f → 0
     if Z is None:
         mu = gap0 * max(der.f, 1e-300) / max(nu, 1)  # dual start on the central path: Z_b = μ C_b⁻¹, z = μ / s
         Z = [mu * np.linalg.inv(c.C(theta)) for c in cons.lmis]
@@ -601,7 +613,7 @@ def _interior_point(problem, cons: _Constraints, theta, Z, z, tol, max_iter, chu
         system = _NewtonSystem(0.5 * (K + K.T))
         gap = _gap(cons, theta, Z, z)
         kkt = float(max(r_dual @ system.solve(r_dual), 0.0))  # squared Newton decrement of the Lagrangian
-        f_ref = max(f, 1e-12 * f_start, 1e-300)
+        f_ref = max(f, 1e-12 * f_scale, 1e-300)
         history.append(f)
         if verbose:
             print(f"newton {it:3d}: f {f:.15g} gap {gap:.3g} kkt {kkt:.3g}")
