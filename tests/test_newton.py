@@ -104,8 +104,10 @@ def assert_same_optimum(newton, sdp, problem, rtol=1e-5):
     assert newton.info["relative_gap"] <= 1e-9
     # the Newton solution is at least as good as the SDP's (which is accurate to ~1e-8 when it says optimal)
     assert newton.objective <= sdp.objective * (1 + 1e-7)
-    # and not far from it (the SDP's own accuracy is the limit: 1e-6 relative is often, not always, met by it)
-    assert sdp.objective - newton.objective <= (rtol if sdp.status == "optimal" else 1e-3) * sdp.objective
+    # and not far from it when the SDP claims optimality (its own accuracy is the limit). When Clarabel
+    # says "optimal_inaccurate" (near-singular M_i at the optimum) it can be far above: only "no worse" holds.
+    if sdp.status == "optimal":
+        assert sdp.objective - newton.objective <= rtol * sdp.objective
     np.testing.assert_allclose(newton.objective, problem.dual_metric_objective(newton.theta), rtol=1e-10)
     assert problem.parameters.is_consistent(newton.theta, tol=1e-9)
 
@@ -276,6 +278,7 @@ def test_warm_start_from_a_subsample_reaches_the_same_optimum():
     problem, _ = rigid_body_problem(crazyflie_like(), 60, seed=7, noise=0.05)
     cold = fit_dual_metric_newton(problem, warm_start_samples=0)
     warm = fit_dual_metric_newton(problem, warm_start_samples=12)
+    # 12 of 60 samples is a harsh warm start: it may jam, and then the cold start runs (and says so)
     assert warm.info["start"].startswith("warm start from 12 samples")
     assert warm.info["relative_gap"] <= 1e-9
     np.testing.assert_allclose(warm.objective, cold.objective, rtol=1e-8)

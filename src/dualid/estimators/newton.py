@@ -385,20 +385,63 @@ def _not_pd_samples(problem, theta, chunk, limit=50) -> np.ndarray:
     return bad[np.argsort(worst)[:limit]]
 
 
+def _energy_ls(problem: IdentificationProblem, chunk: int) -> np.ndarray:
+    """min-norm argmin Σ (v_iᵀ r_i)²: v_iᵀr_i is the same in every chart, so is this θ."""
+    p = problem.p
+    H, g = np.zeros((p, p)), np.zeros(p)
+    for start in range(0, problem.N, chunk):
+        rows = slice(start, start + chunk)
+        e = np.einsum("nap,na->np", problem.Y[rows], problem.v[rows])
+        y = np.einsum("na,na->n", problem.tau[rows], problem.v[rows])
+        H += e.T @ e
+        g += e.T @ y
+    return _solve_psd(H, g, rtol=1e-10)
+
+
+def _frozen_metric_ls(problem: IdentificationProblem, theta_c: np.ndarray, chunk: int) -> np.ndarray | None:
+    """min-norm argmin Σ r_iᵀ M_i(θ_c)⁻¹ r_i (the metric frozen at θ_c): chart-invariant; None if some
+    M_i(θ_c) is not positive definite."""
+    p = problem.p
+    H, g = np.zeros((p, p)), np.zeros(p)
+    for start in range(0, problem.N, chunk):
+        rows = slice(start, start + chunk)
+        try:
+            L = np.linalg.cholesky(problem.metric.evaluate(theta_c, rows))
+        except np.linalg.LinAlgError:
+            return None
+        Z = np.linalg.solve(L, problem.Y[rows])  # L⁻¹ Y_i (n, p)
+        z = np.linalg.solve(L, problem.tau[rows][..., None])[..., 0]
+        H += np.einsum("nap,naq->pq", Z, Z)
+        g += np.einsum("nap,na->p", Z, z)
+    return _solve_psd(H, g, rtol=1e-10)
+
+
 def starting_point(problem, cons: _Constraints, chunk: int) -> tuple[np.ndarray, str]:
-    """A strictly feasible θ with every M_i(θ) ≻ 0: the OLS estimate moved toward a central point."""
-    theta_ols = _ols(problem, chunk)
-    theta_c = _central_point(theta_ols, cons)
-    if cons.margin(theta_c) > 0:
-        # θ(β) = θ_c + β (θ_ols − θ_c), β ≤ 0.9 of the way to the constraint boundary, every M_i ≻ 0
-        d = theta_ols - theta_c
+    """A strictly feasible θ with every M_i(θ) ≻ 0, computed from chart-invariant quantities only.
+
+    The energy least-squares θ picks a central point θ_c (each block's eigenvalues lifted); the
+    frozen-metric estimate argmin Σ rᵀM(θ_c)⁻¹r is then moved toward θ_c until it is strictly
+    feasible. Both estimates are the same in every chart, and Newton steps are affine-invariant in θ,
+    so the whole iteration (and hence the chosen point of a non-unique optimal face) does not
+    depend on the coordinates, units or scaling of the data. Falls back to the OLS seed (and to a
+    phase-I problem) only when that fails.
+    """
+    for seed_name, seed in (("energy", _energy_ls), ("ols", _ols)):
+        theta_seed = seed(problem, chunk)
+        theta_c = _central_point(theta_seed, cons)
+        if cons.margin(theta_c) <= 0 or not np.isfinite(_objective(problem, theta_c, chunk)):
+            continue
+        theta_f = _frozen_metric_ls(problem, theta_c, chunk) if seed_name == "energy" else theta_seed
+        target, label = (theta_f, f"{seed_name}→frozen-metric→central") if theta_f is not None else (theta_seed, f"{seed_name}→central")
+        # θ(β) = θ_c + β (target − θ_c), β ≤ 0.9 of the way to the constraint boundary, every M_i ≻ 0
+        d = target - theta_c
         beta = min(1.0, 0.9 * cons.max_step(theta_c, d))
         while beta > 1e-3:
             if np.isfinite(_objective(problem, theta_c + beta * d, chunk)):
-                return theta_c + beta * d, "ols→central"
+                return theta_c + beta * d, label
             beta *= 0.5
-        if np.isfinite(_objective(problem, theta_c, chunk)):
-            return theta_c, "ols→central"
+        return theta_c, label
+    theta_c = _central_point(_ols(problem, chunk), cons)
     # phase I: a small conic problem over the constraints and the samples where M_i(θ_c) is not ≻ 0
     samples = np.zeros(0, dtype=int)
     if cons.margin(theta_c) > 0:
@@ -552,7 +595,7 @@ def fit_dual_metric_newton(
                 f"lower bound {lo[k]:g} ≥ upper bound {hi[k]:g}",
                 status="infeasible",
             )
-    warm = None
+    warm, failed_warm = None, ""
     if warm_start_samples and problem.N > 4 * warm_start_samples:
         sub = problem.subset(slice(0, None, problem.N // warm_start_samples))
         theta, start = starting_point(sub, cons, chunk)
@@ -563,14 +606,19 @@ def fit_dual_metric_newton(
             start = f"warm start from {sub.N} samples ({info_sub['iterations']} iterations)"
         except (SolverError, _NotPositiveDefinite):
             warm = None
+    if warm is not None:
+        # primal warm start; duals re-centred at θ with a small gap (1e-3 f): the subsample's duals sit too
+        # close to its own boundary for the full problem and would jam the iterations
+        try:
+            theta, Z, z, info = _interior_point(problem, cons, warm[0], None, None, tol, max_iter, chunk, verbose,
+                                                der=warm[1], gap0=1e-3)
+        except SolverError as exc:  # the subsample's optimum can sit near a boundary the full data move away from
+            warm = None
+            failed_warm = f"{start} failed ({exc.status}); "
     if warm is None:
         theta, start = starting_point(problem, cons, chunk)
         theta, Z, z, info = _interior_point(problem, cons, theta, None, None, tol, max_iter, chunk, verbose)
-    else:
-        # primal warm start; duals re-centred at θ with a small gap (1e-3 f): the subsample's duals sit too
-        # close to its own boundary for the full problem and would jam the iterations
-        theta, Z, z, info = _interior_point(problem, cons, warm[0], None, None, tol, max_iter, chunk, verbose,
-                                            der=warm[1], gap0=1e-3)
+        start = failed_warm + start
     f = info.pop("objective")
     info["start"] = start
     return IdentificationResult(
@@ -657,8 +705,9 @@ def _interior_point(problem, cons: _Constraints, theta, Z, z, tol, max_iter, chu
             first = False
             if np.isfinite(phi1):
                 phi1 += target * _barrier(cons, trial)
-            # Armijo, with a tolerance for the rounding of f (ill-conditioned M_i make f noisy at ~1e-12)
-            if phi1 <= phi0 + 1e-4 * alpha * slope + 1e-12 * abs(phi0):
+            # Armijo, with a tolerance for the rounding of f: batched solves with ill-conditioned M_i make
+            # f jitter by a few 1e-12 relative; 1e-10 stays 10× below the stopping tolerance (1e-9)
+            if phi1 <= phi0 + 1e-4 * alpha * slope + 1e-10 * abs(phi0):
                 break
             alpha *= 0.5
             if alpha < 1e-12:
