@@ -132,7 +132,13 @@ def trajectory_plot(result: StudyResult, case: str, path, coordinate: str | None
     t = first.t - first.t[0]
     keep = t <= max_duration
     fig, ax = plt.subplots(figsize=(9, 4.2))
-    ax.plot(t[keep], first.measured[keep, k], color="k", lw=2.2, alpha=0.45, label="measured")
+    measured = first.measured[keep, k]
+    ax.plot(t[keep], measured, color="k", lw=2.2, alpha=0.45, label="measured")
+    # the axis follows the measured signal (±100 % margin): a prediction far off scale is clipped and
+    # says so in its label, instead of flattening every other curve
+    lo, hi = float(measured.min()), float(measured.max())
+    pad = max(hi - lo, 1e-12)
+    ylim = (lo - pad, hi + pad)
     failed = []
     for m in methods:
         tr = traces.get(m)
@@ -143,8 +149,11 @@ def trajectory_plot(result: StudyResult, case: str, path, coordinate: str | None
             continue
         score = _run_score(result, tr, k)
         style = {"lw": 1.8, "ls": "-", "zorder": 2} if m == "dm" else {"lw": 1.1, "ls": "--", "zorder": 3}
-        ax.plot(t[keep], tr.predicted[keep, k], color=COLORS.get(m), label=f"{_label(m)} (score {score:.3f} on this run)", **style)
+        pred = tr.predicted[keep, k]
+        off = " — off scale, peak {:.3g}".format(pred[np.argmax(np.abs(pred))]) if (pred.min() < ylim[0] or pred.max() > ylim[1]) else ""
+        ax.plot(t[keep], pred, color=COLORS.get(m), label=f"{_label(m)} (score {score:.3f} on this run{off})", **style)
     unit = "acceleration" if result.signal == "acceleration" else "velocity"
+    ax.set_ylim(*ylim)
     ax.set_xlabel("time [s]")
     ax.set_ylabel(f"{_coord_label(result, coordinate)}")
     title = f"{result.system}: {coordinate} {unit} on test run {first.run!r}, {CASE_TITLES.get(case, case)}"
