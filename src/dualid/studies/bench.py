@@ -131,16 +131,6 @@ def _pinocchio_model(name: str):
     raise ValueError(f"unknown problem {name!r}; expected one of {', '.join(PROBLEMS)}")
 
 
-def spatial_inertia_basis() -> np.ndarray:
-    """E (10, 6, 6): the 6×6 spatial inertia is G(θ_b) = Σ_k θ_bk E_k in Pinocchio's parameter order
-    (linear in θ_b; the differences of ``Inertia.FromDynamicParameters``)."""
-    import pinocchio as pin
-
-    theta0 = np.array([1.0, 0.1, -0.2, 0.3, 2.0, 0.1, 2.5, -0.2, 0.15, 3.0])
-    G0 = pin.Inertia.FromDynamicParameters(theta0).matrix()
-    return np.stack([pin.Inertia.FromDynamicParameters(theta0 + np.eye(10)[k]).matrix() - G0 for k in range(10)])
-
-
 def base_samples(name: str, cache: Path, count: int = BASE_SAMPLES) -> Path:
     """Y (count, n, p), body Jacobians J (bodies, count, 6, n) in the local frame, θ (p,) and the body
     names for ``count`` random states, cached as ``cache/NAME-COUNT.npz``. The states come from fixed
@@ -153,22 +143,19 @@ def base_samples(name: str, cache: Path, count: int = BASE_SAMPLES) -> Path:
         return path
     import pinocchio as pin
 
+    from dualid.models.rigid_body import RigidBodyModel
+
     model = _pinocchio_model(name)
-    data = model.createData()
+    rb = RigidBodyModel(model)
     rng = np.random.default_rng(0)
     pin.seed(0)
-    bodies = list(range(1, model.njoints))
-    n, p = model.nv, 10 * len(bodies)
-    Y = np.empty((count, n, p))
-    J = np.empty((len(bodies), count, 6, n))
-    for i in range(count):
-        q = pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq))
-        Y[i] = pin.computeJointTorqueRegressor(model, data, q, rng.normal(size=n), rng.normal(size=n))
-        pin.computeJointJacobians(model, data, q)
-        for b, j in enumerate(bodies):
-            J[b, i] = pin.getJointJacobian(model, data, j, pin.LOCAL)
-    theta = np.concatenate([model.inertias[j].toDynamicParameters() for j in bodies])
-    names = np.array([model.names[j] for j in bodies])
+    q = np.stack([pin.randomConfiguration(model, -np.ones(model.nq), np.ones(model.nq)) for _ in range(count)])
+    va = rng.normal(size=(count, 2, model.nv))  # per sample v then a: fewer samples are a prefix of more
+    v, a = va[:, 0], va[:, 1]
+    Y = rb.regressor(q, v, a)  # (count, n, p)
+    J = np.swapaxes(rb.jacobians(q), 0, 1)  # (bodies, count, 6, n), LOCAL frames
+    theta = rb.nominal
+    names = np.array(rb.bodies)
     cache.mkdir(parents=True, exist_ok=True)
     tmp = cache / f".{name}-{count}.{os.getpid()}.npz"
     np.savez(tmp, Y=Y, J=J, theta=theta, names=names)
@@ -179,6 +166,7 @@ def base_samples(name: str, cache: Path, count: int = BASE_SAMPLES) -> Path:
 def build_problem(path: Path, N: int):
     """The identification problem of N samples from a ``base_samples`` file: rows i mod count, τ = Yθ
     plus NOISE·mean|τ| Gaussian noise (seed N); the metric is the mass matrix Σ_b J_bᵀ G(θ_b) J_b."""
+    from dualid.models.rigid_body import spatial_inertia_basis
     from dualid.problem.metric import AffineMetric, MetricTerm
     from dualid.problem.parameters import rigid_body_space
     from dualid.problem.problem import IdentificationProblem
