@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 from rich.console import Console
 
-console = Console(stderr=True)
+console = Console(stderr=True, soft_wrap=True)  # never hard-wrap messages: users grep them
 
 
 def fail(message: str, code: int = 1) -> None:

@@ -1,0 +1,42 @@
+"""The simulate and reproduce commands end to end, on tiny settings."""
+
+import json
+
+from typer.testing import CliRunner
+
+from dualid.cli import app
+
+runner = CliRunner()
+
+
+def test_simulate_writes_a_data_set_and_refuses_to_overwrite(tmp_path):
+    out = tmp_path / "pt"
+    result = runner.invoke(app, ["simulate", "pan-tilt", "--out", str(out), "--size", "small", "--seed", "3"])
+    assert result.exit_code == 0, result.output
+    index = json.loads((out / "dataset.json").read_text())
+    assert index["info"]["system"] == "pan-tilt" and index["info"]["seed"] == 3
+    assert len(index["splits"]["train"]) == 1 and len(index["splits"]["test"]) == 2
+    again = runner.invoke(app, ["simulate", "pan-tilt", "--out", str(out), "--size", "small"])
+    assert again.exit_code == 1
+    assert "already exists and is not empty; pass --force to overwrite it" in again.output
+    forced = runner.invoke(app, ["simulate", "pan-tilt", "--out", str(out), "--size", "small", "--force"])
+    assert forced.exit_code == 0, forced.output
+
+
+def test_unknown_system_is_named():
+    result = runner.invoke(app, ["simulate", "segway", "--out", "unused"])
+    assert result.exit_code == 1
+    assert "unknown system 'segway'; expected one of pan-tilt, crazyflie, landsalp" in result.output
+
+
+def test_reproduce_smoke_run_writes_results_table_and_figures(tmp_path):
+    out = tmp_path / "study"
+    result = runner.invoke(app, ["reproduce", "pan-tilt", "--size", "small", "--seeds", "2", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    for name in ("results.json", "results.md", "score_bars_low.png", "score_bars_high.png", "trajectory_high.png"):
+        assert (out / name).is_file(), name
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["system"] == "pan-tilt" and set(doc["cases"]) == {"low", "high"}
+    assert "DM" in (out / "results.md").read_text()
+    bad = runner.invoke(app, ["reproduce", "pan-tilt", "--case", "medium"])
+    assert bad.exit_code == 1 and "--case: expected low, high or both, got 'medium'" in bad.output
