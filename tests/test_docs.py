@@ -1,13 +1,14 @@
-"""The Python examples in docs/ run as written."""
+"""The Python examples in README.md and docs/ run as written."""
 
 import re
 from pathlib import Path
 
 import pytest
 
-DOCS = Path(__file__).resolve().parents[1] / "docs"
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 BLOCK = re.compile(r"```python\n(.*?)```", re.S)
-EXAMPLES = [(path.name, i, code) for path in sorted(DOCS.glob("*.md")) for i, code in enumerate(BLOCK.findall(path.read_text()))]
+EXAMPLES = [(path.name, i, code) for path in PAGES for i, code in enumerate(BLOCK.findall(path.read_text()))]
 
 
 @pytest.mark.parametrize("name,index,code", EXAMPLES, ids=[f"{n}#{i}" for n, i, _ in EXAMPLES])
