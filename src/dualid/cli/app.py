@@ -22,9 +22,6 @@ def main() -> None:
     """dualid: identify robot models whose fit does not depend on coordinates, units or scaling."""
 
 
+# importing the command modules registers their commands on ``app``
 for _module in ("simulate", "reproduce", "fit", "bench"):
-    try:
-        importlib.import_module(f"dualid.cli.{_module}")
-    except ModuleNotFoundError as exc:  # a command group not written yet
-        if exc.name != f"dualid.cli.{_module}":
-            raise
+    importlib.import_module(f"dualid.cli.{_module}")

@@ -31,10 +31,12 @@ def check_identifiable(problem: IdentificationProblem, rank: int | None = None, 
             f"too few samples: {N} samples × {n} coordinates = {N * n} equations for {p} parameters; "
             f"need at least {int(np.ceil(p / n))} exciting samples (or pass allow_unidentifiable=True)"
         )
-    ident = problem.identifiability()
+    ident = None
     if rank is None:
+        ident = problem.identifiability()
         rank = ident.rank
     if rank < p:
+        ident = ident or problem.identifiability()  # the null space, for the message
         raise IdentifiabilityError(
             f"the {what} has rank {rank} < {p} parameters, so θ is not unique. "
             f"Not identifiable: {', '.join(ident.unidentifiable) or '(combinations below)'}.\n"

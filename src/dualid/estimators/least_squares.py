@@ -133,7 +133,7 @@ def fit_quadratic(
     rank = _rank(stats.H)
     info["rank"] = rank
     if regularizer is None and not allow_unidentifiable:
-        check_identifiable(problem, rank=rank if rank < p else None, what=f"{method} weighted regressor")
+        check_identifiable(problem, rank=rank, what=f"{method} weighted regressor")
 
     s = parameter_scale(problem)
     Hs = s[:, None] * stats.H * s[None, :]

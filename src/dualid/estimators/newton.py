@@ -604,8 +604,10 @@ def fit_dual_metric_newton(
             der = dual_metric_derivatives(problem, th, 2, chunk)  # M_i(θ) ≻ 0 on every sample?
             warm = (th, der)
             start = f"warm start from {sub.N} samples ({info_sub['iterations']} iterations)"
-        except (SolverError, _NotPositiveDefinite):
-            warm = None
+        except SolverError as exc:  # recorded in info["start"]; the cold start below decides
+            warm, failed_warm = None, f"warm start from {sub.N} samples failed ({exc.status}); "
+        except _NotPositiveDefinite:
+            warm, failed_warm = None, f"warm start from {sub.N} samples left some M_i(θ) indefinite; "
     if warm is not None:
         # primal warm start; duals re-centred at θ with a small gap (1e-3 f): the subsample's duals sit too
         # close to its own boundary for the full problem and would jam the iterations

@@ -158,8 +158,11 @@ def _remove_dataset(directory: Path) -> None:
     try:
         doc = json.loads(index.read_text())
         files = [f for runs in doc.get("splits", {}).values() for e in runs for f in (e["file"], e.get("meta_arrays")) if f]
-    except (ValueError, KeyError, TypeError, AttributeError):
-        files = []
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise DataError(
+            f"{index} is not a readable dualid data set index ({exc}); refusing to overwrite a directory "
+            "whose files it cannot list — remove it by hand"
+        ) from exc
     root = directory.resolve()
     for rel in files:
         p = (directory / rel).resolve()

@@ -116,7 +116,10 @@ def make(seed: int = 0, noise: str = "realistic", size: str = "default"):
     }
     if noise not in levels:
         raise ValueError(f"noise: expected one of {sorted(levels)}, got {noise!r}")
-    n_train, n_test, duration = (3, 3, 10.0) if size == "default" else (1, 2, 3.0)
+    sizes = {"default": (3, 3, 10.0), "small": (1, 2, 3.0)}
+    if size not in sizes:
+        raise ValueError(f"size: expected one of {sorted(sizes)}, got {size!r}")
+    n_train, n_test, duration = sizes[size]
     model, train, test, theta = dataset(seed, n_train, n_test, noise=levels[noise], duration=duration)
     return SystemData(
         name="pan-tilt",

@@ -27,7 +27,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-METHODS = ("ols", "wls", "energy", "logdet", "pullback", "dm")
+from dualid.estimators.registry import METHODS  # the one list of method names
+
 DEFAULT_PREPROCESSING = (
     {"resample": {"rate": 500.0}},
     {"differentiate": {"method": "savgol", "window": 0.05}},

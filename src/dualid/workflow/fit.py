@@ -28,7 +28,7 @@ from typing import Callable
 
 import numpy as np
 
-from dualid.errors import DataError
+from dualid.errors import DataError, DualidError
 from dualid.estimators import OLS, IdentificationResult
 from dualid.estimators.least_squares import covariance_weight, energy_statistics, statistics
 from dualid.estimators.registry import make_estimator
@@ -323,7 +323,8 @@ def fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome
                     ols_theta = estimator("ols").fit(problem).theta
                 theta0, prior_text = prior_theta(config, rigid, model, ols_theta)
             result = estimator(method, theta0, config.prior.gamma).fit(problem)
-        except Exception as exc:  # recorded in the report: one method's failure must not lose the others
+        except (DualidError, ValueError, np.linalg.LinAlgError) as exc:  # recorded in the report: one
+            # method's failure must not lose the others; anything else is a bug and propagates
             fits[method] = MethodFit(method, None, error=f"{type(exc).__name__}: {exc}")
             continue
         if method == "ols":

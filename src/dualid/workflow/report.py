@@ -21,6 +21,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from dualid.errors import DualidError  # noqa: E402
 from dualid.models.urdf import write_urdf  # noqa: E402
 from dualid.workflow.fit import METHOD_NAMES, FitOutcome, add_armature, armature_of, friction_of  # noqa: E402
 from dualid.workflow.validate import Validation  # noqa: E402
@@ -221,7 +222,7 @@ def write_fit(outcome: FitOutcome, out: str | Path) -> dict[str, Path]:
         try:
             path = write_urdf(outcome.config.model.urdf, outcome.rigid, f.result.theta[:p0], out / f"{m}.urdf",
                               overwrite=True, friction=friction_of(outcome.model, f.result.theta))
-        except Exception as exc:  # e.g. a fit on the consistency boundary the URDF writer refuses
+        except (DualidError, ValueError) as exc:  # e.g. a fit on the consistency boundary the URDF writer refuses
             urdfs[m] = f"not written: {exc}"
             continue
         armature = armature_of(outcome.model, f.result.theta)

@@ -24,12 +24,12 @@ from dualid.trajectories.trajectory import Trajectory
 
 
 def _ncc(pred: np.ndarray, meas: np.ndarray, max_shift: int) -> np.ndarray:
+    """Per joint; NaN (undefined) where either signal is constant, e.g. an unactuated joint's zero torque."""
     out = np.full(pred.shape[1], np.nan)
     for j in range(pred.shape[1]):
-        try:
-            out[j] = max_normalized_xcorr(pred[:, j], meas[:, j], min(max_shift, pred.shape[0] - 2))
-        except ValueError:  # a constant signal (e.g. an unactuated joint's zero torque): undefined
-            pass
+        if np.ptp(pred[:, j]) == 0 or np.ptp(meas[:, j]) == 0:
+            continue
+        out[j] = max_normalized_xcorr(pred[:, j], meas[:, j], min(max_shift, pred.shape[0] - 2))
     return out
 
 
