@@ -6,30 +6,54 @@ drag-dominated:     v = M̂(q)⁻¹ τ
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from dualid.errors import MetricError
 from dualid.models.base import Model
+from dualid.problem.metric import AffineMetric
 from dualid.trajectories.trajectory import Trajectory
+
+
+@dataclass(frozen=True, eq=False)
+class PredictionData:
+    """What forward dynamics needs from a run that does not depend on θ: M(q, ·), Y_h(q, v) and τ.
+
+    Build it once per run (``of``), then ``predict(θ)`` for every identified model: the Pinocchio
+    passes behind the metric and the bias regressor are not repeated per fit.
+    """
+
+    kind: str  # "inertia" | "drag"
+    metric: AffineMetric  # M(q_i, θ), T samples
+    Y_h: np.ndarray | None  # (T, n, p) bias regressor (inertia), None for drag
+    tau: np.ndarray  # (T, n)
+
+    @staticmethod
+    def of(model: Model, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> "PredictionData":
+        Y_h = model.bias_regressor(q, v) if model.kind == "inertia" else None
+        return PredictionData(model.kind, model.metric(q), Y_h, np.asarray(tau, dtype=float))
+
+    def predict(self, theta: np.ndarray) -> np.ndarray:
+        """Predicted accelerations (inertia) or velocities (drag), (T, n)."""
+        theta = np.asarray(theta, dtype=float)
+        M = self.metric.evaluate(theta)
+        rhs = self.tau if self.Y_h is None else self.tau - self.Y_h @ theta
+        try:
+            L = np.linalg.cholesky(M)
+        except np.linalg.LinAlgError:
+            lam = np.linalg.eigvalsh(M)[:, 0]
+            raise MetricError(
+                f"forward dynamics: M(q, θ) is not positive definite at {int(np.sum(lam <= 0))} of {len(lam)} "
+                f"samples (smallest eigenvalue {lam.min():.3g}); the identified model cannot be simulated there"
+            ) from None
+        z = np.linalg.solve(L, rhs[..., None])
+        return np.linalg.solve(np.swapaxes(L, 1, 2), z)[..., 0]
 
 
 def forward_dynamics(model: Model, theta: np.ndarray, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
     """Predicted accelerations (inertia) or velocities (drag), (T, n)."""
-    theta = np.asarray(theta, dtype=float)
-    M = model.metric(q).evaluate(theta)
-    rhs = np.array(tau, dtype=float)
-    if model.kind == "inertia":
-        rhs = rhs - model.bias_regressor(q, v) @ theta
-    try:
-        L = np.linalg.cholesky(M)
-    except np.linalg.LinAlgError:
-        lam = np.linalg.eigvalsh(M)[:, 0]
-        raise MetricError(
-            f"forward dynamics: M(q, θ) is not positive definite at {int(np.sum(lam <= 0))} of {len(lam)} "
-            f"samples (smallest eigenvalue {lam.min():.3g}); the identified model cannot be simulated there"
-        ) from None
-    z = np.linalg.solve(L, rhs[..., None])
-    return np.linalg.solve(np.swapaxes(L, 1, 2), z)[..., 0]
+    return PredictionData.of(model, q, v, tau).predict(theta)
 
 
 def predict(model: Model, theta: np.ndarray, trajectory: Trajectory) -> np.ndarray:

@@ -32,7 +32,7 @@ import numpy as np
 
 from dualid.errors import DualidError, IdentifiabilityError
 from dualid.estimators import registry
-from dualid.evaluation.prediction import measured_signal, predict
+from dualid.evaluation.prediction import PredictionData, measured_signal
 from dualid.evaluation.scores import metric_rmse, rmse, score_run, shift_window
 from dualid.models.base import build_problem
 from dualid.problem.problem import IdentificationProblem
@@ -351,11 +351,12 @@ def low_data_subset(problem: IdentificationProblem, n_samples: int, seed: int, r
     )
 
 
-def _evaluate(system: SystemData, theta: np.ndarray, max_shift: int, metrics: list[np.ndarray]):
+def _evaluate(system: SystemData, theta: np.ndarray, max_shift: int, metrics: list[np.ndarray],
+              forward: list[PredictionData]):
     S, R, E, P = [], [], [], []
-    for run, M in zip(system.test, metrics):
+    for run, M, fd in zip(system.test, metrics, forward):
         meas = measured_signal(system.model, run)
-        pred = predict(system.model, theta, run)
+        pred = fd.predict(theta)
         S.append(score_run(pred, meas, max_shift))
         R.append(rmse(pred, meas))
         E.append(metric_rmse(pred, meas, M))
@@ -363,12 +364,13 @@ def _evaluate(system: SystemData, theta: np.ndarray, max_shift: int, metrics: li
     return np.array(S), np.array(R), np.array(E), P
 
 
-def _fit_one(estimator, problem, system, case, method, seed, max_shift, metrics) -> tuple[FitRecord, list | None]:
+def _fit_one(estimator, problem, system, case, method, seed, max_shift, evaluation) -> tuple[FitRecord, list | None]:
+    """Fit, then score on the test runs; evaluation = (true metrics, θ-independent prediction data) per run."""
     stage = "fit"
     try:
         result = estimator.fit(problem)
         stage = "prediction"
-        S, R, E, P = _evaluate(system, result.theta, max_shift, metrics)
+        S, R, E, P = _evaluate(system, result.theta, max_shift, *evaluation)
     except DualidError as exc:  # SolverError, MetricError, IdentifiabilityError, ConsistencyError, …
         msg = f"{type(exc).__name__} during {stage}: {exc}"
         return FitRecord(case, method, seed, problem.N, False, error=msg), None
@@ -421,7 +423,8 @@ def run_study(
     B = _ablation_chart(ablation, problem)
     dt = float(np.median(np.diff(system.test[0].t)))
     max_shift = shift_window(system.slowest_period, dt)
-    metrics = [system.model.metric(run.q).evaluate(system.theta_true) for run in system.test]
+    forward = [PredictionData.of(system.model, run.q, run.v, run.tau) for run in system.test]
+    evaluation = ([fd.metric.evaluate(system.theta_true) for fd in forward], forward)  # built once per run
     coords = tuple(problem.coordinates)
 
     plan: list[tuple[str, int | None]] = [("low", s) for s in seed_list if "low" in cases]
@@ -445,7 +448,7 @@ def run_study(
         if B is not None:
             train = train.in_coordinates(B)
         for method, estimator in estimators.items():
-            rec, preds = _fit_one(estimator, train, system, case_name, method, seed, max_shift, metrics)
+            rec, preds = _fit_one(estimator, train, system, case_name, method, seed, max_shift, evaluation)
             records.append(rec)
             if seed is None or seed == seed_list[0]:
                 traces.append(Trace(case_name, method, run.name, run.t, measured_trace,
@@ -457,7 +460,7 @@ def run_study(
         Summary.of(c, m, [r for r in records if r.case == c and r.method == m], n) for c in cases for m in estimators
     )
     truth_rec, truth_pred = _fit_one(_Fixed(system.theta_true), problem, system, "truth", "truth", None, max_shift,
-                                     metrics)
+                                     evaluation)
     if truth_pred is not None:
         for c in cases:
             traces.append(Trace(c, "truth", run.name, run.t, measured_trace, truth_pred[trace_run]))
