@@ -64,11 +64,18 @@ def statistics(problem: IdentificationProblem, W: np.ndarray | None = None, chun
     return Statistics(0.5 * (H + H.T), g, c, W)
 
 
-def energy_statistics(problem: IdentificationProblem) -> Statistics:
-    """W_i = v_i v_iᵀ: the rows e_i = Y_iᵀ v_i and targets v_iᵀ τ_i."""
-    e = np.einsum("nap,na->np", problem.Y, problem.v)
-    y = np.einsum("na,na->n", problem.tau, problem.v)
-    return Statistics(e.T @ e, e.T @ y, float(y @ y), energy=True)
+def energy_statistics(problem: IdentificationProblem, chunk: int = 65536) -> Statistics:
+    """W_i = v_i v_iᵀ: the rows e_i = Y_iᵀ v_i and targets v_iᵀ τ_i, accumulated in chunks of samples."""
+    p = problem.p
+    H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
+    for start in range(0, problem.N, chunk):
+        rows = slice(start, start + chunk)
+        e = np.einsum("nap,na->np", problem.Y[rows], problem.v[rows])
+        y = np.einsum("na,na->n", problem.tau[rows], problem.v[rows])
+        H += e.T @ e
+        g += e.T @ y
+        c += float(y @ y)
+    return Statistics(H, g, c, energy=True)
 
 
 def _rank(H: np.ndarray, rtol: float = 1e-10) -> int:

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualid.errors import MetricError, SolverError
+from dualid.estimators.least_squares import energy_statistics, statistics
 from dualid.estimators.result import IdentificationResult
 from dualid.problem.problem import IdentificationProblem
 
@@ -302,13 +303,8 @@ def _force_scale(problem, theta, chunk) -> float:
 # --- starting point -----------------------------------------------------------------------------
 def _ols(problem: IdentificationProblem, chunk: int) -> np.ndarray:
     """Unconstrained least squares from the sufficient statistics (min-norm where rank deficient)."""
-    p = problem.p
-    H, g = np.zeros((p, p)), np.zeros(p)
-    for start in range(0, problem.N, chunk):
-        A = problem.Y[start : start + chunk].reshape(-1, p)
-        H += A.T @ A
-        g += A.T @ problem.tau[start : start + chunk].reshape(-1)
-    return _solve_psd(H, g, rtol=1e-10)
+    stats = statistics(problem, chunk=chunk)
+    return _solve_psd(stats.H, stats.g, rtol=1e-10)
 
 
 def _clip_psd(C: np.ndarray, eps: float = 1e-2) -> np.ndarray:
@@ -387,15 +383,8 @@ def _not_pd_samples(problem, theta, chunk, limit=50) -> np.ndarray:
 
 def _energy_ls(problem: IdentificationProblem, chunk: int) -> np.ndarray:
     """min-norm argmin Σ (v_iᵀ r_i)²: v_iᵀr_i is the same in every chart, so is this θ."""
-    p = problem.p
-    H, g = np.zeros((p, p)), np.zeros(p)
-    for start in range(0, problem.N, chunk):
-        rows = slice(start, start + chunk)
-        e = np.einsum("nap,na->np", problem.Y[rows], problem.v[rows])
-        y = np.einsum("na,na->n", problem.tau[rows], problem.v[rows])
-        H += e.T @ e
-        g += e.T @ y
-    return _solve_psd(H, g, rtol=1e-10)
+    stats = energy_statistics(problem, chunk=chunk)
+    return _solve_psd(stats.H, stats.g, rtol=1e-10)
 
 
 def _frozen_metric_ls(problem: IdentificationProblem, theta_c: np.ndarray, chunk: int) -> np.ndarray | None:
