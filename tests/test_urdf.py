@@ -108,3 +108,16 @@ def test_inconsistent_theta_refused(tmp_path):
         write_urdf(src, model, np.zeros(12), tmp_path / "bad.urdf")
     with pytest.raises(ValueError, match=r"friction for unknown joint 'weld'; moving joints are \['j1'\]"):
         write_urdf(src, model, model.nominal, tmp_path / "bad.urdf", friction={"weld": (0.1, 0.1)})
+
+
+def test_armature_is_written_as_a_dynamics_attribute(tmp_path):
+    src = tmp_path / "chain.urdf"
+    src.write_text(CHAIN)
+    model = RigidBodyModel.from_urdf(src)
+    out = write_urdf(src, model, model.nominal, tmp_path / "out.urdf", friction={"j1": (0.2, 0.05)}, armature={"j1": 3e-4})
+    dynamics = ET.parse(out).getroot().find("joint[@name='j1']/dynamics")
+    assert float(dynamics.get("armature")) == 3e-4 and float(dynamics.get("damping")) == 0.2
+    with pytest.raises(ConsistencyError, match=r"joint 'j1' armature must be ≥ 0, got -1.0"):
+        write_urdf(src, model, model.nominal, tmp_path / "bad.urdf", armature={"j1": -1.0})
+    with pytest.raises(ValueError, match=r"armature for unknown joint 'weld'; moving joints are \['j1'\]"):
+        write_urdf(src, model, model.nominal, tmp_path / "bad.urdf", armature={"weld": 1.0})

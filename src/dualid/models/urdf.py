@@ -106,12 +106,15 @@ def write_urdf(
     out_path: str | Path,
     overwrite: bool = False,
     friction: dict[str, tuple[float, float]] | None = None,
+    armature: dict[str, float] | None = None,
 ) -> Path:
     """Write a copy of ``source_urdf`` with the identified inertials θ (and optional joint friction).
 
     ``model`` must be the RigidBodyModel of ``source_urdf`` and θ its parameter vector
     (model.parameters.p,). ``friction`` maps joint names to (damping [N m s/rad], Coulomb friction
-    [N m]) written as <dynamics damping= friction=>. Relative mesh filenames are rewritten to
+    [N m]) written as <dynamics damping= friction=>; ``armature`` maps joint names to rotor inertia
+    [kg m²], written as a non-standard <dynamics armature=> (URDF has no field for it; urdfdom and
+    Pinocchio ignore it, ``dualid validate`` reads it back). Relative mesh filenames are rewritten to
     point at the same files from the new folder. Returns the written path.
     """
     source_urdf, out_path = Path(source_urdf), Path(out_path)
@@ -164,19 +167,26 @@ def write_urdf(
                     f" dualid: zeroed; its mass is part of the identified inertial of link {carrier!r} ",
                 )
 
-    for joint_name, (damping, coulomb) in (friction or {}).items():
+    def dynamics_of(joint_name: str, what: str) -> ET.Element:
         if joint_name not in joints or joints[joint_name].get("type") == "fixed":
             moving = [n for n, j in joints.items() if j.get("type") != "fixed"]
-            raise ValueError(f"write_urdf: friction for unknown joint {joint_name!r}; moving joints are {moving}")
+            raise ValueError(f"write_urdf: {what} for unknown joint {joint_name!r}; moving joints are {moving}")
+        dynamics = joints[joint_name].find("dynamics")
+        return ET.SubElement(joints[joint_name], "dynamics") if dynamics is None else dynamics
+
+    for joint_name, (damping, coulomb) in (friction or {}).items():
+        dynamics = dynamics_of(joint_name, "friction")
         if not (damping >= 0 and coulomb >= 0):
             raise ConsistencyError(
                 f"write_urdf: joint {joint_name!r} friction must be ≥ 0, got damping={damping}, friction={coulomb}"
             )
-        dynamics = joints[joint_name].find("dynamics")
-        if dynamics is None:
-            dynamics = ET.SubElement(joints[joint_name], "dynamics")
         dynamics.set("damping", _fmt(damping))
         dynamics.set("friction", _fmt(coulomb))
+    for joint_name, value in (armature or {}).items():
+        dynamics = dynamics_of(joint_name, "armature")
+        if not value >= 0:
+            raise ConsistencyError(f"write_urdf: joint {joint_name!r} armature must be ≥ 0, got {value}")
+        dynamics.set("armature", repr(float(value)))
 
     _relocate_meshes(root, source_urdf.resolve().parent, out_path.resolve().parent)
     ET.indent(tree, space="  ")

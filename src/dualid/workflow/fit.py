@@ -130,20 +130,8 @@ def armature_of(model, theta: np.ndarray) -> dict[str, float]:
     """{joint: armature Ia [kg m²]} from θ of a model with armature terms."""
     if not isinstance(model, JointTermsModel) or not model.armature:
         return {}
-    return {model.coordinates[j]: float(theta[model.index("armature")[k]]) for k, j in enumerate(model.dofs)}
-
-
-def add_armature(urdf: Path, armature: dict[str, float]) -> None:
-    """Record armature as a non-standard attribute <dynamics armature="..."> (URDF has no field for it;
-    urdfdom/Pinocchio ignore unknown attributes, ``urdf_joint_terms`` reads it back)."""
-    tree = ET.parse(urdf, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True)))
-    for joint in tree.getroot().findall("joint"):
-        if joint.get("name") in armature:
-            dyn = joint.find("dynamics")
-            if dyn is None:
-                dyn = ET.SubElement(joint, "dynamics")
-            dyn.set("armature", repr(float(armature[joint.get("name")])))
-    tree.write(urdf, encoding="unicode", xml_declaration=True)
+    # clamped like friction_of: a constrained fit can sit a rounding error below 0
+    return {model.coordinates[j]: max(float(theta[model.index("armature")[k]]), 0.0) for k, j in enumerate(model.dofs)}
 
 
 def urdf_joint_terms(urdf: Path, joints: tuple[str, ...]) -> dict[str, dict[str, float]]:

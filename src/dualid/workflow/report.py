@@ -23,7 +23,7 @@ import numpy as np  # noqa: E402
 
 from dualid.errors import DualidError  # noqa: E402
 from dualid.models.urdf import write_urdf  # noqa: E402
-from dualid.workflow.fit import METHOD_NAMES, FitOutcome, add_armature, armature_of, friction_of  # noqa: E402
+from dualid.workflow.fit import METHOD_NAMES, FitOutcome, armature_of, friction_of  # noqa: E402
 from dualid.workflow.validate import Validation  # noqa: E402
 
 COLORS = {
@@ -221,13 +221,11 @@ def write_fit(outcome: FitOutcome, out: str | Path) -> dict[str, Path]:
             continue
         try:
             path = write_urdf(outcome.config.model.urdf, outcome.rigid, f.result.theta[:p0], out / f"{m}.urdf",
-                              overwrite=True, friction=friction_of(outcome.model, f.result.theta))
+                              overwrite=True, friction=friction_of(outcome.model, f.result.theta),
+                              armature=armature_of(outcome.model, f.result.theta))
         except (DualidError, ValueError) as exc:  # e.g. a fit on the consistency boundary the URDF writer refuses
             urdfs[m] = f"not written: {exc}"
             continue
-        armature = armature_of(outcome.model, f.result.theta)
-        if armature:
-            add_armature(path, armature)
         urdfs[m] = path.name
         written[f"{m}.urdf"] = path
     record = parameters_record(outcome, urdfs)
