@@ -2,7 +2,7 @@
 
     python benchmarks/bench_solvers.py [--max-n 1000000] [--sdp-max-n 10000] [--budget 300] [--cap arm7=100000]
 
-A thin wrapper around ``dualid.studies.bench`` (problems, timing in one subprocess per run, writers;
+A thin wrapper around ``dualid.bench.runner`` (problems, timing in one subprocess per run, writers;
 see that module's doc) that writes benchmarks/results.json and benchmarks/results.md. The same
 benchmark with a scaling plot: ``dualid bench --out DIR``.
 """
@@ -14,7 +14,7 @@ import json
 import sys
 from pathlib import Path
 
-from dualid.studies.bench import (
+from dualid.bench.runner import (
     PROBLEMS, BenchConfig, parse_caps, parse_list, run_benchmark, run_one, to_markdown, write_results,
 )
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from dualid.problem.metric import AffineMetric, MetricTerm
-from dualid.problem.parameters import ParameterBlock, ParameterSpace
-from dualid.problem.problem import IdentificationProblem
+from dualid.model.metric import AffineMetric, MetricTerm
+from dualid.model.parameters import ParameterBlock, ParameterSpace
+from dualid.problem import IdentificationProblem
 
 
 def drag_problem(rng: np.random.Generator, N: int = 60, n: int = 3, bodies: int = 3, noise: float = 0.0,

@@ -1,4 +1,4 @@
-"""``dualid bench`` and dualid.studies.bench: a tiny run through the CLI, the writers on the committed results."""
+"""``dualid bench`` and dualid.bench.runner: a tiny run through the CLI, the writers on the committed results."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from dualid.cli import app
-from dualid.studies.bench import (
+from dualid.bench.runner import (
     BenchConfig, base_samples, build_problem, load_results, parse_caps, time_ratios, to_markdown,
 )
 

@@ -5,9 +5,9 @@ import pytest
 
 from dualid import OLS, WLS, DualMetric, EnergyLS, RegularizedWLS
 from dualid.errors import ConsistencyError, DataError, IdentifiabilityError, MetricError, SolverError
-from dualid.models import build_problem
-from dualid.problem.metric import AffineMetric
-from dualid.problem.problem import IdentificationProblem
+from dualid.problem import build_problem
+from dualid.model.metric import AffineMetric
+from dualid.problem import IdentificationProblem
 from dualid.systems import pan_tilt
 from tests.factories import drag_problem
 

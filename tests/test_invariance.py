@@ -9,7 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from dualid import OLS, WLS, DualMetric, EnergyLS
-from dualid.models import build_problem
+from dualid.problem import build_problem
 from dualid.systems import pan_tilt
 from tests.factories import drag_problem, random_chart
 

@@ -10,8 +10,9 @@ from hypothesis import strategies as st
 from dualid.errors import DataError
 from dualid.estimators import OLS, DualMetric, EnergyLS
 from dualid.evaluation.prediction import forward_dynamics
-from dualid.models import Model, build_problem
-from dualid.models.landsalp import LINK_LENGTH, LandSalpModel, configuration
+from dualid.model import Model
+from dualid.problem import build_problem
+from dualid.model.landsalp import LINK_LENGTH, LandSalpModel, configuration
 from dualid.systems import landsalp as sim
 from dualid.systems.base import make_system
 

@@ -7,9 +7,11 @@ import pandas as pd
 import pytest
 
 from dualid.errors import DataError
-from dualid.logs import ColumnMap, load_dataset, load_log, load_logs, save_dataset
-from dualid.trajectories import Trajectory
-from dualid.trajectories.preprocessing import differentiate, preprocess, sample_rate
+from dualid.data import ColumnMap, load_dataset, load_log, load_logs
+from dualid.report.dataset import save_dataset
+from dualid.errors import OutputError
+from dualid.data import Trajectory
+from dualid.data.preprocessing import differentiate, preprocess, sample_rate
 
 JOINTS = ["Joint1", "Joint2"]
 SHARED = Path(__file__).resolve().parents[2] / "shared"
@@ -214,7 +216,7 @@ def test_dataset_round_trip(tmp_path, fmt):
     splits = {"train": _runs(0, 2), "test": _runs(5, 1, with_a=False)}
     info = {"theta_true": np.array([0.5, 0.02]), "parameter_names": ["m", "b"], "system": "toy"}
     d = save_dataset(tmp_path / "ds", splits, info, fmt=fmt)
-    assert sorted(p.name for p in d.iterdir()) == ["dataset.json", "test", "train"]
+    assert sorted(p.name for p in d.iterdir()) == [".dualid-manifest.json", "dataset.json", "test", "train"]
     assert (d / "train" / f"run_000.{fmt}").is_file()
     back, info_back = load_dataset(d)
     assert info_back == {"theta_true": [0.5, 0.02], "parameter_names": ["m", "b"], "system": "toy"}
@@ -233,7 +235,7 @@ def test_dataset_round_trip(tmp_path, fmt):
 def test_dataset_overwrite_guard(tmp_path):
     d = tmp_path / "ds"
     save_dataset(d, {"train": _runs(0, 3)}, {}, fmt="npz")
-    with pytest.raises(FileExistsError, match=f"dataset directory {d} exists and is not empty; pass overwrite=True"):
+    with pytest.raises(OutputError, match=f"output directory {d}: exists and is not empty; choose another or pass --force"):
         save_dataset(d, {"train": _runs(0, 1)}, {})
     (d / "notes.txt").write_text("keep me")
     save_dataset(d, {"val": _runs(0, 1)}, {"v": 2}, overwrite=True)
@@ -271,8 +273,9 @@ def test_dfki_double_pendulum_log():
 
 
 def test_array_meta_goes_to_a_side_file_and_comes_back(tmp_path):
-    from dualid.logs.dataset import load_dataset, save_dataset
-    from dualid.trajectories import Trajectory
+    from dualid.data.dataset import load_dataset
+    from dualid.report.dataset import save_dataset
+    from dualid.data import Trajectory
 
     t = np.arange(5) * 0.1
     truth = {"q": np.arange(10.0).reshape(5, 2), "note": "exact"}

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from dualid.problem.metric import AffineMetric, MetricTerm
+from dualid.model.metric import AffineMetric, MetricTerm
 from tests.factories import drag_problem, random_chart
 
 

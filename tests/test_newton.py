@@ -16,11 +16,11 @@ from hypothesis import strategies as st
 from dualid import DualMetric
 from dualid.errors import MetricError, SolverError
 from dualid.estimators.newton import _apply_quad, dual_metric_derivatives, fit_dual_metric_newton
-from dualid.models.pan_tilt import PanTilt
-from dualid.models.rigid_body import RigidBodyModel
-from dualid.problem.metric import AffineMetric, MetricTerm
-from dualid.problem.parameters import ParameterBlock, ParameterSpace, rigid_body_space
-from dualid.problem.problem import IdentificationProblem
+from dualid.model.pan_tilt import PanTilt
+from dualid.model.rigid_body import RigidBodyModel
+from dualid.model.metric import AffineMetric, MetricTerm
+from dualid.model.parameters import ParameterBlock, ParameterSpace, rigid_body_space
+from dualid.problem import IdentificationProblem
 
 SETTINGS = settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 

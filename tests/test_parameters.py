@@ -4,7 +4,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from tests.factories import box_inertia
-from dualid.problem.parameters import ParameterBlock, ParameterSpace, pseudo_inertia_basis, rigid_body_space
+from dualid.model.parameters import ParameterBlock, ParameterSpace, pseudo_inertia_basis, rigid_body_space
 
 
 @settings(max_examples=25, deadline=None)

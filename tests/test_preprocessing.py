@@ -7,8 +7,8 @@ from hypothesis import strategies as st
 from scipy import signal
 
 from dualid.errors import DataError
-from dualid.trajectories import Trajectory
-from dualid.trajectories.preprocessing import (
+from dualid.data import Trajectory
+from dualid.data.preprocessing import (
     differentiate,
     downsample,
     filter_lowpass,

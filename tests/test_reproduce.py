@@ -9,10 +9,10 @@ import pytest
 from dualid.errors import IdentifiabilityError, SolverError
 from dualid.estimators import OLS
 from dualid.estimators.result import IdentificationResult
-from dualid.evaluation.figures import score_bars, trajectory_plot, write_report
-from dualid.models.base import build_problem
-from dualid.studies import DEFAULT_METHODS, run_study
-from dualid.studies.reproduce import low_data_subset, units_chart
+from dualid.report.study import score_bars, trajectory_plot, write_report
+from dualid.problem import build_problem
+from dualid.paper.study import DEFAULT_METHODS, run_study
+from dualid.paper.study import low_data_subset, units_chart
 from dualid.systems.base import make_system
 
 

@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from dualid.errors import DataError
-from dualid.models.base import Model
-from dualid.models.rigid_body import RigidBodyModel, spatial_inertia_basis
+from dualid.model.base import Model
+from dualid.model.rigid_body import RigidBodyModel, spatial_inertia_basis
 
 
 def random_valid_theta(rng: np.random.Generator) -> np.ndarray:
@@ -216,9 +216,9 @@ def test_floating_base_from_urdf(tmp_path):
         RigidBodyModel.from_urdf(tmp_path / "missing.urdf")
 
 
-# --- joint friction and armature (dualid.models.joint_terms) ---------------------------------------
-from dualid.models.joint_terms import with_joint_terms  # noqa: E402
-from dualid.models.pan_tilt import PanTilt, jacobian  # noqa: E402
+# --- joint friction and armature (dualid.model.joint_terms) ---------------------------------------
+from dualid.model.joint_terms import with_joint_terms  # noqa: E402
+from dualid.model.pan_tilt import PanTilt, jacobian  # noqa: E402
 
 
 def test_joint_terms_closed_form_on_pan_tilt():

@@ -1,7 +1,7 @@
 import numpy as np
 
 from dualid import OLS, DualMetric
-from dualid.models import build_problem
+from dualid.problem import build_problem
 from dualid.systems import pan_tilt
 
 

@@ -10,8 +10,8 @@ import pinocchio as pin
 import pytest
 
 from dualid.errors import ConsistencyError
-from dualid.models.rigid_body import RigidBodyModel
-from dualid.models.urdf import write_urdf
+from dualid.model.rigid_body import RigidBodyModel
+from dualid.model.urdf import write_urdf
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 PENDUBOT = SHARED / "datasets" / "dfki-double-pendulum" / "pendubot_model_2.1.urdf"

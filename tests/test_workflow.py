@@ -9,13 +9,13 @@ import pytest
 import yaml
 
 from dualid.errors import DataError
-from dualid.models.joint_terms import with_joint_terms
-from dualid.models.rigid_body import RigidBodyModel
-from dualid.workflow.config import ConfigError, FitConfig
-from dualid.workflow.dfki import load_reference, reference_mass_matrix, reference_theta
-from dualid.workflow.fit import fit_robot
-from dualid.workflow.report import write_fit
-from dualid.workflow.validate import validate_urdf
+from dualid.model.joint_terms import with_joint_terms
+from dualid.model.rigid_body import RigidBodyModel
+from dualid.robot.config import ConfigError, FitConfig
+from dualid.robot.dfki import load_reference, reference_mass_matrix, reference_theta
+from dualid.robot.fit import fit_robot
+from dualid.report.robot import write_fit
+from dualid.robot.validate import validate_urdf
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 DFKI = SHARED / "datasets" / "dfki-double-pendulum"

@@ -1,9 +1,11 @@
 """dualid: coordinate-independent robot model identification (dual-metric weighted least squares)."""
 
 from dualid.estimators import OLS, WLS, DualMetric, EnergyLS, IdentificationResult, RegularizedWLS
-from dualid.models import Model, build_problem
-from dualid.problem import AffineMetric, IdentificationProblem, MetricTerm, ParameterBlock, ParameterSpace
-from dualid.trajectories import Trajectory
+from dualid.model import Model
+from dualid.problem import build_problem
+from dualid.model import AffineMetric, MetricTerm, ParameterBlock, ParameterSpace
+from dualid.problem import IdentificationProblem
+from dualid.data import Trajectory
 
 __version__ = "0.1.0"
 

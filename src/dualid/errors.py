@@ -27,3 +27,12 @@ class SolverError(DualidError):
     def __init__(self, message: str, status: str | None = None):
         super().__init__(message)
         self.status = status
+
+
+class ConfigError(DualidError, ValueError):
+    """A configuration (file, mapping or hyperparameter) that cannot be used as given; the message
+    names the key path, what was expected and what was received."""
+
+
+class OutputError(DualidError, OSError):
+    """An output file or directory that cannot be written under dualid's output policy."""

@@ -29,11 +29,11 @@ def bench(
     scaling.png (log-log wall time and peak memory vs N) into the output directory."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from dualid.studies.bench import (
+    from dualid.bench.runner import (
         PROBLEMS, SOLVERS, BenchConfig, parse_caps, parse_list, run_benchmark, time_ratios, to_markdown,
         write_results,
     )
-    from dualid.studies.bench_figures import scaling_plot
+    from dualid.report.bench import scaling_plot
 
     try:
         changes = {

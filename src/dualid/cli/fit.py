@@ -14,7 +14,7 @@ _USER_ERRORS = (ValueError, FileNotFoundError, KeyError, TypeError)  # DataError
 
 
 def _config(config: Optional[Path], model: Optional[Path], data: List[Path]):
-    from dualid.workflow.config import FitConfig
+    from dualid.robot.config import FitConfig
 
     if config is not None:
         return FitConfig.from_yaml(config)
@@ -38,8 +38,8 @@ def fit(
 
     from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
-    from dualid.workflow.fit import fit_robot
-    from dualid.workflow.report import score_table, write_fit
+    from dualid.robot.fit import fit_robot
+    from dualid.report.robot import score_table, write_fit
 
     try:
         cfg = _config(config, model, data)
@@ -86,9 +86,9 @@ def validate(
     force: bool = typer.Option(False, "--force", help="write into an existing non-empty output directory"),
 ) -> None:
     """Predicted vs measured effort (inverse dynamics) and acceleration (forward dynamics) of a URDF on logs."""
-    from dualid.workflow.config import FitConfig
-    from dualid.workflow.report import score_table, write_validation
-    from dualid.workflow.validate import validate_urdf
+    from dualid.robot.config import FitConfig
+    from dualid.report.robot import score_table, write_validation
+    from dualid.robot.validate import validate_urdf
 
     if out is not None:
         output_dir(out, force)

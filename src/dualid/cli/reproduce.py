@@ -26,7 +26,7 @@ def reproduce(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from dualid.errors import DualidError
-    from dualid.studies.reproduce import reproduce as run
+    from dualid.paper.study import reproduce as run
     from dualid.systems.base import system_names
 
     if system not in system_names():

@@ -23,7 +23,7 @@ def simulate(
     """Simulate a system's training and test runs and save them with a dataset.json manifest."""
     from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
-    from dualid.logs.dataset import save_dataset
+    from dualid.report.dataset import save_dataset
     from dualid.systems.base import make_system, system_names
 
     if system not in system_names():

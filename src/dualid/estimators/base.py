@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualid.errors import ConsistencyError, IdentifiabilityError, SolverError
-from dualid.problem.parameters import ParameterSpace
-from dualid.problem.problem import IdentificationProblem
+from dualid.model.parameters import ParameterSpace
+from dualid.problem import IdentificationProblem
 
 SOLVERS = ("CLARABEL", "SCS")
 DEFAULT_OPTIONS = {

@@ -18,7 +18,7 @@ from dualid.errors import MetricError, SolverError
 from dualid.estimators.base import check_identifiable, consistency_constraints, parameter_scale, solve_cvxpy
 from dualid.estimators.newton import fit_dual_metric_newton
 from dualid.estimators.result import IdentificationResult
-from dualid.problem.problem import IdentificationProblem
+from dualid.problem import IdentificationProblem
 
 
 def _schur_blocks(problem: IdentificationProblem, s_theta: np.ndarray, s_slack: float):

@@ -19,8 +19,8 @@ from dualid.estimators.base import (
     solve_cvxpy,
 )
 from dualid.estimators.result import IdentificationResult
-from dualid.problem.parameters import ParameterSpace
-from dualid.problem.problem import IdentificationProblem
+from dualid.model.parameters import ParameterSpace
+from dualid.problem import IdentificationProblem
 
 
 @dataclass(frozen=True)

@@ -38,7 +38,7 @@ import numpy as np
 from dualid.errors import MetricError, SolverError
 from dualid.estimators.least_squares import energy_statistics, statistics
 from dualid.estimators.result import IdentificationResult
-from dualid.problem.problem import IdentificationProblem
+from dualid.problem import IdentificationProblem
 
 
 class _NotPositiveDefinite(Exception):

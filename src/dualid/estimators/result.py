@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dualid.problem.parameters import ParameterSpace
+from dualid.model.parameters import ParameterSpace
 
 
 @dataclass(frozen=True)

@@ -11,9 +11,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualid.errors import MetricError
-from dualid.models.base import Model
-from dualid.problem.metric import AffineMetric
-from dualid.trajectories.trajectory import Trajectory
+from dualid.model.base import Model
+from dualid.model.metric import AffineMetric
+from dualid.data.trajectory import Trajectory
 
 
 @dataclass(frozen=True, eq=False)

@@ -20,11 +20,11 @@ import numpy as np
 import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
-from dualid.models.rigid_body import RigidBodyModel
+from dualid.model.rigid_body import RigidBodyModel
 from dualid.systems import crazyflie_model as cf
 from dualid.systems.crazyflie_model import NOMINAL_THETA, TRUE_THETA, build_model
-from dualid.trajectories.preprocessing import lowpass, savgol_derivatives
-from dualid.trajectories.trajectory import Trajectory
+from dualid.data.preprocessing import lowpass, savgol_derivatives
+from dualid.data.trajectory import Trajectory
 
 __all__ = [
     "CrazyflieNoise",

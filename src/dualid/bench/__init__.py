@@ -1,0 +1,1 @@
+"""The solver benchmark: the dual-metric solvers (Newton, SDP) and constrained OLS against N."""

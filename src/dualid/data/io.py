@@ -1,0 +1,298 @@
+"""Loading robot logs (CSV, Parquet, NPZ) into Trajectories through an explicit column map.
+
+A ``ColumnMap`` says which column holds time and, per joint, position, velocity, acceleration and
+effort, and in which units; ``load_log`` checks the file against it and converts to SI
+(s, rad, rad/s, rad/s², N m).
+
+Velocity rule. ``Trajectory`` needs v. If the map names a velocity column for every joint, v is the
+logged one. If it names none, ``load_log`` raises unless called with ``velocity="gradient"``: then v
+is a placeholder by central differences on the raw time stamps (``np.gradient(q, t)``, valid for
+irregular stamps), meta["logged"] omits "v" and ``preprocessing.differentiate`` (default
+velocity=None) replaces it by its own derivative. Accelerations are kept only if logged
+(else a=None; ``differentiate`` computes them).
+
+Rows are counted from 0 (the first data row, after any header) in error messages.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+
+from dualid.errors import DataError
+from dualid.data.trajectory import Trajectory
+
+# unit -> factor to SI, per quantity
+UNITS: dict[str, dict[str, float]] = {
+    "time": {"s": 1.0, "ms": 1e-3, "us": 1e-6},
+    "position": {"rad": 1.0, "deg": np.pi / 180},
+    "velocity": {"rad/s": 1.0, "deg/s": np.pi / 180},
+    "acceleration": {"rad/s^2": 1.0, "deg/s^2": np.pi / 180},
+    "effort": {"N m": 1.0, "N mm": 1e-3},
+}
+SI_UNITS = {q: next(iter(u)) for q, u in UNITS.items()}  # the first unit of each quantity is SI
+FORMATS = (".csv", ".parquet", ".npz")
+_JOINT_KEYS = ("position", "velocity", "acceleration", "effort")
+
+
+@dataclass(frozen=True)
+class JointColumns:
+    """The columns of one joint; velocity and acceleration are optional."""
+
+    name: str
+    position: str
+    effort: str
+    velocity: str | None = None
+    acceleration: str | None = None
+
+
+@dataclass(frozen=True)
+class ColumnMap:
+    """Which columns hold what, and in which units (converted to SI on load)."""
+
+    time: str
+    joints: tuple[JointColumns, ...]
+    units: tuple[tuple[str, str], ...] = ()  # (quantity, unit) pairs; missing quantities are SI
+
+    def __post_init__(self) -> None:
+        joints = tuple(self.joints)
+        if not joints:
+            raise DataError("column map: no joints given")
+        names = [j.name for j in joints]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise DataError(f"column map: joints named more than once: {dup}")
+        units = dict(self.units.items() if isinstance(self.units, Mapping) else self.units)
+        for quantity, unit in units.items():
+            if quantity not in UNITS:
+                raise DataError(f"column map: unknown quantity {quantity!r} in units; allowed: {list(UNITS)}")
+            if unit not in UNITS[quantity]:
+                raise DataError(
+                    f"column map: unknown {quantity} unit {unit!r}; allowed: {list(UNITS[quantity])}"
+                )
+        full = {q: units.get(q, SI_UNITS[q]) for q in UNITS}
+        object.__setattr__(self, "joints", joints)
+        object.__setattr__(self, "units", tuple(full.items()))
+
+    # -- constructors ------------------------------------------------------------------------------
+    @staticmethod
+    def from_dict(d: Mapping) -> "ColumnMap":
+        """From the YAML form {time: "time", joints: {Joint1: {position: pos_meas1, velocity: vel_meas1,
+        effort: tau_meas1}, ...}, units: {position: rad}}."""
+        if not isinstance(d, Mapping):
+            raise DataError(f"column map must be a mapping with keys time, joints, units; got {type(d).__name__}")
+        unknown = sorted(set(d) - {"time", "joints", "units"})
+        if unknown:
+            raise DataError(f"column map: unknown keys {unknown}; allowed: ['time', 'joints', 'units']")
+        if "joints" not in d or not isinstance(d["joints"], Mapping):
+            raise DataError("column map: 'joints' must map each joint name to {position, velocity, acceleration, effort}")
+        joints = []
+        for name, cols in d["joints"].items():
+            if not isinstance(cols, Mapping):
+                raise DataError(f"column map: joint {name!r} must map to a mapping of columns, got {cols!r}")
+            bad = sorted(set(cols) - set(_JOINT_KEYS))
+            if bad:
+                raise DataError(f"column map: joint {name!r} has unknown keys {bad}; allowed: {list(_JOINT_KEYS)}")
+            missing = [k for k in ("position", "effort") if not cols.get(k)]
+            if missing:
+                raise DataError(f"column map: joint {name!r} needs columns for {missing}")
+            joints.append(JointColumns(str(name), **{k: (None if v is None else str(v)) for k, v in cols.items()}))
+        units = d.get("units") or {}
+        if not isinstance(units, Mapping):
+            raise DataError(f"column map: 'units' must be a mapping quantity -> unit, got {units!r}")
+        return ColumnMap(time=str(d.get("time", "time")), joints=tuple(joints), units=tuple(units.items()))
+
+    @staticmethod
+    def pattern(
+        joints: Sequence[str],
+        position: str = "pos_meas{i}",
+        velocity: str | None = "vel_meas{i}",
+        effort: str = "tau_meas{i}",
+        acceleration: str | None = None,
+        time: str = "time",
+        units: Mapping[str, str] | None = None,
+    ) -> "ColumnMap":
+        """Columns named by patterns: {i} = 1-based joint index, {name} = joint name (defaults follow the
+        DFKI double-pendulum logs). Pass velocity=None when no velocity is logged."""
+
+        def fmt(pat, i, name):
+            return None if pat is None else pat.format(i=i, name=name)
+
+        cols = tuple(
+            JointColumns(
+                name,
+                position=fmt(position, i, name),
+                effort=fmt(effort, i, name),
+                velocity=fmt(velocity, i, name),
+                acceleration=fmt(acceleration, i, name),
+            )
+            for i, name in enumerate(joints, start=1)
+        )
+        return ColumnMap(time=time, joints=cols, units=tuple((units or {}).items()))
+
+    # -- queries -----------------------------------------------------------------------------------
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(j.name for j in self.joints)
+
+    def unit(self, quantity: str) -> str:
+        return dict(self.units)[quantity]
+
+    def columns(self) -> list[str]:
+        """Every column the map reads (time first)."""
+        out = [self.time]
+        for j in self.joints:
+            out += [c for c in (j.position, j.velocity, j.acceleration, j.effort) if c is not None]
+        return out
+
+    def to_dict(self) -> dict:
+        """The YAML form (inverse of from_dict)."""
+        joints = {
+            j.name: {k: getattr(j, k) for k in _JOINT_KEYS if getattr(j, k) is not None} for j in self.joints
+        }
+        return {"time": self.time, "joints": joints, "units": dict(self.units)}
+
+
+def read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
+    """All columns of the file as float arrays (name -> (T,)) and the column order."""
+    ext = path.suffix.lower()
+    if ext == ".npz":
+        with np.load(path, allow_pickle=False) as z:
+            data = {k: np.asarray(z[k]) for k in z.files}
+        if not data:
+            raise DataError(f"{path}: log is empty (no rows)")
+        bad = {k: v.shape for k, v in data.items() if v.ndim != 1}
+        if bad:
+            raise DataError(f"{path}: npz arrays must be 1-D named channels; got shapes {bad}")
+        lengths = {k: v.size for k, v in data.items()}
+        if len(set(lengths.values())) > 1:
+            raise DataError(f"{path}: npz channels have different lengths {lengths}")
+        return data, list(data)
+    import pandas as pd
+
+    if ext == ".csv":
+        try:
+            df = pd.read_csv(path)
+        except pd.errors.EmptyDataError:
+            raise DataError(f"{path}: log is empty (no rows)") from None
+    else:
+        df = pd.read_parquet(path)
+    return {str(c): df[c].to_numpy() for c in df.columns}, [str(c) for c in df.columns]
+
+
+def load_log(
+    path,
+    columns: ColumnMap | Mapping,
+    joints: Sequence[str] | None = None,
+    velocity: str = "logged",
+    name: str | None = None,
+) -> Trajectory:
+    """One log file as a Trajectory in SI units.
+
+    path: .csv (pandas), .parquet (pyarrow via pandas) or .npz (numpy, one named 1-D array per channel).
+    columns: a ColumnMap or its dict form. joints: the model's joint names; the trajectory's
+    coordinates follow this order and every model joint must be mapped (default: the map's order).
+    velocity: "logged" (the map must name velocity columns) or "gradient" (see the module docstring).
+    """
+    path = Path(path)
+    cmap = columns if isinstance(columns, ColumnMap) else ColumnMap.from_dict(columns)
+    if velocity not in ("logged", "gradient"):
+        raise DataError(f"load_log: velocity must be 'logged' or 'gradient', got {velocity!r}")
+    if joints is None:
+        joints = cmap.joint_names
+    else:
+        joints = tuple(joints)
+        extra = [j for j in cmap.joint_names if j not in joints]
+        if extra:
+            raise DataError(f"column map names joints {extra} that are not in the model; model joints: {list(joints)}")
+        unmapped = [j for j in joints if j not in cmap.joint_names]
+        if unmapped:
+            raise DataError(f"column map has no columns for model joints {unmapped}; mapped: {list(cmap.joint_names)}")
+    by_name = {j.name: j for j in cmap.joints}
+    jcols = [by_name[j] for j in joints]
+    has_v = [j.velocity is not None for j in jcols]
+    if any(has_v) and not all(has_v):
+        raise DataError(
+            f"column map names velocity columns for some joints only (missing for "
+            f"{[j.name for j in jcols if j.velocity is None]}); map all or none"
+        )
+    if not any(has_v) and velocity == "logged":
+        raise DataError(
+            "column map has no velocity columns: map a velocity column for each joint, or load with "
+            "velocity='gradient' and then call preprocessing.differentiate to compute v from q"
+        )
+    has_a = [j.acceleration is not None for j in jcols]
+    if any(has_a) and not all(has_a):
+        raise DataError(
+            f"column map names acceleration columns for some joints only (missing for "
+            f"{[j.name for j in jcols if j.acceleration is None]}); map all or none"
+        )
+
+    if not path.exists():
+        raise FileNotFoundError(f"log file not found: {path}")
+    if path.suffix.lower() not in FORMATS:
+        raise DataError(f"{path}: unknown log format {path.suffix!r}; expected one of {', '.join(FORMATS)}")
+    data, available = read_table(path)
+    needed = [cmap.time]
+    for j in jcols:
+        needed += [c for c in (j.position, j.velocity if velocity == "logged" else None, j.acceleration, j.effort) if c]
+    missing = [c for c in dict.fromkeys(needed) if c not in data]
+    if missing:
+        raise DataError(f"{path}: missing columns {missing}; available columns: {available}")
+    T = len(data[cmap.time])
+    if T == 0:
+        raise DataError(f"{path}: log is empty (no rows)")
+    if T < 2:
+        raise DataError(f"{path}: log has {T} row; need at least 2")
+
+    def column(c: str) -> np.ndarray:
+        try:
+            x = np.asarray(data[c], dtype=float)
+        except (TypeError, ValueError):
+            raise DataError(f"{path}: column {c!r} is not numeric (dtype {data[c].dtype})") from None
+        bad = ~np.isfinite(x)
+        if bad.any():
+            raise DataError(f"{path}: column {c!r} has non-finite values (NaN or inf), first at row {int(np.argmax(bad))}")
+        return x
+
+    for c in dict.fromkeys(needed):
+        column(c)  # check every mapped column before converting
+    t = column(cmap.time) * UNITS["time"][cmap.unit("time")]
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        k = int(np.argmax(dt <= 0))
+        raise DataError(
+            f"{path}: time column {cmap.time!r} must be strictly increasing; "
+            f"row {k} has {data[cmap.time][k]} and row {k + 1} has {data[cmap.time][k + 1]}"
+        )
+
+    def stack(key: str, quantity: str):
+        return np.stack([column(getattr(j, key)) for j in jcols], axis=1) * UNITS[quantity][cmap.unit(quantity)]
+
+    q = stack("position", "position")
+    tau = stack("effort", "effort")
+    a = stack("acceleration", "acceleration") if all(has_a) else None
+    if velocity == "logged":
+        v = stack("velocity", "velocity")
+    else:
+        v = np.gradient(q, t, axis=0, edge_order=2)
+    logged = ["q", "tau"] + (["v"] if velocity == "logged" else []) + (["a"] if a is not None else [])
+    meta = {
+        "source": str(path),
+        "columns": cmap.to_dict(),
+        "units": dict(cmap.units),
+        "logged": logged,
+    }
+    if velocity == "gradient":
+        meta["steps"] = [{"load_velocity": {"method": "gradient"}}]
+    return Trajectory(t=t, q=q, v=v, tau=tau, a=a, coordinates=tuple(joints), name=name or path.stem, meta=meta)
+
+
+def load_logs(
+    paths: Iterable, columns: ColumnMap | Mapping, joints: Sequence[str] | None = None, velocity: str = "logged"
+) -> list[Trajectory]:
+    """load_log for each path, in order."""
+    return [load_log(p, columns, joints, velocity=velocity) for p in paths]

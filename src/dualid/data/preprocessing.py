@@ -1,0 +1,246 @@
+"""Signal processing for trajectories: zero-phase low-pass filtering and numerical differentiation.
+
+Every step applied to a ``Trajectory`` is appended to ``trajectory.meta['steps']`` so the output of
+a fit records how its data were made.
+"""
+
+from __future__ import annotations
+
+import inspect
+from dataclasses import replace
+
+import numpy as np
+from scipy import interpolate, signal
+
+from dualid.errors import DataError
+from dualid.data.trajectory import Trajectory
+
+
+def sample_rate(t: np.ndarray, rtol: float = 0.05) -> float:
+    """The (uniform) sample rate of t [Hz]; DataError when the spacing varies by more than rtol."""
+    dt = np.diff(np.asarray(t, dtype=float))
+    med = float(np.median(dt))
+    if med <= 0:
+        raise DataError(f"time stamps must increase; median step is {med}")
+    spread = float(np.max(np.abs(dt - med))) / med
+    if spread > rtol:
+        raise DataError(
+            f"time stamps are not uniform: step varies by {spread:.0%} of the median {med:.4g} s "
+            f"(tolerance {rtol:.0%}); resample first"
+        )
+    return 1.0 / med
+
+
+def lowpass(x: np.ndarray, fs: float, cutoff: float, order: int = 4) -> np.ndarray:
+    """Zero-phase Butterworth low-pass along axis 0 (filtfilt, second-order sections)."""
+    if not 0 < cutoff < fs / 2:
+        raise DataError(f"low-pass cutoff must be in (0, {fs / 2:.4g}) Hz (Nyquist at fs={fs:.4g} Hz), got {cutoff}")
+    sos = signal.butter(order, cutoff, btype="low", fs=fs, output="sos")
+    return signal.sosfiltfilt(sos, np.asarray(x, dtype=float), axis=0)
+
+
+def savgol_derivatives(x: np.ndarray, fs: float, window: float, polyorder: int = 3):
+    """Smoothed x and its first two time derivatives by a Savitzky–Golay fit over ``window`` seconds."""
+    n = int(round(window * fs)) | 1  # odd number of samples
+    n = max(n, polyorder + 2 + (polyorder % 2 == 0))
+    if n > x.shape[0]:
+        raise DataError(f"Savitzky–Golay window of {n} samples is longer than the signal ({x.shape[0]} samples)")
+    dt = 1.0 / fs
+    x = np.asarray(x, dtype=float)
+    xs = signal.savgol_filter(x, n, polyorder, deriv=0, axis=0, mode="interp")
+    dx = signal.savgol_filter(x, n, polyorder, deriv=1, delta=dt, axis=0, mode="interp")
+    ddx = signal.savgol_filter(x, n, polyorder, deriv=2, delta=dt, axis=0, mode="interp")
+    return xs, dx, ddx
+
+
+# --------------------------------------------------------------------------------------------------
+# Trajectory -> Trajectory steps. Each returns a new Trajectory and appends {name: parameters} to
+# meta["steps"]. All but ``resample`` and ``trim`` need uniform time stamps (see ``sample_rate``).
+# --------------------------------------------------------------------------------------------------
+
+_FIELDS = ("q", "v", "tau", "a")
+
+
+def _has_quaternion(traj: Trajectory) -> bool:
+    """True when q is not a plain vector of the velocity coordinates (floating base: nq = n + 1)."""
+    return traj.q.shape[1] != traj.v.shape[1]
+
+
+def _velocity_logged(traj: Trajectory) -> bool:
+    """Whether v holds measured data. Loaders list measured quantities in meta['logged']; a trajectory
+    without that key (e.g. a simulated one) is taken to carry a meaningful v."""
+    logged = traj.meta.get("logged")
+    return True if logged is None else "v" in logged
+
+
+def resample(traj: Trajectory, rate: float, method: str = "linear") -> Trajectory:
+    """Interpolate every channel onto the uniform grid t0, t0 + 1/rate, ... ≤ t_end [Hz].
+
+    method: "linear" (no overshoot) or "cubic" (not-a-knot cubic spline, smooth derivatives).
+    A floating-base q (with a unit quaternion) is refused: component-wise interpolation would leave
+    the unit sphere; resample such runs with SE(3) interpolation before building the Trajectory.
+    """
+    if not (np.isfinite(rate) and rate > 0):
+        raise DataError(f"resample: rate must be a positive number of Hz, got {rate!r}")
+    if method not in ("linear", "cubic"):
+        raise DataError(f"resample: method must be 'linear' or 'cubic', got {method!r}")
+    if _has_quaternion(traj):
+        raise DataError(
+            f"resample: q has {traj.q.shape[1]} columns for {traj.n} velocity coordinates (a floating base "
+            "with a quaternion); component-wise interpolation would break the unit norm. Resample the "
+            "configuration with SE(3) interpolation (e.g. pinocchio.interpolate) before building the Trajectory"
+        )
+    t = traj.t
+    T_new = int(np.floor((t[-1] - t[0]) * rate * (1 + 1e-12))) + 1
+    if T_new < 2:
+        raise DataError(f"resample: a {t[-1] - t[0]:.4g} s run gives fewer than 2 samples at {rate} Hz")
+    t_new = t[0] + np.arange(T_new) / rate
+    t_new[-1] = min(t_new[-1], t[-1])  # guard round-off past the end
+
+    def interp(x):
+        if x is None:
+            return None
+        if method == "linear":
+            return np.stack([np.interp(t_new, t, x[:, j]) for j in range(x.shape[1])], axis=1)
+        return interpolate.CubicSpline(t, x, axis=0)(t_new)
+
+    changes = {key: interp(getattr(traj, key)) for key in _FIELDS}
+    step = {"resample": {"rate": float(rate), "method": method}}
+    return traj.with_step(step, t=t_new, **changes)
+
+
+def filter_lowpass(traj: Trajectory, cutoff: float, fields=("q", "v", "tau"), order: int = 4) -> Trajectory:
+    """Zero-phase Butterworth low-pass (``lowpass``) of the named fields at ``cutoff`` Hz."""
+    fields = (fields,) if isinstance(fields, str) else tuple(fields)
+    unknown = [f for f in fields if f not in _FIELDS]
+    if unknown:
+        raise DataError(f"filter_lowpass: unknown fields {unknown}; allowed: {list(_FIELDS)}")
+    if "a" in fields and traj.a is None:
+        raise DataError("filter_lowpass: field 'a' requested but the trajectory has no acceleration")
+    if "q" in fields and _has_quaternion(traj):
+        raise DataError(
+            "filter_lowpass: cannot filter q of a floating base (it holds a unit quaternion); "
+            "filter fields=('v', 'tau') instead"
+        )
+    fs = sample_rate(traj.t)
+    changes = {f: lowpass(getattr(traj, f), fs, cutoff, order) for f in fields}
+    step = {"filter_lowpass": {"cutoff": float(cutoff), "fields": list(fields), "order": int(order)}}
+    return traj.with_step(step, **changes)
+
+
+def differentiate(
+    traj: Trajectory,
+    method: str = "savgol",
+    window: float = 0.05,
+    cutoff: float | None = None,
+    polyorder: int = 3,
+    velocity: bool | None = None,
+) -> Trajectory:
+    """Velocity and acceleration from q by numerical differentiation.
+
+    method "savgol": Savitzky–Golay first and second derivatives over ``window`` seconds;
+    method "central": second-order central differences (np.gradient), best of a low-passed q.
+    cutoff: if given, q is first low-passed (zero-phase) at this frequency [Hz].
+    velocity: replace v by dq/dt? None (default) = only when v was not logged (meta['logged']
+    from the loader lacks "v"); True = always; False = keep v. ``a`` is always computed from q.
+    q itself is left unchanged.
+    """
+    if method not in ("savgol", "central"):
+        raise DataError(f"differentiate: method must be 'savgol' or 'central', got {method!r}")
+    if _has_quaternion(traj):
+        raise DataError(
+            f"differentiate: q has {traj.q.shape[1]} columns for {traj.n} velocity coordinates (a floating "
+            "base with a quaternion); differentiate its configuration on the Lie group (pinocchio.difference)"
+        )
+    fs = sample_rate(traj.t)
+    q = traj.q if cutoff is None else lowpass(traj.q, fs, cutoff)
+    if method == "savgol":
+        _, dq, ddq = savgol_derivatives(q, fs, window, polyorder)
+    else:
+        dt = 1.0 / fs
+        dq = np.gradient(q, dt, axis=0, edge_order=2)
+        ddq = np.gradient(dq, dt, axis=0, edge_order=2)
+    replace_v = (not _velocity_logged(traj)) if velocity is None else bool(velocity)
+    changes = {"a": ddq}
+    if replace_v:
+        changes["v"] = dq
+    params = {"method": method, "cutoff": None if cutoff is None else float(cutoff), "velocity": replace_v}
+    if method == "savgol":
+        params.update(window=float(window), polyorder=int(polyorder))
+    return traj.with_step({"differentiate": params}, **changes)
+
+
+def trim(traj: Trajectory, start: float | None = None, stop: float | None = None) -> Trajectory:
+    """The samples with start ≤ t ≤ stop (times in seconds on the trajectory's own clock, traj.t)."""
+    lo = -np.inf if start is None else float(start)
+    hi = np.inf if stop is None else float(stop)
+    if lo >= hi:
+        raise DataError(f"trim: start must be before stop, got start={start}, stop={stop}")
+    mask = (traj.t >= lo) & (traj.t <= hi)
+    if mask.sum() < 2:
+        raise DataError(
+            f"trim: [{start}, {stop}] s keeps {int(mask.sum())} samples of a run spanning "
+            f"[{traj.t[0]:.6g}, {traj.t[-1]:.6g}] s; need at least 2"
+        )
+    out = traj.take(mask)
+    return out.with_step({"trim": {"start": start, "stop": stop}})
+
+
+def downsample(traj: Trajectory, factor: int, cutoff: float | None = None, order: int = 4) -> Trajectory:
+    """Keep every ``factor``-th sample after a zero-phase anti-aliasing low-pass.
+
+    cutoff defaults to 0.8 × the new Nyquist frequency (0.4 · fs / factor). Every vector channel is
+    filtered; a floating-base q (with a quaternion) is decimated without filtering.
+    """
+    if isinstance(factor, bool) or not isinstance(factor, (int, np.integer)) or factor < 1:
+        raise DataError(f"downsample: factor must be a positive integer, got {factor!r}")
+    factor = int(factor)
+    fs = sample_rate(traj.t)
+    if cutoff is None:
+        cutoff = 0.4 * fs / factor
+    if factor > 1 and cutoff >= fs / (2 * factor):
+        raise DataError(
+            f"downsample: cutoff {cutoff} Hz is not below the new Nyquist frequency {fs / (2 * factor):.4g} Hz "
+            f"(fs={fs:.4g} Hz, factor={factor}); aliasing would follow"
+        )
+    fields = [f for f in _FIELDS if getattr(traj, f) is not None and not (f == "q" and _has_quaternion(traj))]
+    if factor > 1:
+        traj = replace(traj, **{f: lowpass(getattr(traj, f), fs, cutoff, order) for f in fields})
+    step = {"downsample": {"factor": factor, "cutoff": float(cutoff), "order": int(order), "filtered": fields}}
+    return traj.take(slice(0, None, factor)).with_step(step)
+
+
+STEPS = {
+    "resample": resample,
+    "filter_lowpass": filter_lowpass,
+    "differentiate": differentiate,
+    "trim": trim,
+    "downsample": downsample,
+}
+
+
+def preprocess(traj: Trajectory, steps: list[dict]) -> Trajectory:
+    """Apply a pipeline given as config, e.g.
+    [{"resample": {"rate": 500}}, {"differentiate": {"method": "savgol", "window": 0.05}},
+     {"filter_lowpass": {"cutoff": 20}}, {"downsample": {"factor": 5}}].
+    Each step is a one-key mapping {name: parameters}; parameters may be omitted (None or {})."""
+    known = ", ".join(sorted(STEPS))
+    for k, step in enumerate(steps):
+        if not isinstance(step, dict) or len(step) != 1:
+            raise DataError(f"preprocessing step {k} must be a one-key mapping {{name: parameters}}, got {step!r}")
+        (name, params), = step.items()
+        if name not in STEPS:
+            raise DataError(f"unknown preprocessing step {name!r} (step {k}); known steps: {known}")
+        params = {} if params is None else params
+        if not isinstance(params, dict):
+            raise DataError(f"preprocessing step {k} ({name}): parameters must be a mapping, got {params!r}")
+        fn = STEPS[name]
+        try:
+            inspect.signature(fn).bind(traj, **params)
+        except TypeError as err:
+            accepted = [p for p in inspect.signature(fn).parameters if p != "traj"]
+            raise DataError(
+                f"preprocessing step {k} ({name}): bad parameters {params} ({err}); accepted: {accepted}"
+            ) from err
+        traj = fn(traj, **params)
+    return traj

@@ -1,0 +1,533 @@
+"""The paper's experiments on a simulated system: fit every method, predict the test runs, score.
+
+For each case ("low": a random rank-preserving subset of ``system.low_data_samples`` training
+samples per seed; "high": every training sample) and each method, θ̂ is fitted on the training
+problem, the forward dynamics are predicted on every test run from the measured states and inputs,
+and compared with the measured signal (accelerations for inertia-dominated systems, velocities for
+drag-dominated ones) per coordinate:
+
+- score: max normalized cross-correlation over shifts within ±T_slowest/72;
+- RMSE per coordinate (chart-dependent), and the chart-invariant sqrt(mean eᵀ M_true e).
+
+Mean and standard deviation are taken over the pooled (seed, test run) pairs of successful fits;
+failed fits (solver or metric errors) are recorded with their message and excluded from the
+statistics, never zero-filled.
+
+``ablation="units"`` fits in re-charted coordinates q = B q̃ with a constant diagonal B that
+changes units (lengths to mm, angles to degrees) and predicts with the physical θ̂ in the original
+model: the dual-metric fit must not move, the others may.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any, Literal
+
+import numpy as np
+
+from dualid.errors import DualidError, IdentifiabilityError
+from dualid.estimators import methods as registry
+from dualid.evaluation.prediction import PredictionData, measured_signal
+from dualid.evaluation.scores import metric_rmse, rmse, score_run, shift_window
+from dualid.problem import build_problem
+from dualid.problem import IdentificationProblem
+from dualid.systems.base import SystemData
+
+Case = Literal["both", "low", "high"]
+DEFAULT_METHODS = ("ols_unconstrained", "ols", "wls", "energy", "logdet", "pullback", "dm")
+METHOD_LABELS = {
+    "ols_unconstrained": "OLS (unconstrained)",
+    "ols": "OLS",
+    "wls": "WLS",
+    "energy": "energy",
+    "logdet": "log-det WLS",
+    "pullback": "pullback WLS",
+    "dm": "DM",
+    "truth": "true θ",
+}
+LOW_DATA_MAX_TRIES = 2000  # random subsets drawn per seed before giving up on keeping the rank
+
+_LINEAR = re.compile(r"^(v_?|p_?|pos_?|d)?[xyz]$", re.IGNORECASE)  # names of translational coordinates
+
+
+# --- methods --------------------------------------------------------------------------------
+def make_estimator(method: str, system: SystemData):
+    """The estimator behind a method name, under the same physical-consistency constraints.
+
+    allow_unidentifiable=True everywhere: the floating-base pendulum has an exact null space.
+    """
+    if method == "ols_unconstrained":
+        return registry.make_estimator("ols", constrained=False, allow_unidentifiable=True)
+    if method not in DEFAULT_METHODS:
+        raise ValueError(f"unknown method {method!r}; expected one of {list(DEFAULT_METHODS)}")
+    return registry.make_estimator(
+        method, theta0=system.theta_nominal, gamma=system.gamma, per_equation=True, allow_unidentifiable=True
+    )
+
+
+def units_chart(coordinates: Sequence[str]) -> np.ndarray:
+    """Diagonal of B = ∂q/∂q̃ for a change of units: translations in mm (B = 1e-3 m/mm) for
+    coordinates named x, y, z, vx, vy, vz, px, … ; every other coordinate is taken as an angle and
+    expressed in degrees (B = π/180 rad/deg)."""
+    return np.array([1e-3 if _LINEAR.match(c) else math.pi / 180.0 for c in coordinates])
+
+
+def _ablation_chart(ablation, problem: IdentificationProblem) -> np.ndarray | None:
+    """The constant B (n, n) of an ablation, or None."""
+    if ablation is None:
+        return None
+    if isinstance(ablation, str):
+        if ablation != "units":
+            raise ValueError(f"ablation: expected None, 'units' or a constant matrix B, got {ablation!r}")
+        return np.diag(units_chart(problem.coordinates))
+    B = np.asarray(ablation, dtype=float)
+    n = problem.n
+    if B.shape == (n,):
+        B = np.diag(B)
+    if B.shape != (n, n):
+        raise ValueError(f"ablation: expected a diagonal ({n},) or a matrix ({n}, {n}), got shape {B.shape}")
+    if not np.all(np.isfinite(B)) or abs(np.linalg.det(B)) == 0.0:
+        raise ValueError("ablation: the chart B must be finite and invertible")
+    return B
+
+
+# --- results --------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class FitRecord:
+    """One fit (method, case, seed) and its scores on every test run, or why it failed."""
+
+    case: str  # "low" | "high"
+    method: str
+    seed: int | None  # the low-data subset's seed; None for the high-data case
+    n_samples: int  # training samples used
+    ok: bool
+    error: str = ""  # "<ErrorType> during <stage>: <message>" when not ok
+    theta: tuple[float, ...] = ()
+    objective: float = float("nan")
+    solve_time: float = float("nan")  # [s]
+    status: str = ""
+    scores: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (runs, n)
+    rmse: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (runs, n) signal units
+    metric_rmse: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (runs,)
+
+    def as_dict(self, runs: Sequence[str], coordinates: Sequence[str]) -> dict:
+        d: dict[str, Any] = {"case": self.case, "method": self.method, "seed": self.seed,
+                             "n_samples": self.n_samples, "ok": self.ok}
+        if not self.ok:
+            d["error"] = self.error
+            return d
+        d.update(
+            theta=list(self.theta), objective=self.objective, solve_time_s=self.solve_time, status=self.status,
+            runs={
+                run: {
+                    "score": dict(zip(coordinates, self.scores[k].tolist())),
+                    "rmse": dict(zip(coordinates, self.rmse[k].tolist())),
+                    "metric_rmse": float(self.metric_rmse[k]),
+                }
+                for k, run in enumerate(runs)
+            },
+        )
+        return d
+
+
+@dataclass(frozen=True, eq=False)
+class Summary:
+    """Mean and std over the pooled (seed, test run) pairs of one method's successful fits."""
+
+    case: str
+    method: str
+    n_fits: int
+    n_failed: int
+    score_mean: np.ndarray  # (n,)  NaN when every fit failed
+    score_std: np.ndarray
+    rmse_mean: np.ndarray  # (n,) signal units per coordinate
+    rmse_std: np.ndarray
+    metric_rmse_mean: float
+    metric_rmse_std: float
+
+    @staticmethod
+    def of(case: str, method: str, records: Sequence[FitRecord], n: int) -> "Summary":
+        ok = [r for r in records if r.ok]
+        if not ok:
+            nan = np.full(n, np.nan)
+            return Summary(case, method, len(records), len(records), nan, nan, nan, nan, float("nan"), float("nan"))
+        S = np.concatenate([r.scores for r in ok])
+        R = np.concatenate([r.rmse for r in ok])
+        E = np.concatenate([r.metric_rmse for r in ok])
+        return Summary(
+            case, method, len(records), len(records) - len(ok), S.mean(0), S.std(0), R.mean(0), R.std(0),
+            float(E.mean()), float(E.std()),
+        )
+
+    def as_dict(self, coordinates: Sequence[str]) -> dict:
+        c = list(coordinates)
+        return {
+            "n_fits": self.n_fits,
+            "n_failed": self.n_failed,
+            "score_mean": dict(zip(c, self.score_mean.tolist())),
+            "score_std": dict(zip(c, self.score_std.tolist())),
+            "rmse_mean": dict(zip(c, self.rmse_mean.tolist())),
+            "rmse_std": dict(zip(c, self.rmse_std.tolist())),
+            "metric_rmse_mean": self.metric_rmse_mean,
+            "metric_rmse_std": self.metric_rmse_std,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class Trace:
+    """Predicted and measured signal on one test run (for trajectory plots); predicted None if failed."""
+
+    case: str
+    method: str
+    run: str
+    t: np.ndarray  # (T,) [s]
+    measured: np.ndarray  # (T, n)
+    predicted: np.ndarray | None  # (T, n)
+
+
+def _clean(x):
+    """JSON-safe: NaN/inf → None, numpy scalars → Python."""
+    if isinstance(x, dict):
+        return {k: _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, (float, np.floating)):
+        return float(x) if np.isfinite(x) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    return x
+
+
+@dataclass(frozen=True, eq=False)
+class StudyResult:
+    system: str
+    kind: str  # "inertia" | "drag"
+    signal: str  # "acceleration" | "velocity": what is predicted and scored
+    coordinates: tuple[str, ...]
+    shape_coordinates: tuple[str, ...]
+    parameter_names: tuple[str, ...]
+    methods: tuple[str, ...]
+    cases: tuple[str, ...]
+    test_runs: tuple[str, ...]
+    records: tuple[FitRecord, ...]
+    summaries: tuple[Summary, ...]
+    truth: Summary  # the true θ's prediction: what noise and unmodelled effects allow
+    traces: tuple[Trace, ...]
+    config: dict  # seeds, max_shift, ablation chart, low-data size, …
+
+    def summary(self, case: str, method: str) -> Summary:
+        for s in self.summaries:
+            if s.case == case and s.method == method:
+                return s
+        raise KeyError(f"no summary for case {case!r}, method {method!r}; cases {self.cases}, methods {self.methods}")
+
+    def failures(self) -> tuple[FitRecord, ...]:
+        return tuple(r for r in self.records if not r.ok)
+
+    def as_dict(self) -> dict:
+        c = self.coordinates
+        return _clean({
+            "system": self.system,
+            "kind": self.kind,
+            "signal": self.signal,
+            "coordinates": list(c),
+            "shape_coordinates": list(self.shape_coordinates),
+            "parameter_names": list(self.parameter_names),
+            "methods": list(self.methods),
+            "test_runs": list(self.test_runs),
+            "config": self.config,
+            "truth": self.truth.as_dict(c),
+            "cases": {
+                case: {
+                    "summary": {s.method: s.as_dict(c) for s in self.summaries if s.case == case},
+                    "fits": [r.as_dict(self.test_runs, c) for r in self.records if r.case == case],
+                }
+                for case in self.cases
+            },
+        })
+
+    def to_json(self, indent: int | None = 2) -> str:
+        return json.dumps(self.as_dict(), indent=indent, allow_nan=False)
+
+    def to_markdown(self) -> str:
+        c = self.coordinates
+        sym = "a" if self.signal == "acceleration" else "v"
+        lines = [
+            f"# {self.system}: identification study",
+            "",
+            f"Predicted forward dynamics ({self.signal}s, {self.kind}-dominated) on {len(self.test_runs)} test runs. "
+            f"Score: max normalized cross-correlation within ±{self.config.get('max_shift')} samples "
+            f"(±T/72 of the slowest period {self.config.get('slowest_period')} s); mean ± std over test runs"
+            + (" and seeds" if "low" in self.cases else "") + ". Shape coordinates: "
+            + ", ".join(self.shape_coordinates) + ".",
+        ]
+        if self.config.get("ablation") is not None:
+            lines += ["", f"Ablation: fitted in a re-charted problem, B = diag({self.config['ablation_B_diag']})."]
+        for case in self.cases:
+            title = {"low": f"Low-data case ({self.config.get('low_data_samples')} samples, "
+                            f"{len(self.config.get('seeds') or [])} seeds)", "high": "High-data case (all samples)"}[case]
+            lines += ["", f"## {title}", "", "### Score (higher is better, max 1)", ""]
+            lines += _table(["method"] + [f"{sym}:{x}" for x in c] + ["failed"],
+                            [[METHOD_LABELS.get(s.method, s.method)] + [_pm(m, d, 3) for m, d in zip(s.score_mean, s.score_std)]
+                             + [f"{s.n_failed}/{s.n_fits}"] for s in self.summaries if s.case == case])
+            lines += ["", "### RMSE per coordinate (signal units) and chart-invariant RMSE √(mean eᵀMe)", ""]
+            lines += _table(["method"] + [f"{sym}:{x}" for x in c] + ["√(eᵀMe)"],
+                            [[METHOD_LABELS.get(s.method, s.method)] + [_pm(m, d, 3, "g") for m, d in zip(s.rmse_mean, s.rmse_std)]
+                             + [_pm(s.metric_rmse_mean, s.metric_rmse_std, 3, "g")] for s in self.summaries if s.case == case])
+        t = self.truth
+        lines += ["", "## Reference: the true parameters", ""]
+        lines += _table(["", *[f"{sym}:{x}" for x in c], "√(eᵀMe)"],
+                        [["score"] + [_pm(m, d, 3) for m, d in zip(t.score_mean, t.score_std)] + [""],
+                         ["RMSE"] + [_pm(m, d, 3, "g") for m, d in zip(t.rmse_mean, t.rmse_std)]
+                         + [_pm(t.metric_rmse_mean, t.metric_rmse_std, 3, "g")]])
+        failed = self.failures()
+        if failed:
+            lines += ["", "## Failed fits", ""]
+            for r in failed:
+                seed = f", seed {r.seed}" if r.seed is not None else ""
+                lines.append(f"- {r.case}, {METHOD_LABELS.get(r.method, r.method)}{seed}: {r.error}")
+        return "\n".join(lines) + "\n"
+
+
+def _pm(m: float, d: float, digits: int, fmt: str = "f") -> str:
+    if not np.isfinite(m):
+        return "failed"
+    return f"{m:.{digits}{fmt}} ± {d:.{digits}{fmt}}" if fmt == "f" else f"{m:.{digits}g} ± {d:.{digits - 1}g}"
+
+
+def _table(header: list[str], rows: list[list[str]]) -> list[str]:
+    out = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * len(header)) + "|"]
+    return out + ["| " + " | ".join(r) + " |" for r in rows]
+
+
+# --- progress -------------------------------------------------------------------------------
+class _Progress:
+    """Either a callback progress(done, total, description) or a rich.progress.Progress."""
+
+    def __init__(self, progress, total: int):
+        self.done, self.total, self.callback, self.rich, self.task = 0, total, None, None, None
+        if progress is None:
+            return
+        if hasattr(progress, "add_task") and hasattr(progress, "update"):
+            self.rich = progress
+            self.task = progress.add_task("identification study", total=total)
+        elif callable(progress):
+            self.callback = progress
+        else:
+            raise TypeError(f"progress: expected a callable (done, total, description) or a rich Progress, got {progress!r}")
+
+    def step(self, description: str) -> None:
+        self.done += 1
+        if self.callback is not None:
+            self.callback(self.done, self.total, description)
+        elif self.rich is not None:
+            self.rich.update(self.task, advance=1, description=description)
+
+
+# --- the study ------------------------------------------------------------------------------
+def low_data_subset(problem: IdentificationProblem, n_samples: int, seed: int, rank: int | None = None,
+                    max_tries: int = LOW_DATA_MAX_TRIES) -> np.ndarray:
+    """Sorted indices of n_samples random samples whose regressor keeps the full problem's rank."""
+    if rank is None:
+        rank = problem.identifiability().rank
+    if not 0 < n_samples <= problem.N:
+        raise ValueError(f"low-data case: expected 1 ≤ samples ≤ {problem.N} (training samples), got {n_samples}")
+    rng = np.random.default_rng(seed)
+    best = -1
+    for _ in range(max_tries):
+        idx = np.sort(rng.choice(problem.N, size=n_samples, replace=False))
+        r = problem.subset(idx).identifiability().rank
+        if r == rank:
+            return idx
+        best = max(best, r)
+    raise IdentifiabilityError(
+        f"low-data case: no random subset of {n_samples} of {problem.N} samples reached the full regressor rank "
+        f"{rank} in {max_tries} draws (seed {seed}; best rank {best}); use more samples"
+    )
+
+
+def _evaluate(system: SystemData, theta: np.ndarray, max_shift: int, metrics: list[np.ndarray],
+              forward: list[PredictionData]):
+    S, R, E, P = [], [], [], []
+    for run, M, fd in zip(system.test, metrics, forward):
+        meas = measured_signal(system.model, run)
+        pred = fd.predict(theta)
+        S.append(score_run(pred, meas, max_shift))
+        R.append(rmse(pred, meas))
+        E.append(metric_rmse(pred, meas, M))
+        P.append(pred)
+    return np.array(S), np.array(R), np.array(E), P
+
+
+def _fit_one(estimator, problem, system, case, method, seed, max_shift, evaluation) -> tuple[FitRecord, list | None]:
+    """Fit, then score on the test runs; evaluation = (true metrics, θ-independent prediction data) per run."""
+    stage = "fit"
+    try:
+        result = estimator.fit(problem)
+        stage = "prediction"
+        S, R, E, P = _evaluate(system, result.theta, max_shift, *evaluation)
+    except DualidError as exc:  # SolverError, MetricError, IdentifiabilityError, ConsistencyError, …
+        msg = f"{type(exc).__name__} during {stage}: {exc}"
+        return FitRecord(case, method, seed, problem.N, False, error=msg), None
+    rec = FitRecord(
+        case, method, seed, problem.N, True, theta=tuple(float(x) for x in result.theta),
+        objective=float(result.objective), solve_time=float(result.solve_time), status=str(result.status),
+        scores=S, rmse=R, metric_rmse=E,
+    )
+    return rec, P
+
+
+def run_study(
+    system: SystemData,
+    case: Case = "both",
+    seeds: int | Sequence[int] = 5,
+    methods: Sequence[str] | Mapping[str, Any] = DEFAULT_METHODS,
+    progress: Callable[[int, int, str], None] | Any | None = None,
+    ablation: None | str | np.ndarray = None,
+    trace_run: int = 0,
+) -> StudyResult:
+    """Fit each method in each case, predict every test run, score; see the module docstring.
+
+    seeds: the number of low-data subsets (seeds 0..seeds−1) or the seeds themselves.
+    methods: names (see DEFAULT_METHODS) or a mapping name → estimator (anything with fit(problem)).
+    progress: a callback progress(done, total, description) or a rich Progress.
+    ablation: None, "units" (see ``units_chart``) or a constant chart B ((n,) diagonal or (n, n)).
+    trace_run: index of the test run whose predicted signals are kept for trajectory plots.
+    """
+    cases = {"both": ("low", "high"), "low": ("low",), "high": ("high",)}.get(case)
+    if cases is None:
+        raise ValueError(f"case: expected 'both', 'low' or 'high', got {case!r}")
+    seed_list = list(range(seeds)) if isinstance(seeds, (int, np.integer)) else [int(s) for s in seeds]
+    if "low" in cases and not seed_list:
+        raise ValueError(f"seeds: the low-data case needs at least one seed, got {seeds!r}")
+    if isinstance(methods, Mapping):
+        estimators = dict(methods)
+    else:
+        if isinstance(methods, str):
+            raise TypeError(f"methods: expected a sequence of method names, got the string {methods!r}")
+        estimators = {m: make_estimator(m, system) for m in methods}
+    if not estimators:
+        raise ValueError("methods: expected at least one method")
+    if not system.test:
+        raise ValueError(f"system {system.name!r} has no test runs to predict")
+    if not 0 <= trace_run < len(system.test):
+        raise ValueError(f"trace_run: expected an index in [0, {len(system.test) - 1}], got {trace_run}")
+
+    problem = build_problem(system.model, list(system.train))
+    rank = problem.identifiability().rank
+    B = _ablation_chart(ablation, problem)
+    dt = float(np.median(np.diff(system.test[0].t)))
+    max_shift = shift_window(system.slowest_period, dt)
+    forward = [PredictionData.of(system.model, run.q, run.v, run.tau) for run in system.test]
+    evaluation = ([fd.metric.evaluate(system.theta_true) for fd in forward], forward)  # built once per run
+    coords = tuple(problem.coordinates)
+
+    plan: list[tuple[str, int | None]] = [("low", s) for s in seed_list if "low" in cases]
+    if "high" in cases:
+        plan.append(("high", None))
+    tracker = _Progress(progress, len(plan) * len(estimators))
+
+    records: list[FitRecord] = []
+    traces: list[Trace] = []
+    subsets: dict[str, list[int]] = {}
+    run = system.test[trace_run]
+    measured_trace = measured_signal(system.model, run)
+    t0 = time.perf_counter()
+    for case_name, seed in plan:
+        if case_name == "low":
+            idx = low_data_subset(problem, system.low_data_samples, seed, rank)
+            subsets[str(seed)] = idx.tolist()
+            train = problem.subset(idx)
+        else:
+            train = problem
+        if B is not None:
+            train = train.in_coordinates(B)
+        for method, estimator in estimators.items():
+            rec, preds = _fit_one(estimator, train, system, case_name, method, seed, max_shift, evaluation)
+            records.append(rec)
+            if seed is None or seed == seed_list[0]:
+                traces.append(Trace(case_name, method, run.name, run.t, measured_trace,
+                                    None if preds is None else preds[trace_run]))
+            tracker.step(f"{case_name}{'' if seed is None else f' seed {seed}'}: {method}")
+
+    n = problem.n
+    summaries = tuple(
+        Summary.of(c, m, [r for r in records if r.case == c and r.method == m], n) for c in cases for m in estimators
+    )
+    truth_rec, truth_pred = _fit_one(_Fixed(system.theta_true), problem, system, "truth", "truth", None, max_shift,
+                                     evaluation)
+    if truth_pred is not None:
+        for c in cases:
+            traces.append(Trace(c, "truth", run.name, run.t, measured_trace, truth_pred[trace_run]))
+    config = {
+        "seeds": seed_list if "low" in cases else [],
+        "low_data_samples": system.low_data_samples if "low" in cases else None,
+        "low_data_subsets": subsets,
+        "training_samples": problem.N,
+        "regressor_rank": rank,
+        "n_params": problem.p,
+        "slowest_period": system.slowest_period,
+        "dt": dt,
+        "max_shift": max_shift,
+        "gamma": system.gamma,
+        "ablation": None if ablation is None else (ablation if isinstance(ablation, str) else "chart"),
+        "ablation_B_diag": None if B is None else np.diag(B).tolist(),
+        "elapsed_s": time.perf_counter() - t0,
+        "description": system.description,
+    }
+    return StudyResult(
+        system=system.name,
+        kind=problem.kind,
+        signal="acceleration" if problem.kind == "inertia" else "velocity",
+        coordinates=coords,
+        shape_coordinates=tuple(system.shape_coordinates),
+        parameter_names=tuple(problem.parameters.names),
+        methods=tuple(estimators),
+        cases=cases,
+        test_runs=tuple(r.name for r in system.test),
+        records=tuple(records),
+        summaries=summaries,
+        truth=Summary.of("truth", "truth", [truth_rec], n),
+        traces=tuple(traces),
+        config=config,
+    )
+
+
+@dataclass(frozen=True)
+class _Fixed:
+    """An 'estimator' that returns given parameters (the truth reference)."""
+
+    theta: np.ndarray
+
+    def fit(self, problem):
+        from dualid.estimators.result import IdentificationResult
+
+        return IdentificationResult("fixed", self.theta, problem.parameters, float("nan"), "given", "none", 0.0)
+
+
+def reproduce(
+    system_name: str,
+    out_dir,
+    case: Case = "both",
+    seeds: int = 5,
+    noise: str = "realistic",
+    size: str = "default",
+    ablation: None | str | np.ndarray = None,
+    overwrite: bool = False,
+    progress=None,
+) -> StudyResult:
+    """Simulate the named system, run the study and write results.json, results.md and figures to out_dir."""
+    from dualid.report.study import check_out_dir, write_report
+    from dualid.systems.base import make_system
+
+    check_out_dir(out_dir, overwrite)  # fail before the (long) study, not after
+    system = make_system(system_name, seed=0, noise=noise, size=size)
+    result = run_study(system, case=case, seeds=seeds, progress=progress, ablation=ablation)
+    result = replace(result, config={**result.config, "noise": noise, "size": size, "system_seed": 0})
+    write_report(result, out_dir, overwrite=overwrite)
+    return result

@@ -1,0 +1,225 @@
+"""The identification problem: per-sample regressors, forces, metric and velocities, as a value.
+
+    τ_i = Y_i θ + ε_i,     M_i(θ) = M_i0 + Σ_k θ_k M_ik,     i = 1..N
+
+An ``IdentificationProblem`` is immutable (its arrays are read-only); transformations such as a
+change of coordinates or a subsample return a new problem.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import numpy as np
+
+from dualid.errors import DataError
+from dualid.data.trajectory import Trajectory
+from dualid.model.base import Kind, Model
+from dualid.model.metric import AffineMetric
+from dualid.model.parameters import ParameterSpace
+
+def _frozen(a, name: str, shape: tuple) -> np.ndarray:
+    a = np.array(a, dtype=float)  # a private copy
+    if a.shape != shape:
+        raise DataError(f"{name}: expected shape {shape}, got {a.shape}")
+    bad = ~np.isfinite(a)
+    if bad.any():
+        where = np.argwhere(bad)[0].tolist()
+        raise DataError(f"{name}: {int(bad.sum())} non-finite values (NaN or inf), first at index {where}")
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    """What the stacked regressor determines: rank, conditioning and the unidentifiable directions."""
+
+    rank: int
+    n_params: int
+    condition_number: float  # σ_max / σ_min over the identifiable directions (column-scaled)
+    singular_values: np.ndarray  # of the column-scaled stacked regressor
+    null_space: np.ndarray  # (p, p − rank) directions of θ that do not change Yθ
+    unidentifiable: tuple[str, ...]  # parameters that have a component in the null space
+    names: tuple[str, ...]
+
+    @property
+    def full_rank(self) -> bool:
+        return self.rank == self.n_params
+
+    def describe(self, max_items: int = 6) -> str:
+        """A readable account of the null space: its dimension and the main combinations."""
+        if self.full_rank:
+            return f"all {self.n_params} parameters are identifiable (condition number {self.condition_number:.3g})"
+        lines = [
+            f"rank {self.rank} of {self.n_params}: {self.n_params - self.rank} unidentifiable "
+            f"direction(s); condition number of the identifiable part {self.condition_number:.3g}"
+        ]
+        for j in range(min(self.null_space.shape[1], max_items)):
+            z = self.null_space[:, j]
+            order = np.argsort(-np.abs(z))[:4]
+            combo = " ".join(f"{z[k]:+.2f}·{self.names[k]}" for k in order if abs(z[k]) > 1e-3)
+            lines.append(f"  null direction {j + 1}: {combo}")
+        return "\n".join(lines)
+
+
+@dataclass(frozen=True, eq=False)
+class IdentificationProblem:
+    """Samples of inverse dynamics τ_i = Y_i θ with their metric M_i(θ), N samples, n dofs, p params."""
+
+    Y: np.ndarray  # (N, n, p) regressor [force units per parameter unit]
+    tau: np.ndarray  # (N, n) generalized forces (coordinate force units)
+    metric: AffineMetric  # M_i(θ), (N, n, n) when evaluated
+    v: np.ndarray  # (N, n) generalized velocities, for the energy residual v_iᵀ r_i
+    parameters: ParameterSpace
+    kind: Kind = "inertia"  # "inertia": M is the mass matrix; "drag": the resistance matrix
+    coordinates: tuple[str, ...] = field(default=())  # names of the n coordinates
+
+    def __post_init__(self) -> None:
+        Y = np.asarray(self.Y)
+        if Y.ndim != 3:
+            raise DataError(f"Y: expected shape (N, n, p), got {Y.shape}")
+        N, n, p = Y.shape
+        object.__setattr__(self, "Y", _frozen(Y, "Y", (N, n, p)))
+        object.__setattr__(self, "tau", _frozen(self.tau, "tau", (N, n)))
+        object.__setattr__(self, "v", _frozen(self.v, "v", (N, n)))
+        if self.parameters.p != p:
+            raise DataError(f"parameters: Y has {p} columns but the parameter space names {self.parameters.p}")
+        if self.metric.shape != (N, n) or self.metric.n_params != p:
+            raise DataError(
+                f"metric: expected N={N} samples of {n}×{n} matrices in p={p} parameters, "
+                f"got N={self.metric.shape[0]}, n={self.metric.shape[1]}, p={self.metric.n_params}"
+            )
+        if self.kind not in ("inertia", "drag"):
+            raise DataError(f"kind: expected 'inertia' or 'drag', got {self.kind!r}")
+        coords = tuple(self.coordinates) or tuple(f"q{j}" for j in range(n))
+        if len(coords) != n:
+            raise DataError(f"coordinates: expected {n} names, got {len(coords)}")
+        object.__setattr__(self, "coordinates", coords)
+        if N == 0:
+            raise DataError("the problem has no samples (N = 0)")
+
+    # --- sizes ------------------------------------------------------------------------------
+    @property
+    def N(self) -> int:
+        return self.Y.shape[0]
+
+    @property
+    def n(self) -> int:
+        return self.Y.shape[1]
+
+    @property
+    def p(self) -> int:
+        return self.Y.shape[2]
+
+    # --- evaluation -------------------------------------------------------------------------
+    def residual(self, theta: np.ndarray) -> np.ndarray:
+        """r_i = Y_i θ − τ_i, (N, n)."""
+        return self.Y @ np.asarray(theta, dtype=float) - self.tau
+
+    def dual_metric_objective(self, theta: np.ndarray) -> float:
+        """Σ r_iᵀ M_i(θ)⁻¹ r_i; +inf where some M_i(θ) is not positive definite."""
+        r = self.residual(theta)
+        M = self.metric.evaluate(theta)
+        try:
+            L = np.linalg.cholesky(M)
+        except np.linalg.LinAlgError:
+            return float("inf")
+        z = np.linalg.solve(L, r[..., None])[..., 0]
+        return float(np.sum(z * z))
+
+    def identifiability(self, rtol: float = 1e-9) -> Identifiability:
+        """Rank and null space of the stacked regressor (columns scaled to unit norm first)."""
+        A = self.Y.reshape(-1, self.p)
+        scale = np.linalg.norm(A, axis=0)
+        scale[scale == 0] = 1.0
+        # SVD of the p×p Gram matrix's Cholesky-free square root: cheap for N·n ≫ p
+        if A.shape[0] > 4 * self.p:
+            _, R = np.linalg.qr(A / scale, mode="reduced")
+            _, s, Vt = np.linalg.svd(R)
+        else:
+            _, s, Vt = np.linalg.svd(A / scale, full_matrices=True)
+        s_full = np.zeros(self.p)
+        s_full[: len(s)] = s
+        tol = rtol * max(s_full.max(), 1e-300) * max(A.shape)
+        rank = int(np.sum(s_full > tol))
+        null = Vt[rank:].T / scale[:, None]  # back to unscaled θ directions
+        if null.size:
+            null = null / np.linalg.norm(null, axis=0)
+        in_null = np.linalg.norm(null, axis=1) > 1e-6 if null.size else np.zeros(self.p, bool)
+        cond = float(s_full[0] / s_full[rank - 1]) if rank > 0 else float("inf")
+        return Identifiability(
+            rank=rank,
+            n_params=self.p,
+            condition_number=cond,
+            singular_values=s_full,
+            null_space=null,
+            unidentifiable=tuple(nm for nm, z in zip(self.parameters.names, in_null) if z),
+            names=self.parameters.names,
+        )
+
+    # --- transformations --------------------------------------------------------------------
+    def subset(self, idx) -> "IdentificationProblem":
+        """The problem restricted to samples idx (indices, slice or boolean mask)."""
+        idx = np.arange(self.N)[idx]
+        return IdentificationProblem(
+            self.Y[idx], self.tau[idx], self.metric.take(idx), self.v[idx], self.parameters, self.kind, self.coordinates
+        )
+
+    def in_coordinates(self, B: np.ndarray, coordinates: tuple[str, ...] | None = None) -> "IdentificationProblem":
+        """The same data in another chart q = φ(q̃), B = ∂φ/∂q̃ ((n, n) or (N, n, n), invertible).
+
+        Forces are covectors and velocities vectors: τ̃ = Bᵀτ, Ỹ = BᵀY, M̃ = BᵀMB, ṽ = B⁻¹v.
+        """
+        B = np.broadcast_to(np.asarray(B, dtype=float), (self.N, self.n, self.n))
+        Bt = np.swapaxes(B, 1, 2)
+        v = np.linalg.solve(B, self.v[..., None])[..., 0]
+        return IdentificationProblem(
+            Bt @ self.Y,
+            (Bt @ self.tau[..., None])[..., 0],
+            self.metric.pullback(B),
+            v,
+            self.parameters,
+            self.kind,
+            coordinates or tuple(f"{c}~" for c in self.coordinates),
+        )
+
+    @staticmethod
+    def concatenate(problems: list["IdentificationProblem"]) -> "IdentificationProblem":
+        """Stack the samples of several problems (e.g. several runs) of the same system."""
+        first = problems[0]
+        for q in problems[1:]:
+            if q.parameters != first.parameters or q.kind != first.kind or q.n != first.n:
+                raise DataError("concatenate: problems describe different systems (parameters, kind or n differ)")
+        return IdentificationProblem(
+            np.concatenate([q.Y for q in problems]),
+            np.concatenate([q.tau for q in problems]),
+            AffineMetric.concatenate([q.metric for q in problems]),
+            np.concatenate([q.v for q in problems]),
+            first.parameters,
+            first.kind,
+            first.coordinates,
+        )
+
+
+def build_problem(model: Model, trajectories: list[Trajectory] | Trajectory) -> IdentificationProblem:
+    """The identification problem of a model over one or several trajectories."""
+    if isinstance(trajectories, Trajectory):
+        trajectories = [trajectories]
+    problems = []
+    for traj in trajectories:
+        if model.kind == "inertia" and traj.a is None:
+            raise ValueError(
+                f"trajectory {traj.name!r} has no accelerations; an inertia-dominated model needs them "
+                "(differentiate the velocities first, see dualid.data.preprocessing)"
+            )
+        problems.append(
+            IdentificationProblem(
+                Y=model.regressor(traj.q, traj.v, traj.a),
+                tau=traj.tau,
+                metric=model.metric(traj.q),
+                v=traj.v,
+                parameters=model.parameters,
+                kind=model.kind,
+                coordinates=model.coordinates,
+            )
+        )
+    return IdentificationProblem.concatenate(problems)

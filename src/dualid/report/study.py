@@ -1,0 +1,210 @@
+"""Figures and the written report of a study (the only module that imports matplotlib; Agg backend).
+
+- ``score_bars``: the paper's Fig. 2/4 — score per coordinate, mean with std error bars; left panel
+  WLS, energy, DM; right panel log-det WLS, pullback WLS, DM.
+- ``trajectory_plot``: the paper's Fig. 3/5 — predicted vs measured signal of the shape coordinate
+  where the methods differ most, on one test run.
+- ``write_report``: results.json, results.md and the PNGs in an output directory.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from dualid.paper.study import METHOD_LABELS, StudyResult  # noqa: E402
+
+PANELS = (("wls", "energy", "dm"), ("logdet", "pullback", "dm"))
+TRAJECTORY_METHODS = ("dm", "wls", "energy", "logdet", "pullback")
+COLORS = {
+    "dm": "#d62728",
+    "wls": "#1f77b4",
+    "energy": "#2ca02c",
+    "logdet": "#9467bd",
+    "pullback": "#ff7f0e",
+    "ols": "#8c564b",
+    "ols_unconstrained": "#7f7f7f",
+    "truth": "#000000",
+}
+CASE_TITLES = {"low": "low-data case", "high": "high-data case"}
+
+
+def _label(method: str) -> str:
+    return METHOD_LABELS.get(method, method)
+
+
+def _coord_label(result: StudyResult, c: str) -> str:
+    """a:<coordinate> for accelerations, v:<coordinate> for velocities (as in results.md)."""
+    return f"{'a' if result.signal == 'acceleration' else 'v'}:{c}"
+
+
+def _check_case(result: StudyResult, case: str) -> None:
+    if case not in result.cases:
+        raise ValueError(f"case: expected one of {list(result.cases)} (the cases of this study), got {case!r}")
+
+
+def score_bars(result: StudyResult, case: str, path) -> Path:
+    """Grouped bars of the score per coordinate (mean ± std), two panels as in the paper; PNG at path."""
+    _check_case(result, case)
+    coords = result.coordinates
+    n = len(coords)
+    panels = [[m for m in panel if m in result.methods] for panel in PANELS]
+    panels = [p for p in panels if p] or [list(result.methods)]
+    lows = [0.0]
+    for panel in panels:
+        for m in panel:
+            s = result.summary(case, m)
+            lows.extend((s.score_mean - s.score_std)[np.isfinite(s.score_mean)].tolist())
+    ymin = min(lows)
+    ymin = 0.0 if ymin >= 0 else max(-1.05, np.floor(ymin * 10) / 10 - 0.05)
+    width_in = min(16.0, max(8.0, 0.8 * n * len(panels) + 2))
+    fig, axes = plt.subplots(1, len(panels), figsize=(width_in, 4.2), sharey=True, squeeze=False)
+    x = np.arange(n)
+    for ax, panel in zip(axes[0], panels):
+        w = 0.8 / len(panel)
+        for j, m in enumerate(panel):
+            s = result.summary(case, m)
+            pos = x - 0.4 + w * (j + 0.5)
+            mean = np.nan_to_num(s.score_mean, nan=0.0)
+            ax.bar(pos, mean, w, yerr=np.nan_to_num(s.score_std), capsize=2, color=COLORS.get(m),
+                   label=_label(m) + (f" ({s.n_failed}/{s.n_fits} failed)" if s.n_failed else ""),
+                   error_kw={"elinewidth": 0.8})
+            for k in np.flatnonzero(~np.isfinite(s.score_mean)):
+                ax.text(pos[k], 0.02, "failed", rotation=90, ha="center", va="bottom", fontsize=7)
+        ax.set_xticks(x)
+        ax.set_xticklabels([_coord_label(result, c) for c in coords], fontsize=9)
+        for k, c in enumerate(coords):
+            if c in result.shape_coordinates:
+                ax.get_xticklabels()[k].set_fontweight("bold")
+                ax.axvspan(k - 0.5, k + 0.5, color="0.93", zorder=0)
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_ylim(ymin, 1.05)
+        ax.grid(axis="y", alpha=0.3)
+        ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3, frameon=False)
+    axes[0][0].set_ylabel("max normalized cross-correlation")
+    fig.suptitle(f"{result.system}: predicted vs measured {result.signal}, {CASE_TITLES.get(case, case)}\n"
+                 f"mean ± std over test runs{' and seeds' if case == 'low' else ''}; shaded: shape coordinates",
+                 fontsize=9)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+    return path
+
+
+def most_contested_coordinate(result: StudyResult, case: str, methods=TRAJECTORY_METHODS) -> str:
+    """The shape coordinate (or any coordinate, if none are named) where the mean scores of the methods
+    spread most (max − min)."""
+    _check_case(result, case)
+    candidates = [c for c in result.shape_coordinates if c in result.coordinates] or list(result.coordinates)
+    methods = [m for m in methods if m in result.methods]
+    spread = {}
+    for c in candidates:
+        k = result.coordinates.index(c)
+        vals = [result.summary(case, m).score_mean[k] for m in methods]
+        vals = [v for v in vals if np.isfinite(v)]
+        spread[c] = (max(vals) - min(vals)) if len(vals) > 1 else 0.0
+    return max(candidates, key=lambda c: spread[c])
+
+
+def trajectory_plot(result: StudyResult, case: str, path, coordinate: str | None = None,
+                    methods=TRAJECTORY_METHODS, max_duration: float = 15.0) -> Path:
+    """Predicted (each method) and measured signal of one coordinate on the study's trace run; PNG at path.
+
+    coordinate: default the shape coordinate where the methods differ most. Only the first
+    max_duration seconds of the run are drawn, for legibility.
+    """
+    _check_case(result, case)
+    if coordinate is None:
+        coordinate = most_contested_coordinate(result, case, methods)
+    if coordinate not in result.coordinates:
+        raise ValueError(f"coordinate: expected one of {list(result.coordinates)}, got {coordinate!r}")
+    k = result.coordinates.index(coordinate)
+    traces = {tr.method: tr for tr in result.traces if tr.case == case}
+    if not traces:
+        raise ValueError(f"the study kept no trajectories for case {case!r}")
+    first = next(iter(traces.values()))
+    t = first.t - first.t[0]
+    keep = t <= max_duration
+    fig, ax = plt.subplots(figsize=(9, 4.2))
+    measured = first.measured[keep, k]
+    ax.plot(t[keep], measured, color="k", lw=2.2, alpha=0.45, label="measured")
+    # the axis follows the measured signal (±100 % margin): a prediction far off scale is clipped and
+    # says so in its label, instead of flattening every other curve
+    lo, hi = float(measured.min()), float(measured.max())
+    pad = max(hi - lo, 1e-12)
+    ylim = (lo - pad, hi + pad)
+    failed = []
+    for m in methods:
+        tr = traces.get(m)
+        if tr is None:
+            continue
+        if tr.predicted is None:
+            failed.append(_label(m))
+            continue
+        score = _run_score(result, tr, k)
+        style = {"lw": 1.8, "ls": "-", "zorder": 2} if m == "dm" else {"lw": 1.1, "ls": "--", "zorder": 3}
+        pred = tr.predicted[keep, k]
+        off = " — off scale, peak {:.3g}".format(pred[np.argmax(np.abs(pred))]) if (pred.min() < ylim[0] or pred.max() > ylim[1]) else ""
+        ax.plot(t[keep], pred, color=COLORS.get(m), label=f"{_label(m)} (score {score:.3f} on this run{off})", **style)
+    unit = "acceleration" if result.signal == "acceleration" else "velocity"
+    ax.set_ylim(*ylim)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(f"{_coord_label(result, coordinate)}")
+    title = f"{result.system}: {coordinate} {unit} on test run {first.run!r}, {CASE_TITLES.get(case, case)}"
+    if failed:
+        title += f" — failed: {', '.join(failed)}"
+    ax.set_title(title, fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.2), frameon=False)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+    return path
+
+
+def _run_score(result: StudyResult, trace, k: int) -> float:
+    """The score of coordinate k on the trace's run, from the fit the trace came from (first seed)."""
+    j = result.test_runs.index(trace.run)
+    if trace.method == "truth":
+        recs = []
+    else:
+        recs = [r for r in result.records if r.case == trace.case and r.method == trace.method and r.ok]
+    if not recs:
+        return float("nan")
+    return float(recs[0].scores[j, k])  # records are in seed order; traces keep the first seed
+
+
+def check_out_dir(out_dir, overwrite: bool = False) -> Path:
+    """The output directory, refusing an existing non-empty one unless overwrite=True."""
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"output directory {str(out)!r} exists and is not a directory")
+    if out.is_dir() and any(out.iterdir()) and not overwrite:
+        raise FileExistsError(
+            f"output directory {str(out)!r} exists and is not empty; choose another or pass overwrite=True"
+        )
+    return out
+
+
+def write_report(result: StudyResult, out_dir, overwrite: bool = False) -> dict[str, Path]:
+    """results.json, results.md, score_bars_<case>.png and trajectory_<case>.png in out_dir."""
+    out = check_out_dir(out_dir, overwrite)
+    out.mkdir(parents=True, exist_ok=True)
+    written = {"json": out / "results.json", "markdown": out / "results.md"}
+    written["json"].write_text(result.to_json() + "\n")
+    md = result.to_markdown()
+    figures = []
+    for case in result.cases:
+        bars = score_bars(result, case, out / f"score_bars_{case}.png")
+        traj = trajectory_plot(result, case, out / f"trajectory_{case}.png")
+        written[f"score_bars_{case}"], written[f"trajectory_{case}"] = bars, traj
+        figures += [f"![scores, {case}]({bars.name})", f"![trajectory, {case}]({traj.name})"]
+    written["markdown"].write_text(md + "\n## Figures\n\n" + "\n\n".join(figures) + "\n")
+    return written

@@ -1,0 +1,262 @@
+"""``FitConfig``: everything a real-robot fit needs, from a YAML file or a dict (and CLI overrides).
+
+YAML form (relative paths are relative to the YAML file's folder)::
+
+    model: {urdf: robot.urdf, floating_base: false, gravity: [0, 0, -9.81]}
+    columns: {time: time, joints: {Joint1: {position: pos_meas1, velocity: vel_meas1, effort: tau_meas1}}}
+    train: [run0.csv, run1.csv]
+    test: [run2.csv]
+    preprocessing: [{resample: {rate: 500}}, {differentiate: {window: 0.05}}, {downsample: {factor: 5}}]
+    joint_terms: {viscous: true, coulomb: true, coulomb_velocity: 0.01, armature: true, joints: [Joint1]}
+    bounds: {Joint1.b: [0, 1]}
+    methods: [ols, wls, energy, logdet, pullback, dm]
+    prior: {source: urdf, gamma: 1.0}
+    validation: {xcorr_window: 0.02}
+    references: {lab: lab_parameters.yml}
+    out: results/robot
+
+Only ``model.urdf`` and ``train`` are required. ``columns`` may be omitted when the logs carry the
+DFKI double-pendulum columns (time, pos_meas{i}, vel_meas{i}, tau_meas{i}; see ``fit.column_map``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from dualid.errors import ConfigError
+from dualid.estimators.methods import METHODS  # the one list of method names
+
+DEFAULT_PREPROCESSING = (
+    {"resample": {"rate": 500.0}},
+    {"differentiate": {"method": "savgol", "window": 0.05}},
+    {"filter_lowpass": {"cutoff": 20.0, "fields": ["tau"]}},
+    {"downsample": {"factor": 5}},
+)
+
+_TOP_KEYS = (
+    "model", "columns", "train", "test", "preprocessing", "joint_terms", "bounds", "methods", "prior",
+    "validation", "references", "out",
+)
+_MODEL_KEYS = ("urdf", "floating_base", "gravity")
+_JOINT_TERM_KEYS = ("viscous", "coulomb", "coulomb_velocity", "armature", "joints")
+_PRIOR_KEYS = ("source", "gamma")
+_VALIDATION_KEYS = ("xcorr_window",)
+
+
+def _check_keys(d: Any, known: tuple[str, ...], where: str) -> Mapping:
+    if d is None:
+        return {}
+    if not isinstance(d, Mapping):
+        raise ConfigError(f"{where}: expected a mapping with keys {list(known)}, got {type(d).__name__} {d!r}")
+    unknown = [k for k in d if k not in known]
+    if unknown:
+        raise ConfigError(f"{where}: unknown keys {unknown}; known keys: {list(known)}")
+    return d
+
+
+def _path(x, base: Path | None, where: str) -> Path:
+    if not isinstance(x, (str, Path)) or not str(x):
+        raise ConfigError(f"{where}: expected a file path, got {x!r}")
+    p = Path(x).expanduser()
+    return p if p.is_absolute() or base is None else base / p
+
+
+def _paths(x, base: Path | None, where: str) -> tuple[Path, ...]:
+    if x is None:
+        return ()
+    if isinstance(x, (str, Path)):
+        x = [x]
+    if not isinstance(x, (list, tuple)):
+        raise ConfigError(f"{where}: expected a list of file paths, got {x!r}")
+    return tuple(_path(p, base, where) for p in x)
+
+
+def _bool(x, where: str) -> bool:
+    if not isinstance(x, bool):
+        raise ConfigError(f"{where}: expected true or false, got {x!r}")
+    return x
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    urdf: Path
+    floating_base: bool = False
+    gravity: tuple[float, float, float] | None = None  # [m/s²]; None: the URDF/Pinocchio default (0, 0, −9.81)
+
+
+@dataclass(frozen=True)
+class JointTermsConfig:
+    viscous: bool = True  # b_j v_j [N m s/rad]
+    coulomb: bool = True  # fc_j tanh(v_j / v_c) [N m]
+    coulomb_velocity: float = 0.01  # v_c [rad/s]
+    armature: bool = True  # Ia_j a_j [kg m²] (reflected rotor inertia)
+    joints: tuple[str, ...] | None = None  # None: every joint of the model that is not a floating base
+
+
+@dataclass(frozen=True)
+class PriorConfig:
+    source: str = "urdf"  # "urdf" (the URDF's inertials) or a parameters.yaml/json file (from a previous fit)
+    gamma: float = 1.0  # weight of the prior, in units of the data objective
+
+
+@dataclass(frozen=True)
+class FitConfig:
+    """A real-robot fit (see the module docstring for the YAML form)."""
+
+    model: ModelConfig
+    train: tuple[Path, ...]
+    test: tuple[Path, ...] = ()
+    columns: Mapping | None = None  # ColumnMap dict form; None: DFKI default if the logs have those columns
+    preprocessing: tuple[dict, ...] = DEFAULT_PREPROCESSING
+    joint_terms: JointTermsConfig = field(default_factory=JointTermsConfig)
+    bounds: tuple[tuple[str, float, float], ...] = ()  # (name, lo, hi)
+    methods: tuple[str, ...] = ("ols", "dm")
+    prior: PriorConfig = field(default_factory=PriorConfig)
+    xcorr_window: float = 0.02  # [s] shift window ± of the normalized cross-correlation
+    references: tuple[tuple[str, Path], ...] = ()  # (label, DFKI reference_parameters yml)
+    out: Path | None = None
+
+    def __post_init__(self) -> None:
+        if not self.train:
+            raise ConfigError("train: at least one training log file is required")
+        unknown = [m for m in self.methods if m not in METHODS]
+        if unknown:
+            raise ConfigError(f"unknown method {unknown[0]!r}; known methods: {', '.join(METHODS)}")
+        if not self.methods:
+            raise ConfigError(f"methods: choose at least one of {', '.join(METHODS)}")
+        if len(set(self.methods)) != len(self.methods):
+            object.__setattr__(self, "methods", tuple(dict.fromkeys(self.methods)))
+        if not (np.isfinite(self.xcorr_window) and self.xcorr_window >= 0):
+            raise ConfigError(f"validation.xcorr_window: expected seconds ≥ 0, got {self.xcorr_window!r}")
+        if not (np.isfinite(self.prior.gamma) and self.prior.gamma >= 0):
+            raise ConfigError(f"prior.gamma: expected a number ≥ 0, got {self.prior.gamma!r}")
+        for name, lo, hi in self.bounds:
+            if not lo <= hi:
+                raise ConfigError(f"bounds: {name!r} has lower {lo} > upper {hi}")
+
+    # --- construction -----------------------------------------------------------------------
+    @staticmethod
+    def from_dict(d: Mapping, base_dir: str | Path | None = None) -> "FitConfig":
+        """From the YAML form; relative paths are taken relative to ``base_dir`` (if given)."""
+        base = None if base_dir is None else Path(base_dir)
+        d = _check_keys(d, _TOP_KEYS, "config")
+        missing = [k for k in ("model", "train") if d.get(k) in (None, [], "")]
+        if missing:
+            raise ConfigError(f"config: missing required keys {missing}")
+        m = d["model"]
+        if isinstance(m, (str, Path)):
+            m = {"urdf": m}
+        m = _check_keys(m, _MODEL_KEYS, "model")
+        if not m.get("urdf"):
+            raise ConfigError("model: missing required key 'urdf'")
+        gravity = m.get("gravity")
+        if gravity is not None:
+            try:
+                gravity = tuple(float(x) for x in gravity)
+            except (TypeError, ValueError):
+                gravity = ()
+            if len(gravity) != 3:
+                raise ConfigError(f"model.gravity: expected 3 numbers [m/s²], got {m.get('gravity')!r}")
+        model = ModelConfig(_path(m["urdf"], base, "model.urdf"), _bool(m.get("floating_base", False), "model.floating_base"), gravity)
+
+        jt = _check_keys(d.get("joint_terms"), _JOINT_TERM_KEYS, "joint_terms")
+        joints = jt.get("joints")
+        if joints is not None:
+            joints = (joints,) if isinstance(joints, str) else tuple(str(j) for j in joints)
+        joint_terms = JointTermsConfig(
+            viscous=_bool(jt.get("viscous", True), "joint_terms.viscous"),
+            coulomb=_bool(jt.get("coulomb", True), "joint_terms.coulomb"),
+            coulomb_velocity=float(jt.get("coulomb_velocity", 0.01)),
+            armature=_bool(jt.get("armature", True), "joint_terms.armature"),
+            joints=joints,
+        )
+        pr = d.get("prior")
+        if isinstance(pr, str):
+            pr = {"source": pr}
+        pr = _check_keys(pr, _PRIOR_KEYS, "prior")
+        source = str(pr.get("source", "urdf"))
+        if source != "urdf":
+            source = str(_path(source, base, "prior.source"))
+        prior = PriorConfig(source, float(pr.get("gamma", 1.0)))
+
+        bounds_in = d.get("bounds") or {}
+        if not isinstance(bounds_in, Mapping):
+            raise ConfigError(f"bounds: expected a mapping {{parameter name: [lower, upper]}}, got {bounds_in!r}")
+        bounds = []
+        for name, pair in bounds_in.items():
+            if not isinstance(pair, (list, tuple)) or len(pair) != 2:
+                raise ConfigError(f"bounds: {name!r} must be [lower, upper] (use null for none), got {pair!r}")
+            lo, hi = (-np.inf if pair[0] is None else float(pair[0]), np.inf if pair[1] is None else float(pair[1]))
+            bounds.append((str(name), lo, hi))
+
+        methods = d.get("methods", ("ols", "dm"))
+        methods = (methods,) if isinstance(methods, str) else tuple(str(x) for x in methods)
+        steps = d.get("preprocessing", DEFAULT_PREPROCESSING)
+        if not isinstance(steps, (list, tuple)):
+            raise ConfigError(f"preprocessing: expected a list of steps {{name: parameters}}, got {steps!r}")
+        val = _check_keys(d.get("validation"), _VALIDATION_KEYS, "validation")
+        refs = d.get("references") or {}
+        if not isinstance(refs, Mapping):
+            raise ConfigError(f"references: expected a mapping {{label: reference parameters .yml}}, got {refs!r}")
+        columns = d.get("columns")
+        if columns is not None and not isinstance(columns, Mapping):
+            raise ConfigError(f"columns: expected a column map (time, joints, units), got {columns!r}")
+        return FitConfig(
+            model=model,
+            train=_paths(d["train"], base, "train"),
+            test=_paths(d.get("test"), base, "test"),
+            columns=columns,
+            preprocessing=tuple(steps),
+            joint_terms=joint_terms,
+            bounds=tuple(bounds),
+            methods=methods,
+            prior=prior,
+            xcorr_window=float(val.get("xcorr_window", 0.02)),
+            references=tuple((str(k), _path(v, base, f"references.{k}")) for k, v in refs.items()),
+            out=None if d.get("out") is None else _path(d["out"], base, "out"),
+        )
+
+    @staticmethod
+    def from_yaml(path: str | Path) -> "FitConfig":
+        """Read a YAML config; relative paths in it are relative to its folder."""
+        import yaml
+
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"config file not found: {path}")
+        with open(path) as f:
+            d = yaml.safe_load(f) or {}
+        return FitConfig.from_dict(d, base_dir=path.resolve().parent)
+
+    def with_overrides(self, **changes) -> "FitConfig":
+        """A copy with the given fields replaced (None values are ignored), e.g. from CLI flags."""
+        known = {f.name for f in fields(self)}
+        unknown = [k for k in changes if k not in known]
+        if unknown:
+            raise ConfigError(f"unknown config fields {unknown}; known: {sorted(known)}")
+        return replace(self, **{k: v for k, v in changes.items() if v is not None})
+
+    def as_dict(self) -> dict:
+        """The YAML form (paths as strings), for the record written next to the results."""
+        return {
+            "model": {"urdf": str(self.model.urdf), "floating_base": self.model.floating_base,
+                      "gravity": None if self.model.gravity is None else list(self.model.gravity)},
+            "columns": None if self.columns is None else dict(self.columns),
+            "train": [str(p) for p in self.train],
+            "test": [str(p) for p in self.test],
+            "preprocessing": [dict(s) for s in self.preprocessing],
+            "joint_terms": {"viscous": self.joint_terms.viscous, "coulomb": self.joint_terms.coulomb,
+                            "coulomb_velocity": self.joint_terms.coulomb_velocity,
+                            "armature": self.joint_terms.armature,
+                            "joints": None if self.joint_terms.joints is None else list(self.joint_terms.joints)},
+            "bounds": {n: [lo, hi] for n, lo, hi in self.bounds},
+            "methods": list(self.methods),
+            "prior": {"source": self.prior.source, "gamma": self.prior.gamma},
+            "validation": {"xcorr_window": self.xcorr_window},
+            "references": {k: str(v) for k, v in self.references},
+            "out": None if self.out is None else str(self.out),
+        }

@@ -1,0 +1,332 @@
+"""``fit_robot``: a URDF and logs in; identified parameters, uncertainty and held-out validation out.
+
+Steps: load the logs through a column map (``logs.io``), preprocess them (``preprocess``; the
+differentiation gives the accelerations and every step is recorded), build the model (the URDF's
+``RigidBodyModel`` plus joint friction/armature), the problem and its identifiability report, fit
+every requested method (physically consistent; ``allow_unidentifiable=True`` because a URDF chain is
+never fully identifiable: the estimate in the null space is one of many minimisers), and validate on
+the held-out runs (``workflow.validate``). A method that fails is recorded, not fatal.
+
+Uncertainty (quadratic estimators ols, wls, energy): with H the estimator's normal matrix
+(Σ Y_iᵀ W_i Y_i) and σ̂² = f(θ̂)/(N·n − rank) (N − rank for the energy residual, one equation per
+sample), cov(θ̂) ≈ σ̂² H⁺. Only parameters whose unit vector lies in the range of H have a standard
+error (any generalized inverse gives the same value there); the others are "not identifiable":
+the data say nothing about them alone, only about combinations. These are the textbook errors
+of the unconstrained estimate under white residuals; active constraints and the coloured,
+model-error-dominated residuals of real data make them optimistic. Not computed for the
+regularized (logdet, pullback) and dual-metric (dm) estimators.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from dualid.errors import DataError, DualidError
+from dualid.estimators import OLS, IdentificationResult
+from dualid.estimators.least_squares import covariance_weight, energy_statistics, statistics
+from dualid.estimators.methods import make_estimator
+from dualid.data.io import ColumnMap, load_log, read_table
+from dualid.problem import build_problem
+from dualid.model.joint_terms import JointTermsModel, with_joint_terms
+from dualid.model.rigid_body import RigidBodyModel
+from dualid.problem import Identifiability, IdentificationProblem
+from dualid.data.preprocessing import preprocess
+from dualid.data.trajectory import Trajectory
+from dualid.robot.config import FitConfig
+from dualid.robot.validate import Validation, validate
+
+NOT_IDENTIFIABLE = "not identifiable"
+METHOD_NAMES = {
+    "ols": "ordinary least squares",
+    "wls": "covariance-weighted least squares",
+    "energy": "energy (power) residual least squares",
+    "logdet": "WLS + log-det prior",
+    "pullback": "WLS + constant pullback prior",
+    "dm": "dual-metric weighted least squares",
+}
+
+Progress = Callable[[str], None]
+
+
+# --- data -------------------------------------------------------------------------------------
+def column_map(config_columns, joints: tuple[str, ...], first_log: Path) -> ColumnMap:
+    """The configured map, or the DFKI pattern (time, pos_meas{i}, vel_meas{i}, tau_meas{i}) when none is
+    configured and the first log has exactly those columns; otherwise a DataError asking for a map."""
+    if config_columns is not None:
+        return ColumnMap.from_dict(config_columns)
+    cmap = ColumnMap.pattern(joints)
+    if not Path(first_log).exists():
+        raise FileNotFoundError(f"log file not found: {first_log}")
+    _, available = read_table(Path(first_log))
+    missing = [c for c in cmap.columns() if c not in available]
+    if missing:
+        raise DataError(
+            f"no column map given and {first_log} lacks the default DFKI columns {missing} "
+            f"(available: {available}); give a 'columns' map in a --config file"
+        )
+    return cmap
+
+
+def load_runs(paths, cmap: ColumnMap, joints: tuple[str, ...], steps) -> list[Trajectory]:
+    """Load and preprocess each log; the runs must end with accelerations (a 'differentiate' step)."""
+    runs = []
+    velocity = "logged" if all(j.velocity for j in cmap.joints) else "gradient"
+    for p in paths:
+        traj = preprocess(load_log(p, cmap, joints, velocity=velocity), [dict(s) for s in steps])
+        if traj.a is None:
+            raise DataError(
+                f"{p}: no accelerations after preprocessing; add a 'differentiate' step (e.g. "
+                "{differentiate: {method: savgol, window: 0.05}})"
+            )
+        runs.append(traj)
+    return runs
+
+
+# --- model ------------------------------------------------------------------------------------
+def build_model(config: FitConfig) -> tuple[RigidBodyModel, JointTermsModel | RigidBodyModel]:
+    """The URDF's rigid-body model and it with the configured joint terms."""
+    rigid = RigidBodyModel.from_urdf(config.model.urdf, config.model.floating_base, config.model.gravity)
+    jt = config.joint_terms
+    if jt.joints is not None:
+        unknown = [j for j in jt.joints if j not in rigid.coordinates]
+        if unknown:
+            raise DataError(f"joint_terms.joints: joints {unknown} are not in the model; model joints: {list(rigid.coordinates)}")
+    if not (jt.viscous or jt.coulomb or jt.armature):
+        return rigid, rigid
+    return rigid, with_joint_terms(rigid, jt.viscous, jt.coulomb, jt.armature, jt.joints, jt.coulomb_velocity)
+
+
+def with_bounds(problem: IdentificationProblem, bounds) -> IdentificationProblem:
+    if not bounds:
+        return problem
+    names = problem.parameters.names
+    unknown = [n for n, _, _ in bounds if n not in names]
+    if unknown:
+        raise DataError(f"bounds: unknown parameters {unknown}; parameters are {list(names)}")
+    params = problem.parameters.with_bounds({n: lo for n, lo, _ in bounds}, {n: hi for n, _, hi in bounds})
+    return dataclasses.replace(problem, parameters=params)
+
+
+def friction_of(model, theta: np.ndarray) -> dict[str, tuple[float, float]]:
+    """{joint: (viscous b, Coulomb fc)} from θ of a model with joint terms (for URDF <dynamics>)."""
+    if not isinstance(model, JointTermsModel):
+        return {}
+    out = {}
+    for k, j in enumerate(model.dofs):
+        b = float(theta[model.index("viscous")[k]]) if model.viscous else 0.0
+        fc = float(theta[model.index("coulomb")[k]]) if model.coulomb else 0.0
+        out[model.coordinates[j]] = (max(b, 0.0), max(fc, 0.0))
+    return out
+
+
+def armature_of(model, theta: np.ndarray) -> dict[str, float]:
+    """{joint: armature Ia [kg m²]} from θ of a model with armature terms."""
+    if not isinstance(model, JointTermsModel) or not model.armature:
+        return {}
+    # clamped like friction_of: a constrained fit can sit a rounding error below 0
+    return {model.coordinates[j]: max(float(theta[model.index("armature")[k]]), 0.0) for k, j in enumerate(model.dofs)}
+
+
+def urdf_joint_terms(urdf: Path, joints: tuple[str, ...]) -> dict[str, dict[str, float]]:
+    """{joint: {damping, friction, armature}} from the <dynamics> of the URDF's moving joints (0 if absent)."""
+    root = ET.parse(urdf).getroot()
+    out = {}
+    for joint in root.findall("joint"):
+        name = joint.get("name")
+        if name in joints:
+            dyn = joint.find("dynamics")
+            out[name] = {k: float(dyn.get(k, 0.0)) if dyn is not None else 0.0 for k in ("damping", "friction", "armature")}
+    return out
+
+
+# --- prior ------------------------------------------------------------------------------------
+def prior_theta(config: FitConfig, rigid: RigidBodyModel, model, ols_theta: np.ndarray | None) -> tuple[np.ndarray, str]:
+    """θ₀ for the regularized methods, and a sentence saying where it came from.
+
+    "urdf": the URDF's inertials; joint terms (absent from a URDF's inertials) take the unregularized
+    OLS estimate floored at 1e-3 × the largest value of their group (a log-det prior needs θ₀ > 0).
+    A file: a parameters.json/yaml written by a previous fit ("file#method" picks the method, default
+    its first fitted one), or any file with a 'parameters' list of {name, value}; matched by name.
+    """
+    p0 = rigid.parameters.p
+    theta0 = np.full(model.parameters.p, np.nan)
+    if config.prior.source == "urdf":
+        theta0[:p0] = rigid.nominal
+        what = f"the inertials of {config.model.urdf.name}"
+    else:
+        source, _, pick = config.prior.source.partition("#")
+        path = Path(source)
+        if not path.is_file():
+            raise FileNotFoundError(f"prior.source: no parameters file at {path}")
+        if path.suffix == ".json":
+            d = json.loads(path.read_text())
+        else:
+            import yaml
+
+            d = yaml.safe_load(path.read_text())
+        d = d or {}
+        if "methods" in d:  # a parameters.yaml/json of a previous fit: "file#method" or its first fitted method
+            fitted = [m for m, e in d["methods"].items() if "parameters" in e]
+            if not fitted or (pick and pick not in fitted):
+                raise DataError(f"prior.source {path}: no fitted method {pick or ''!r}; fitted methods: {fitted}")
+            d = d["methods"][pick or fitted[0]]
+        values = {e["name"]: float(e["value"]) for e in d.get("parameters", [])}
+        missing = [n for n in rigid.parameters.names if n not in values]
+        if missing:
+            raise DataError(f"prior.source {path}: no values for parameters {missing}")
+        theta0 = np.array([values.get(n, np.nan) for n in model.parameters.names])
+        what = f"the parameters in {path}"
+    if model is not rigid:
+        for b in model.parameters.blocks:
+            idx = np.array(b.indices)
+            if idx[0] < p0:
+                continue
+            src = np.where(np.isnan(theta0[idx]), ols_theta[idx] if ols_theta is not None else 1.0, theta0[idx])
+            theta0[idx] = np.maximum(src, max(1e-3 * float(np.max(np.abs(src))), 1e-9))
+        what += "; joint terms it lacks (a URDF has none) from the OLS estimate; all floored at 1e-3 × their group's largest"
+    return theta0, what
+
+
+# --- estimators -------------------------------------------------------------------------------
+def estimator(method: str, theta0: np.ndarray | None = None, gamma: float = 1.0):
+    """Constrained estimators that accept a URDF chain's null space (never fully identifiable)."""
+    return make_estimator(method, theta0=theta0, gamma=gamma, allow_unidentifiable=True)
+
+
+def standard_errors(method: str, problem: IdentificationProblem, result: IdentificationResult,
+                    ident: Identifiability) -> tuple[float | str | None, ...]:
+    """Per-parameter standard errors (see the module docstring); NOT_IDENTIFIABLE in the null space,
+    None for methods without one."""
+    if method not in ("ols", "wls", "energy"):
+        return (None,) * problem.p
+    if method == "ols":
+        H, dof = statistics(problem).H, problem.N * problem.n
+    elif method == "wls":
+        W, _ = covariance_weight(problem, None, OLS(allow_unidentifiable=True))
+        H, dof = statistics(problem, W).H, problem.N * problem.n
+    else:
+        H, dof = energy_statistics(problem).H, problem.N
+    d = np.sqrt(np.clip(np.diag(H), 0, None))
+    d[d == 0] = 1.0
+    Hs_pinv = np.linalg.pinv(H / np.outer(d, d), rcond=1e-10, hermitian=True)
+    rank = int(np.linalg.matrix_rank(H / np.outer(d, d), tol=1e-10 * np.abs(H / np.outer(d, d)).max(), hermitian=True))
+    var = np.diag(Hs_pinv) / d**2
+    sigma2 = float(result.info.get("data_objective", result.objective)) / max(dof - rank, 1)
+    unident = set(ident.unidentifiable)
+    return tuple(
+        NOT_IDENTIFIABLE if name in unident else float(np.sqrt(max(sigma2 * v, 0.0)))
+        for name, v in zip(problem.parameters.names, var)
+    )
+
+
+# --- outcome ----------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class MethodFit:
+    """One method's fit: the result (None when it failed, then ``error`` says why), its standard
+    errors and its held-out validation."""
+
+    method: str
+    result: IdentificationResult | None
+    uncertainty: tuple[float | str | None, ...] = ()
+    validation: Validation | None = None
+    error: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return self.result is not None
+
+
+@dataclass(frozen=True, eq=False)
+class FitOutcome:
+    config: FitConfig
+    rigid: RigidBodyModel
+    model: JointTermsModel | RigidBodyModel
+    columns: ColumnMap
+    train: tuple[Trajectory, ...]
+    test: tuple[Trajectory, ...]
+    problem: IdentificationProblem
+    identifiability: Identifiability
+    fits: dict[str, MethodFit]
+    references: dict[str, tuple[np.ndarray, Validation | None]] = field(default_factory=dict)
+    prior: str = ""  # where θ₀ of the regularized methods came from
+
+    @property
+    def steps(self) -> list:
+        return list(self.train[0].meta.get("steps", [])) if self.train else []
+
+    def identifiability_text(self) -> str:
+        ident = self.identifiability
+        lines = [
+            f"samples: {self.problem.N} (x {self.problem.n} joints) from {len(self.train)} training runs; "
+            f"parameters: {self.problem.p}",
+            ident.describe(max_items=12),
+        ]
+        if not ident.full_rank:
+            lines += [
+                "",
+                "A URDF chain is never fully identifiable from joint torques: only these combinations (the base",
+                "parameters) are. Every method was fitted with allow_unidentifiable=True, so each returns one of",
+                "many minimisers; its values along the null directions come from the constraints/solver (or the",
+                "prior), not from the data. Compare predictions, not raw parameters.",
+                f"not identifiable on their own ({len(ident.unidentifiable)}): {', '.join(ident.unidentifiable)}",
+            ]
+        return "\n".join(lines)
+
+
+def _say(progress: Progress | None, message: str) -> None:
+    if progress is not None:
+        progress(message)
+
+
+def fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome:
+    """Run the whole workflow (see the module docstring); progress(message) is called between stages."""
+    from dualid.robot.dfki import reference_theta
+
+    _say(progress, f"building the model from {config.model.urdf}")
+    rigid, model = build_model(config)
+    joints = tuple(rigid.coordinates)
+    cmap = column_map(config.columns, joints, config.train[0])
+    _say(progress, f"loading {len(config.train)} training and {len(config.test)} test logs")
+    train = load_runs(config.train, cmap, joints, config.preprocessing)
+    test = load_runs(config.test, cmap, joints, config.preprocessing)
+    _say(progress, "building regressors")
+    problem = with_bounds(build_problem(model, train), config.bounds)
+    ident = problem.identifiability()
+
+    fits: dict[str, MethodFit] = {}
+    ols_theta = None
+    theta0, prior_text = None, ""
+    for method in config.methods:
+        _say(progress, f"fitting {method} ({METHOD_NAMES[method]})")
+        try:
+            if method in ("logdet", "pullback") and theta0 is None:
+                if ols_theta is None and model is not rigid:
+                    ols_theta = estimator("ols").fit(problem).theta
+                theta0, prior_text = prior_theta(config, rigid, model, ols_theta)
+            result = estimator(method, theta0, config.prior.gamma).fit(problem)
+        except (DualidError, ValueError, np.linalg.LinAlgError) as exc:  # recorded in the report: one
+            # method's failure must not lose the others; anything else is a bug and propagates
+            fits[method] = MethodFit(method, None, error=f"{type(exc).__name__}: {exc}")
+            continue
+        if method == "ols":
+            ols_theta = result.theta
+        uncertainty = standard_errors(method, problem, result, ident)
+        validation = None
+        if test:
+            _say(progress, f"validating {method} on {len(test)} held-out runs")
+            validation = validate(model, result.theta, test, method, config.xcorr_window)
+        fits[method] = MethodFit(method, result, uncertainty, validation)
+
+    references = {}
+    for label, path in config.references:
+        _say(progress, f"validating the reference parameters {label}")
+        theta_ref = reference_theta(path, model)
+        references[label] = (theta_ref, validate(model, theta_ref, test, label, config.xcorr_window) if test else None)
+    return FitOutcome(config, rigid, model, cmap, tuple(train), tuple(test), problem, ident, fits, references, prior_text)

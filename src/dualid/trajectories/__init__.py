@@ -1,3 +1,0 @@
-from dualid.trajectories.trajectory import Trajectory
-
-__all__ = ["Trajectory"]
