@@ -63,7 +63,7 @@ def test_unknown_method(tmp_path):
     result = runner.invoke(app, ["fit", "--model", str(URDF), "--data", str(DFKI / "trajectory_00.csv"),
                                  "--method", "lasso", "--out", str(tmp_path / "o")])
     assert result.exit_code == 1
-    assert "unknown method 'lasso'; known methods: ols, wls, energy, logdet, pullback, dm" in _out(result)
+    assert "unknown method 'lasso'; known methods: ols, ols_unconstrained, wls, energy, logdet, pullback, dm" in _out(result)
 
 
 def test_unknown_config_key(tmp_path):

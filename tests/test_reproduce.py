@@ -6,7 +6,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pytest
 
-from dualid.errors import IdentifiabilityError, SolverError
+from dualid.errors import ConfigError, IdentifiabilityError, SolverError
 from dualid.estimators import OLS
 from dualid.estimators.result import IdentificationResult
 from dualid.report.study import score_bars, trajectory_plot, write_report
@@ -128,7 +128,7 @@ def test_low_data_subsets_keep_the_rank(system):
 def test_input_errors(system):
     with pytest.raises(ValueError, match=r"case: expected 'both', 'low' or 'high', got 'medium'"):
         run_study(system, case="medium")
-    with pytest.raises(ValueError, match=r"unknown method 'lasso'; expected one of \['ols_unconstrained'"):
+    with pytest.raises(ConfigError, match=r"^unknown method 'lasso'; known methods: ols, ols_unconstrained, wls, energy, logdet, pullback, dm$"):
         run_study(system, methods=("lasso",))
     with pytest.raises(ValueError, match=r"ablation: expected None, 'units' or a constant matrix B, got 'meters'"):
         run_study(system, case="high", methods=("ols",), ablation="meters")

@@ -31,7 +31,7 @@ from typing import Any, Literal
 import numpy as np
 
 from dualid.errors import DualidError, IdentifiabilityError
-from dualid.estimators import methods as registry
+from dualid.estimators import methods as methods_table
 from dualid.evaluation.prediction import PredictionData, measured_signal
 from dualid.evaluation.scores import metric_rmse, rmse, score_run, shift_window
 from dualid.problem import build_problem
@@ -40,16 +40,6 @@ from dualid.systems.base import SystemData
 
 Case = Literal["both", "low", "high"]
 DEFAULT_METHODS = ("ols_unconstrained", "ols", "wls", "energy", "logdet", "pullback", "dm")
-METHOD_LABELS = {
-    "ols_unconstrained": "OLS (unconstrained)",
-    "ols": "OLS",
-    "wls": "WLS",
-    "energy": "energy",
-    "logdet": "log-det WLS",
-    "pullback": "pullback WLS",
-    "dm": "DM",
-    "truth": "true θ",
-}
 LOW_DATA_MAX_TRIES = 2000  # random subsets drawn per seed before giving up on keeping the rank
 
 _LINEAR = re.compile(r"^(v_?|p_?|pos_?|d)?[xyz]$", re.IGNORECASE)  # names of translational coordinates
@@ -61,11 +51,7 @@ def make_estimator(method: str, system: SystemData):
 
     allow_unidentifiable=True everywhere: the floating-base pendulum has an exact null space.
     """
-    if method == "ols_unconstrained":
-        return registry.make_estimator("ols", constrained=False, allow_unidentifiable=True)
-    if method not in DEFAULT_METHODS:
-        raise ValueError(f"unknown method {method!r}; expected one of {list(DEFAULT_METHODS)}")
-    return registry.make_estimator(
+    return methods_table.make_estimator(
         method, theta0=system.theta_nominal, gamma=system.gamma, per_equation=True, allow_unidentifiable=True
     )
 
@@ -273,11 +259,11 @@ class StudyResult:
                             f"{len(self.config.get('seeds') or [])} seeds)", "high": "High-data case (all samples)"}[case]
             lines += ["", f"## {title}", "", "### Score (higher is better, max 1)", ""]
             lines += _table(["method"] + [f"{sym}:{x}" for x in c] + ["failed"],
-                            [[METHOD_LABELS.get(s.method, s.method)] + [_pm(m, d, 3) for m, d in zip(s.score_mean, s.score_std)]
+                            [[methods_table.label(s.method)] + [_pm(m, d, 3) for m, d in zip(s.score_mean, s.score_std)]
                              + [f"{s.n_failed}/{s.n_fits}"] for s in self.summaries if s.case == case])
             lines += ["", "### RMSE per coordinate (signal units) and chart-invariant RMSE √(mean eᵀMe)", ""]
             lines += _table(["method"] + [f"{sym}:{x}" for x in c] + ["√(eᵀMe)"],
-                            [[METHOD_LABELS.get(s.method, s.method)] + [_pm(m, d, 3, "g") for m, d in zip(s.rmse_mean, s.rmse_std)]
+                            [[methods_table.label(s.method)] + [_pm(m, d, 3, "g") for m, d in zip(s.rmse_mean, s.rmse_std)]
                              + [_pm(s.metric_rmse_mean, s.metric_rmse_std, 3, "g")] for s in self.summaries if s.case == case])
         t = self.truth
         lines += ["", "## Reference: the true parameters", ""]
@@ -290,7 +276,7 @@ class StudyResult:
             lines += ["", "## Failed fits", ""]
             for r in failed:
                 seed = f", seed {r.seed}" if r.seed is not None else ""
-                lines.append(f"- {r.case}, {METHOD_LABELS.get(r.method, r.method)}{seed}: {r.error}")
+                lines.append(f"- {r.case}, {methods_table.label(r.method)}{seed}: {r.error}")
         return "\n".join(lines) + "\n"
 
 

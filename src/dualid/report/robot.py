@@ -23,13 +23,10 @@ import numpy as np  # noqa: E402
 
 from dualid.errors import DualidError  # noqa: E402
 from dualid.model.urdf import write_urdf  # noqa: E402
-from dualid.robot.fit import METHOD_NAMES, FitOutcome, armature_of, friction_of  # noqa: E402
+from dualid.estimators.methods import color as method_color, method as method_entry
+from dualid.robot.fit import FitOutcome, armature_of, friction_of  # noqa: E402
 from dualid.robot.validate import Validation  # noqa: E402
 
-COLORS = {
-    "dm": "#d62728", "wls": "#1f77b4", "energy": "#2ca02c", "logdet": "#9467bd", "pullback": "#ff7f0e",
-    "ols": "#8c564b",
-}
 UNCERTAINTY_NOTE = (
     "std_error: σ̂·sqrt((H⁺)_kk) of the quadratic estimators (ols, wls, energy), H their normal matrix, "
     "σ̂² the residual objective per degree of freedom; valid for parameters whose unit vector lies in the "
@@ -55,7 +52,7 @@ def _clean(x):
 
 
 def _color(label: str, k: int) -> str:
-    return COLORS.get(label, plt.get_cmap("tab10")(k % 10))
+    return method_color(label) or plt.get_cmap("tab10")(k % 10)
 
 
 def _slug(s: str) -> str:
@@ -168,11 +165,11 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str]) -> dict:
     methods = {}
     for m, f in outcome.fits.items():
         if not f.ok:
-            methods[m] = {"description": METHOD_NAMES[m], "error": f.error}
+            methods[m] = {"description": method_entry(m).description, "error": f.error}
             continue
         r = f.result
         methods[m] = {
-            "description": METHOD_NAMES[m],
+            "description": method_entry(m).description,
             "status": r.status,
             "solver": r.solver,
             "solve_time_s": r.solve_time,

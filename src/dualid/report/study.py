@@ -17,25 +17,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from dualid.paper.study import METHOD_LABELS, StudyResult  # noqa: E402
+from dualid.estimators.methods import color as method_color, label as method_label  # noqa: E402
+from dualid.paper.study import StudyResult  # noqa: E402
 
 PANELS = (("wls", "energy", "dm"), ("logdet", "pullback", "dm"))
 TRAJECTORY_METHODS = ("dm", "wls", "energy", "logdet", "pullback")
-COLORS = {
-    "dm": "#d62728",
-    "wls": "#1f77b4",
-    "energy": "#2ca02c",
-    "logdet": "#9467bd",
-    "pullback": "#ff7f0e",
-    "ols": "#8c564b",
-    "ols_unconstrained": "#7f7f7f",
-    "truth": "#000000",
-}
 CASE_TITLES = {"low": "low-data case", "high": "high-data case"}
 
 
 def _label(method: str) -> str:
-    return METHOD_LABELS.get(method, method)
+    return method_label(method)
 
 
 def _coord_label(result: StudyResult, c: str) -> str:
@@ -71,7 +62,7 @@ def score_bars(result: StudyResult, case: str, path) -> Path:
             s = result.summary(case, m)
             pos = x - 0.4 + w * (j + 0.5)
             mean = np.nan_to_num(s.score_mean, nan=0.0)
-            ax.bar(pos, mean, w, yerr=np.nan_to_num(s.score_std), capsize=2, color=COLORS.get(m),
+            ax.bar(pos, mean, w, yerr=np.nan_to_num(s.score_std), capsize=2, color=method_color(m),
                    label=_label(m) + (f" ({s.n_failed}/{s.n_fits} failed)" if s.n_failed else ""),
                    error_kw={"elinewidth": 0.8})
             for k in np.flatnonzero(~np.isfinite(s.score_mean)):
@@ -151,7 +142,7 @@ def trajectory_plot(result: StudyResult, case: str, path, coordinate: str | None
         style = {"lw": 1.8, "ls": "-", "zorder": 2} if m == "dm" else {"lw": 1.1, "ls": "--", "zorder": 3}
         pred = tr.predicted[keep, k]
         off = " — off scale, peak {:.3g}".format(pred[np.argmax(np.abs(pred))]) if (pred.min() < ylim[0] or pred.max() > ylim[1]) else ""
-        ax.plot(t[keep], pred, color=COLORS.get(m), label=f"{_label(m)} (score {score:.3f} on this run{off})", **style)
+        ax.plot(t[keep], pred, color=method_color(m), label=f"{_label(m)} (score {score:.3f} on this run{off})", **style)
     unit = "acceleration" if result.signal == "acceleration" else "velocity"
     ax.set_ylim(*ylim)
     ax.set_xlabel("time [s]")

@@ -31,7 +31,7 @@ import numpy as np
 from dualid.errors import DataError, DualidError
 from dualid.estimators import OLS, IdentificationResult
 from dualid.estimators.least_squares import covariance_weight, energy_statistics, statistics
-from dualid.estimators.methods import make_estimator
+from dualid.estimators.methods import make_estimator, method as method_entry
 from dualid.data.io import ColumnMap, load_log, read_table
 from dualid.problem import build_problem
 from dualid.model.joint_terms import JointTermsModel, with_joint_terms
@@ -43,14 +43,6 @@ from dualid.robot.config import FitConfig
 from dualid.robot.validate import Validation, validate
 
 NOT_IDENTIFIABLE = "not identifiable"
-METHOD_NAMES = {
-    "ols": "ordinary least squares",
-    "wls": "covariance-weighted least squares",
-    "energy": "energy (power) residual least squares",
-    "logdet": "WLS + log-det prior",
-    "pullback": "WLS + constant pullback prior",
-    "dm": "dual-metric weighted least squares",
-}
 
 Progress = Callable[[str], None]
 
@@ -304,7 +296,7 @@ def fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome
     ols_theta = None
     theta0, prior_text = None, ""
     for method in config.methods:
-        _say(progress, f"fitting {method} ({METHOD_NAMES[method]})")
+        _say(progress, f"fitting {method} ({method_entry(method).description})")
         try:
             if method in ("logdet", "pullback") and theta0 is None:
                 if ols_theta is None and model is not rigid:
