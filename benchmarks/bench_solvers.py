@@ -15,8 +15,14 @@ import sys
 from pathlib import Path
 
 from dualid.bench.runner import (
-    PROBLEMS, BenchConfig, parse_caps, parse_list, run_benchmark, run_one, to_markdown, write_results,
+    PROBLEMS,
+    BenchConfig,
+    parse_caps,
+    parse_list,
+    run_benchmark,
+    run_one,
 )
+from dualid.report.bench import to_markdown, write_results
 
 HERE = Path(__file__).resolve().parent
 

@@ -9,10 +9,16 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from dualid.cli import app
 from dualid.bench.runner import (
-    BenchConfig, base_samples, build_problem, load_results, parse_caps, time_ratios, to_markdown,
+    BenchConfig,
+    base_samples,
+    build_problem,
+    load_results,
+    parse_caps,
+    time_ratios,
 )
+from dualid.cli import app
+from dualid.report.bench import to_markdown
 
 ROOT = Path(__file__).resolve().parents[1]
 COMMITTED = ROOT / "benchmarks"
@@ -33,7 +39,7 @@ def bench_dir(tmp_path_factory):
 
 
 def test_bench_writes_json_markdown_and_plot(bench_dir):
-    assert sorted(p.name for p in bench_dir.iterdir()) == ["results.json", "results.md", "scaling.png"]
+    assert sorted(p.name for p in bench_dir.iterdir()) == [".dualid-manifest.json", "results.json", "results.md", "scaling.png"]
     assert (bench_dir / "scaling.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     result = json.loads((bench_dir / "results.json").read_text())
     assert {"machine", "noise", "base_samples", "config", "runs"} <= set(result)
@@ -53,7 +59,7 @@ def test_bench_refuses_a_non_empty_directory_without_force(bench_dir):
     before = (bench_dir / "results.json").read_text()
     result = runner.invoke(app, ["bench", "--out", str(bench_dir), *SMALL, "--solvers", "newton"])
     assert result.exit_code == 1
-    assert "already exists and is not empty; pass --force to overwrite it" in _out(result)
+    assert "exists and is not empty; choose another or pass --force" in _out(result)
     assert (bench_dir / "results.json").read_text() == before
 
 

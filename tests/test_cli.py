@@ -18,7 +18,7 @@ def test_simulate_writes_a_data_set_and_refuses_to_overwrite(tmp_path):
     assert len(index["splits"]["train"]) == 1 and len(index["splits"]["test"]) == 2
     again = runner.invoke(app, ["simulate", "pan-tilt", "--out", str(out), "--size", "small"])
     assert again.exit_code == 1
-    assert "already exists and is not empty; pass --force to overwrite it" in again.output
+    assert f"output directory {out}: exists and is not empty; choose another or pass --force" in again.output
     forced = runner.invoke(app, ["simulate", "pan-tilt", "--out", str(out), "--size", "small", "--force"])
     assert forced.exit_code == 0, forced.output
 

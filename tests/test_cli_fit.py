@@ -56,7 +56,7 @@ def test_fit_and_validate_end_to_end(tmp_path):
     # an existing non-empty output directory is refused without --force
     result = runner.invoke(app, ["fit", "--config", str(cfg), "--method", "ols", "--out", str(out)])
     assert result.exit_code == 1
-    assert f"{out} already exists and is not empty; pass --force to overwrite it" in _out(result)
+    assert f"output directory {out}: exists and is not empty; choose another or pass --force" in _out(result)
 
 
 def test_unknown_method(tmp_path):

@@ -11,8 +11,8 @@ from scipy.spatial.transform import Rotation
 
 from dualid.estimators import OLS
 from dualid.evaluation.prediction import forward_dynamics
-from dualid.problem import build_problem
 from dualid.model.rigid_body import RigidBodyModel
+from dualid.problem import build_problem
 from dualid.systems import crazyflie as cfs
 from dualid.systems import crazyflie_model as cfm
 from dualid.systems.base import make_system

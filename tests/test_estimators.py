@@ -5,9 +5,8 @@ import pytest
 
 from dualid import OLS, WLS, DualMetric, EnergyLS, RegularizedWLS
 from dualid.errors import ConsistencyError, DataError, IdentifiabilityError, MetricError, SolverError
-from dualid.problem import build_problem
 from dualid.model.metric import AffineMetric
-from dualid.problem import IdentificationProblem
+from dualid.problem import IdentificationProblem, build_problem
 from dualid.systems import pan_tilt
 from tests.factories import drag_problem
 

@@ -6,7 +6,8 @@
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from dualid import OLS, WLS, DualMetric, EnergyLS
 from dualid.problem import build_problem

@@ -11,8 +11,8 @@ from dualid.errors import DataError
 from dualid.estimators import OLS, DualMetric, EnergyLS
 from dualid.evaluation.prediction import forward_dynamics
 from dualid.model import Model
-from dualid.problem import build_problem
 from dualid.model.landsalp import LINK_LENGTH, LandSalpModel, configuration
+from dualid.problem import build_problem
 from dualid.systems import landsalp as sim
 from dualid.systems.base import make_system
 

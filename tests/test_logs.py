@@ -6,12 +6,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from dualid.errors import DataError
-from dualid.data import ColumnMap, load_dataset, load_log, load_logs
-from dualid.report.dataset import save_dataset
-from dualid.errors import OutputError
-from dualid.data import Trajectory
+from dualid.data import ColumnMap, Trajectory, load_dataset, load_log, load_logs
 from dualid.data.preprocessing import differentiate, preprocess, sample_rate
+from dualid.errors import DataError, OutputError
+from dualid.report.dataset import save_dataset
 
 JOINTS = ["Joint1", "Joint2"]
 SHARED = Path(__file__).resolve().parents[2] / "shared"
@@ -273,9 +271,9 @@ def test_dfki_double_pendulum_log():
 
 
 def test_array_meta_goes_to_a_side_file_and_comes_back(tmp_path):
+    from dualid.data import Trajectory
     from dualid.data.dataset import load_dataset
     from dualid.report.dataset import save_dataset
-    from dualid.data import Trajectory
 
     t = np.arange(5) * 0.1
     truth = {"q": np.arange(10.0).reshape(5, 2), "note": "exact"}

@@ -16,10 +16,10 @@ from hypothesis import strategies as st
 from dualid import DualMetric
 from dualid.errors import MetricError, SolverError
 from dualid.estimators.newton import _apply_quad, dual_metric_derivatives, fit_dual_metric_newton
-from dualid.model.pan_tilt import PanTilt
-from dualid.model.rigid_body import RigidBodyModel
 from dualid.model.metric import AffineMetric, MetricTerm
-from dualid.model.parameters import ParameterBlock, ParameterSpace, rigid_body_space
+from dualid.model.pan_tilt import PanTilt
+from dualid.model.parameters import ParameterBlock, ParameterSpace
+from dualid.model.rigid_body import RigidBodyModel
 from dualid.problem import IdentificationProblem
 
 SETTINGS = settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -1,10 +1,11 @@
 import numpy as np
 import pinocchio as pin
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from tests.factories import box_inertia
 from dualid.model.parameters import ParameterBlock, ParameterSpace, pseudo_inertia_basis, rigid_body_space
+from tests.factories import box_inertia
 
 
 @settings(max_examples=25, deadline=None)

@@ -6,7 +6,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import signal
 
-from dualid.errors import DataError
 from dualid.data import Trajectory
 from dualid.data.preprocessing import (
     differentiate,
@@ -17,6 +16,7 @@ from dualid.data.preprocessing import (
     sample_rate,
     trim,
 )
+from dualid.errors import DataError
 
 W = 2 * np.pi * 0.7  # [rad/s]
 

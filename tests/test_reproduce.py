@@ -6,13 +6,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pytest
 
-from dualid.errors import ConfigError, IdentifiabilityError, SolverError
+from dualid.errors import ConfigError, IdentifiabilityError, OutputError, SolverError
 from dualid.estimators import OLS
 from dualid.estimators.result import IdentificationResult
-from dualid.report.study import score_bars, trajectory_plot, write_report
+from dualid.paper.study import DEFAULT_METHODS, low_data_subset, run_study, units_chart
 from dualid.problem import build_problem
-from dualid.paper.study import DEFAULT_METHODS, run_study
-from dualid.paper.study import low_data_subset, units_chart
+from dualid.report.study import score_bars, study_json, study_markdown, trajectory_plot, write_report
 from dualid.systems.base import make_system
 
 
@@ -43,7 +42,7 @@ class NegativeMass:
 
 
 def test_json_structure(study, system):
-    d = json.loads(study.to_json())
+    d = json.loads(study_json(study))
     assert d["system"] == "pan-tilt" and d["kind"] == "inertia" and d["signal"] == "acceleration"
     assert d["coordinates"] == ["pan", "tilt"]
     assert d["methods"] == list(DEFAULT_METHODS)
@@ -87,11 +86,11 @@ def test_failures_are_reported_not_dropped(system):
     assert failed["negative"].error.startswith("MetricError during prediction: forward dynamics: M(q, θ) is not")
     s = r.summary("high", "broken")
     assert s.n_failed == 1 and np.all(np.isnan(s.score_mean))  # not zero-filled
-    d = json.loads(r.to_json())  # NaN becomes null: valid JSON
+    d = json.loads(study_json(r))  # NaN becomes null: valid JSON
     assert d["cases"]["high"]["summary"]["broken"]["score_mean"] == {"pan": None, "tilt": None}
     assert d["cases"]["high"]["fits"][1] == {"case": "high", "method": "broken", "seed": None, "n_samples": 600,
                                              "ok": False, "error": failed["broken"].error}
-    md = r.to_markdown()
+    md = study_markdown(r)
     assert "## Failed fits" in md and "fake solver" in md and "| broken | failed | failed | 1/1 |" in md
 
 
@@ -142,17 +141,17 @@ def test_report_files_and_refusal_to_overwrite(study, tmp_path):
     out = tmp_path / "report"
     written = write_report(study, out)
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["results.json", "results.md", "score_bars_high.png", "score_bars_low.png",
+    assert names == [".dualid-manifest.json", "results.json", "results.md", "score_bars_high.png", "score_bars_low.png",
                      "trajectory_high.png", "trajectory_low.png"]
     assert json.loads(written["json"].read_text())["system"] == "pan-tilt"
     md = written["markdown"].read_text()
     assert "## Low-data case (10 samples, 2 seeds)" in md and "| DM | " in md and "a:tilt" in md
     for p in out.glob("*.png"):
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    with pytest.raises(FileExistsError, match=f"output directory '{out}' exists and is not empty"):
+    with pytest.raises(OutputError, match=f"^output directory {out}: exists and is not empty; choose another or pass --force$"):
         write_report(study, out)
     write_report(study, out, overwrite=True)
     with pytest.raises(ValueError, match=r"case: expected one of \['low', 'high'\]"):
-        score_bars(study, "medium", tmp_path / "x.png")
+        score_bars(study, "medium")
     with pytest.raises(ValueError, match=r"coordinate: expected one of \['pan', 'tilt'\], got 'roll'"):
-        trajectory_plot(study, "high", tmp_path / "x.png", coordinate="roll")
+        trajectory_plot(study, "high", coordinate="roll")

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from dualid import OLS, WLS, DualMetric, EnergyLS, RegularizedWLS
+from dualid.data import Trajectory
 from dualid.model import RigidBodyModel
 from dualid.problem import build_problem
-from dualid.data import Trajectory
 from tests.factories import arm
 
 

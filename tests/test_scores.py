@@ -107,7 +107,7 @@ def test_metric_rmse_is_chart_invariant():
     A = r.standard_normal((50, 3, 3))
     M = A @ np.swapaxes(A, 1, 2) + np.eye(3)
     B = r.standard_normal((50, 3, 3)) + 3 * np.eye(3)
-    to_new = lambda x: np.linalg.solve(B, x[..., None])[..., 0]  # noqa: E731
+    to_new = lambda x: np.linalg.solve(B, x[..., None])[..., 0]
     Mt = np.swapaxes(B, 1, 2) @ M @ B
     assert metric_rmse(to_new(e_pred), to_new(e_meas), Mt) == pytest.approx(metric_rmse(e_pred, e_meas, M), rel=1e-10)
     assert not np.allclose(rmse(to_new(e_pred), to_new(e_meas)), rmse(e_pred, e_meas))

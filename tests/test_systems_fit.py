@@ -2,8 +2,8 @@
 
 import pytest
 
-from dualid.problem import build_problem
 from dualid.paper.study import DEFAULT_METHODS, make_estimator
+from dualid.problem import build_problem
 from dualid.systems.base import make_system
 
 

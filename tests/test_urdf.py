@@ -9,9 +9,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from dualid.errors import ConsistencyError
+from dualid.errors import ConsistencyError, OutputError
 from dualid.model.rigid_body import RigidBodyModel
-from dualid.model.urdf import write_urdf
+from dualid.report.urdf import write_urdf
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 PENDUBOT = SHARED / "datasets" / "dfki-double-pendulum" / "pendubot_model_2.1.urdf"
@@ -84,7 +84,7 @@ def test_overwrite_refused(tmp_path):
     model = RigidBodyModel.from_urdf(src)
     target = tmp_path / "out.urdf"
     target.write_text("keep me")
-    with pytest.raises(FileExistsError, match=r"out\.urdf already exists; pass overwrite=True to replace it"):
+    with pytest.raises(OutputError, match=r"out\.urdf already exists; pass overwrite=True to replace it"):
         write_urdf(src, model, model.nominal, target)
     assert target.read_text() == "keep me"
     write_urdf(src, model, model.nominal, target, overwrite=True)

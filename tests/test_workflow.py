@@ -11,10 +11,10 @@ import yaml
 from dualid.errors import DataError
 from dualid.model.joint_terms import with_joint_terms
 from dualid.model.rigid_body import RigidBodyModel
+from dualid.report.robot import write_fit
 from dualid.robot.config import ConfigError, FitConfig
 from dualid.robot.dfki import load_reference, reference_mass_matrix, reference_theta
 from dualid.robot.fit import fit_robot
-from dualid.report.robot import write_fit
 from dualid.robot.validate import validate_urdf
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"

@@ -1,11 +1,9 @@
 """dualid: coordinate-independent robot model identification (dual-metric weighted least squares)."""
 
-from dualid.estimators import OLS, WLS, DualMetric, EnergyLS, IdentificationResult, RegularizedWLS
-from dualid.model import Model
-from dualid.problem import build_problem
-from dualid.model import AffineMetric, MetricTerm, ParameterBlock, ParameterSpace
-from dualid.problem import IdentificationProblem
 from dualid.data import Trajectory
+from dualid.estimators import OLS, WLS, DualMetric, EnergyLS, IdentificationResult, RegularizedWLS
+from dualid.model import AffineMetric, MetricTerm, Model, ParameterBlock, ParameterSpace
+from dualid.problem import IdentificationProblem, build_problem
 
 __version__ = "0.1.0"
 

@@ -9,13 +9,16 @@ change of coordinates or a subsample return a new problem.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+
 import numpy as np
 
-from dualid.errors import DataError
 from dualid.data.trajectory import Trajectory
+from dualid.errors import DataError
+from dualid.linalg import rank_from_singular_values
 from dualid.model.base import Kind, Model
 from dualid.model.metric import AffineMetric
 from dualid.model.parameters import ParameterSpace
+
 
 def _frozen(a, name: str, shape: tuple) -> np.ndarray:
     a = np.array(a, dtype=float)  # a private copy
@@ -126,8 +129,9 @@ class IdentificationProblem:
         z = np.linalg.solve(L, r[..., None])[..., 0]
         return float(np.sum(z * z))
 
-    def identifiability(self, rtol: float = 1e-9) -> Identifiability:
-        """Rank and null space of the stacked regressor (columns scaled to unit norm first)."""
+    def identifiability(self) -> Identifiability:
+        """Rank and null space of the stacked regressor (columns scaled to unit norm first; the rank
+        rule is dualid.linalg's)."""
         A = self.Y.reshape(-1, self.p)
         scale = np.linalg.norm(A, axis=0)
         scale[scale == 0] = 1.0
@@ -139,8 +143,7 @@ class IdentificationProblem:
             _, s, Vt = np.linalg.svd(A / scale, full_matrices=True)
         s_full = np.zeros(self.p)
         s_full[: len(s)] = s
-        tol = rtol * max(s_full.max(), 1e-300) * max(A.shape)
-        rank = int(np.sum(s_full > tol))
+        rank = rank_from_singular_values(s_full)
         null = Vt[rank:].T / scale[:, None]  # back to unscaled θ directions
         if null.size:
             null = null / np.linalg.norm(null, axis=0)

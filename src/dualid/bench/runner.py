@@ -166,9 +166,9 @@ def base_samples(name: str, cache: Path, count: int = BASE_SAMPLES) -> Path:
 def build_problem(path: Path, N: int):
     """The identification problem of N samples from a ``base_samples`` file: rows i mod count, τ = Yθ
     plus NOISE·mean|τ| Gaussian noise (seed N); the metric is the mass matrix Σ_b J_bᵀ G(θ_b) J_b."""
-    from dualid.model.rigid_body import spatial_inertia_basis
     from dualid.model.metric import AffineMetric, MetricTerm
     from dualid.model.parameters import rigid_body_space
+    from dualid.model.rigid_body import spatial_inertia_basis
     from dualid.problem import IdentificationProblem
 
     if N < 1:
@@ -188,7 +188,7 @@ def build_problem(path: Path, N: int):
 
 
 def _estimator(solver: str):
-    from dualid import OLS, DualMetric
+    from dualid.estimators import OLS, DualMetric
 
     if solver == "newton":
         return DualMetric(solver="newton", allow_unidentifiable=True)
@@ -349,52 +349,6 @@ def time_ratios(result: dict, solver: str, reference: str) -> dict[tuple[str, in
     """{(problem, N): wall time of ``reference`` / wall time of ``solver``} where both finished."""
     t = {(r["problem"], r["solver"], r["N"]): r["wall_time_s"] for r in result["runs"] if "error" not in r}
     return {(p, N): t[p, reference, N] / t[p, s, N] for (p, s, N) in t if s == solver and (p, reference, N) in t}
-
-
-def to_markdown(result: dict) -> str:
-    """results.md: machine, set-up, one table row per run (errors included) and any findings."""
-    m = result["machine"]
-    lines = [
-        "# Dual-metric solver benchmark",
-        "",
-        f"Machine: {m['cpu']}, {m['cores']} cores, {m['memory_GB']} GB RAM; Python {m['python']}, numpy {m['numpy']}; "
-        f"OPENBLAS_NUM_THREADS={m['OPENBLAS_NUM_THREADS']}; load average {m.get('load_note', 'at start')} "
-        f"{tuple(round(x, 2) for x in m['load_average_at_start'])} "
-        "(the machine was shared with other jobs: absolute times are pessimistic, ratios are indicative).",
-        "",
-        f"Random states, τ = Yθ + {int(100 * result['noise'])} % noise; up to {result['base_samples']:,} distinct samples, "
-        "larger N repeat them with fresh noise. Peak memory = the run's process maximum RSS (data + solver). "
-        "Objective gap: (f − f_SDP/Clarabel) / f_SDP/Clarabel (negative: lower than the SDP's).",
-        "",
-        "| problem | solver | N | wall time [s] | peak RSS [GB] | data [GB] | iterations | objective | gap to SDP |",
-        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
-    ]
-    for r in result["runs"]:
-        if "error" in r:
-            lines.append(f"| {r['problem']} | {r['solver']} | {r['N']:,} | error: {r['error'][:80]} | | | | | |")
-            continue
-        gap = r.get("objective_gap_to_sdp_clarabel")
-        obj = r.get("dual_metric_objective")
-        obj = float("nan") if r["solver"] == "ols_constrained" or obj is None else obj  # f of the DM solvers only
-        lines.append(
-            f"| {r['problem']} | {r['solver']} | {r['N']:,} | {r['wall_time_s']:.3f} | {r['peak_rss_GB']:.2f} | "
-            f"{r['data_GB']:.2f} | {r['iterations'] if r['iterations'] is not None else ''} | {obj:.10g} | "
-            f"{'' if gap is None else f'{gap:.2e}'} |"
-        )
-    if result.get("findings"):
-        lines += ["", "## Findings", ""] + ([result["newton_rows_note"], ""] if result.get("newton_rows_note") else [])
-        lines += [f"- {x}" for x in result["findings"]]
-    return "\n".join(lines) + "\n"
-
-
-def write_results(result: dict, out: Path) -> tuple[Path, Path]:
-    """results.json and results.md in ``out`` (created if missing); their paths."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    js, md = out / "results.json", out / "results.md"
-    js.write_text(json.dumps(result, indent=2))
-    md.write_text(to_markdown(result))
-    return js, md
 
 
 def parse_list(text: str, known: Sequence[str], what: str) -> tuple[str, ...]:

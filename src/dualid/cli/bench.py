@@ -30,10 +30,17 @@ def bench(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from dualid.bench.runner import (
-        PROBLEMS, SOLVERS, BenchConfig, parse_caps, parse_list, run_benchmark, time_ratios, to_markdown,
-        write_results,
+        PROBLEMS,
+        SOLVERS,
+        BenchConfig,
+        parse_caps,
+        parse_list,
+        run_benchmark,
+        time_ratios,
     )
-    from dualid.report.bench import scaling_plot
+    from dualid.report.bench import scaling_plot, to_markdown, write_results
+    from dualid.report.figures import save_figure
+    from dualid.report.outdir import write_output
 
     try:
         changes = {
@@ -60,8 +67,12 @@ def bench(
                 progress.console.print(f"  {what}: {status}", markup=False)
 
         result = run_benchmark(config, progress=report)
-    json_path, md_path = write_results(result, out)
-    png = scaling_plot(result, out / "scaling.png")
+    def write(d: Path) -> dict[str, Path]:
+        js, md = write_results(result, d)
+        return {"json": js, "md": md, "png": save_figure(scaling_plot(result), d / "scaling.png")}
+
+    paths = write_output(out, force, write)
+    json_path, md_path, png = paths["json"], paths["md"], paths["png"]
     typer.echo(to_markdown(result))
     for (problem, N), ratio in sorted(time_ratios(result, "newton", "sdp_clarabel").items()):
         typer.echo(f"{problem} N={N:,}: SDP (Clarabel) / Newton wall time = {ratio:.1f}×")

@@ -17,8 +17,12 @@ def fail(message: str, code: int = 1) -> None:
 
 
 def output_dir(path: Path, force: bool) -> Path:
-    """Refuse an existing non-empty directory unless --force was given."""
-    if path.exists() and (not path.is_dir() or any(path.iterdir())) and not force:
-        fail(f"{path} already exists and is not empty; pass --force to overwrite it")
-    path.mkdir(parents=True, exist_ok=True)
-    return path
+    """Check --out against the output-directory policy before any work (dualid.report.outdir)."""
+    from dualid.errors import OutputError
+    from dualid.report.outdir import check_output_dir
+
+    try:
+        return check_output_dir(path, force)
+    except OutputError as exc:
+        fail(str(exc))
+        raise  # unreachable: fail exits

@@ -38,8 +38,8 @@ def fit(
 
     from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
-    from dualid.robot.fit import fit_robot
     from dualid.report.robot import score_table, write_fit
+    from dualid.robot.fit import fit_robot
 
     try:
         cfg = _config(config, model, data)
@@ -60,7 +60,7 @@ def fit(
         try:
             outcome = fit_robot(cfg, progress=lambda msg: bar.update(task, description=msg))
             bar.update(task, description=f"writing {cfg.out}")
-            write_fit(outcome, cfg.out)
+            write_fit(outcome, cfg.out, force)
         except _USER_ERRORS as exc:
             bar.stop()
             fail(str(exc))
@@ -86,8 +86,8 @@ def validate(
     force: bool = typer.Option(False, "--force", help="write into an existing non-empty output directory"),
 ) -> None:
     """Predicted vs measured effort (inverse dynamics) and acceleration (forward dynamics) of a URDF on logs."""
-    from dualid.robot.config import FitConfig
     from dualid.report.robot import score_table, write_validation
+    from dualid.robot.config import FitConfig
     from dualid.robot.validate import validate_urdf
 
     if out is not None:
@@ -102,7 +102,7 @@ def validate(
         with console.status(f"validating {model.name} on {len(data)} runs"):
             _, _, val = validate_urdf(model, data, **kw)
         if out is not None:
-            write_validation(val, out, {"model": str(model), "data": [str(p) for p in data]})
+            write_validation(val, out, {"model": str(model), "data": [str(p) for p in data]}, force)
     except _USER_ERRORS as exc:
         fail(str(exc))
     typer.echo(score_table({val.label: val}))

@@ -26,7 +26,8 @@ def reproduce(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from dualid.errors import DualidError
-    from dualid.paper.study import reproduce as run
+    from dualid.report.study import reproduce as run
+    from dualid.report.study import study_markdown
     from dualid.systems.base import system_names
 
     if system not in system_names():
@@ -43,5 +44,5 @@ def reproduce(
         fail(f"{exc}; pass --force to overwrite it")
     except (DualidError, ValueError) as exc:
         fail(str(exc))
-    console.print(result.to_markdown())
+    console.print(study_markdown(result), markup=False)
     console.print(f"[green]wrote[/] {out}/results.json, results.md and figures")

@@ -47,6 +47,6 @@ def simulate(
             "theta_nominal": [float(x) for x in data.theta_nominal],
             "description": data.description,
         }
-        save_dataset(out, {"train": list(data.train), "test": list(data.test)}, info, fmt=fmt, overwrite=True)
+        save_dataset(out, {"train": list(data.train), "test": list(data.test)}, info, fmt=fmt, overwrite=force)
     n_samples = sum(t.T for t in data.train + data.test)
     console.print(f"wrote {len(data.train)} training and {len(data.test)} test runs ({n_samples} samples) to {out}")

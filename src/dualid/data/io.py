@@ -22,8 +22,8 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-from dualid.errors import DataError
 from dualid.data.trajectory import Trajectory
+from dualid.errors import DataError
 
 # unit -> factor to SI, per quantity
 UNITS: dict[str, dict[str, float]] = {

@@ -12,8 +12,8 @@ from dataclasses import replace
 import numpy as np
 from scipy import interpolate, signal
 
-from dualid.errors import DataError
 from dualid.data.trajectory import Trajectory
+from dualid.errors import DataError
 
 
 def sample_rate(t: np.ndarray, rtol: float = 0.05) -> float:

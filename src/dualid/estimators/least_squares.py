@@ -19,6 +19,7 @@ from dualid.estimators.base import (
     solve_cvxpy,
 )
 from dualid.estimators.result import IdentificationResult
+from dualid.linalg import gram_eigh, gram_rank
 from dualid.model.parameters import ParameterSpace
 from dualid.problem import IdentificationProblem
 
@@ -78,13 +79,6 @@ def energy_statistics(problem: IdentificationProblem, chunk: int = 65536) -> Sta
     return Statistics(H, g, c, energy=True)
 
 
-def _rank(H: np.ndarray, rtol: float = 1e-10) -> int:
-    d = np.sqrt(np.clip(np.diag(H), 0, None))
-    d[d == 0] = 1.0
-    w = np.linalg.eigvalsh(H / np.outer(d, d))
-    return int(np.sum(w > rtol * max(w.max(), 1e-300)))
-
-
 def _regularizer_terms(kind: str, parameters: ParameterSpace, theta0: np.ndarray):
     """Per block: (indices, V (k, m, m), C0 (m, m)) for the blocks a geometric prior applies to."""
     out = []
@@ -137,7 +131,7 @@ def fit_quadratic(
 
     p = problem.p
     info = dict(info or {})
-    rank = _rank(stats.H)
+    rank = gram_rank(stats.H)
     info["rank"] = rank
     if regularizer is None and not allow_unidentifiable:
         check_identifiable(problem, rank=rank, what=f"{method} weighted regressor")
@@ -157,8 +151,7 @@ def fit_quadratic(
             time.perf_counter() - t0, None, False, info,
         )
 
-    w, U = np.linalg.eigh(Hs)
-    keep = w > 1e-13 * max(w.max(), 1e-300)
+    w, U, keep = gram_eigh(Hs)
     R = np.sqrt(w[keep])[:, None] * U[:, keep].T
     b = (U[:, keep].T @ gs) / np.sqrt(w[keep])
     # f(θ) = ‖Rφ − b‖² + f_min with f_min the unconstrained minimum; normalise by f_min so the

@@ -10,10 +10,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dualid.data.trajectory import Trajectory
 from dualid.errors import MetricError
 from dualid.model.base import Model
 from dualid.model.metric import AffineMetric
-from dualid.data.trajectory import Trajectory
 
 
 @dataclass(frozen=True, eq=False)

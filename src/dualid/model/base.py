@@ -12,7 +12,6 @@ import numpy as np
 
 from dualid.model.metric import AffineMetric
 from dualid.model.parameters import ParameterSpace
-from dualid.data.trajectory import Trajectory
 
 Kind = Literal["inertia", "drag"]
 

@@ -99,27 +99,25 @@ def _relocate_meshes(root: ET.Element, source_dir: Path, out_dir: Path) -> None:
             mesh.set("filename", os.path.relpath(source_dir / filename, out_dir))
 
 
-def write_urdf(
+def identified_urdf(
     source_urdf: str | Path,
     model: RigidBodyModel,
     theta: np.ndarray,
-    out_path: str | Path,
-    overwrite: bool = False,
+    out_dir: str | Path | None = None,
     friction: dict[str, tuple[float, float]] | None = None,
     armature: dict[str, float] | None = None,
-) -> Path:
-    """Write a copy of ``source_urdf`` with the identified inertials θ (and optional joint friction).
+) -> str:
+    """The text of a copy of ``source_urdf`` with the identified inertials θ (and optional joint friction).
 
     ``model`` must be the RigidBodyModel of ``source_urdf`` and θ its parameter vector
     (model.parameters.p,). ``friction`` maps joint names to (damping [N m s/rad], Coulomb friction
     [N m]) written as <dynamics damping= friction=>; ``armature`` maps joint names to rotor inertia
     [kg m²], written as a non-standard <dynamics armature=> (URDF has no field for it; urdfdom and
     Pinocchio ignore it, ``dualid validate`` reads it back). Relative mesh filenames are rewritten to
-    point at the same files from the new folder. Returns the written path.
+    point at the same files from ``out_dir`` (the folder the text will be written to).
+    ``dualid.report.urdf.write_urdf`` writes it to a file.
     """
-    source_urdf, out_path = Path(source_urdf), Path(out_path)
-    if out_path.exists() and not overwrite:
-        raise FileExistsError(f"write_urdf: {out_path} already exists; pass overwrite=True to replace it")
+    source_urdf = Path(source_urdf)
     theta = np.asarray(theta, dtype=float)
     if theta.shape != (model.parameters.p,):
         raise ValueError(
@@ -188,8 +186,7 @@ def write_urdf(
             raise ConsistencyError(f"write_urdf: joint {joint_name!r} armature must be ≥ 0, got {value}")
         dynamics.set("armature", repr(float(value)))
 
-    _relocate_meshes(root, source_urdf.resolve().parent, out_path.resolve().parent)
+    if out_dir is not None:
+        _relocate_meshes(root, source_urdf.resolve().parent, Path(out_dir).resolve())
     ET.indent(tree, space="  ")
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    tree.write(out_path, encoding="unicode", xml_declaration=True)
-    return out_path
+    return "<?xml version='1.0' encoding='utf-8'?>\n" + ET.tostring(root, encoding="unicode")

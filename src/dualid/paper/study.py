@@ -20,12 +20,11 @@ model: the dual-metric fit must not move, the others may.
 
 from __future__ import annotations
 
-import json
 import math
 import re
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -34,8 +33,8 @@ from dualid.errors import DualidError, IdentifiabilityError
 from dualid.estimators import methods as methods_table
 from dualid.evaluation.prediction import PredictionData, measured_signal
 from dualid.evaluation.scores import metric_rmse, rmse, score_run, shift_window
-from dualid.problem import build_problem
-from dualid.problem import IdentificationProblem
+from dualid.paper.results import FitRecord, StudyResult, Summary, Trace
+from dualid.problem import IdentificationProblem, build_problem
 from dualid.systems.base import SystemData
 
 Case = Literal["both", "low", "high"]
@@ -80,215 +79,6 @@ def _ablation_chart(ablation, problem: IdentificationProblem) -> np.ndarray | No
     if not np.all(np.isfinite(B)) or abs(np.linalg.det(B)) == 0.0:
         raise ValueError("ablation: the chart B must be finite and invertible")
     return B
-
-
-# --- results --------------------------------------------------------------------------------
-@dataclass(frozen=True, eq=False)
-class FitRecord:
-    """One fit (method, case, seed) and its scores on every test run, or why it failed."""
-
-    case: str  # "low" | "high"
-    method: str
-    seed: int | None  # the low-data subset's seed; None for the high-data case
-    n_samples: int  # training samples used
-    ok: bool
-    error: str = ""  # "<ErrorType> during <stage>: <message>" when not ok
-    theta: tuple[float, ...] = ()
-    objective: float = float("nan")
-    solve_time: float = float("nan")  # [s]
-    status: str = ""
-    scores: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (runs, n)
-    rmse: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (runs, n) signal units
-    metric_rmse: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (runs,)
-
-    def as_dict(self, runs: Sequence[str], coordinates: Sequence[str]) -> dict:
-        d: dict[str, Any] = {"case": self.case, "method": self.method, "seed": self.seed,
-                             "n_samples": self.n_samples, "ok": self.ok}
-        if not self.ok:
-            d["error"] = self.error
-            return d
-        d.update(
-            theta=list(self.theta), objective=self.objective, solve_time_s=self.solve_time, status=self.status,
-            runs={
-                run: {
-                    "score": dict(zip(coordinates, self.scores[k].tolist())),
-                    "rmse": dict(zip(coordinates, self.rmse[k].tolist())),
-                    "metric_rmse": float(self.metric_rmse[k]),
-                }
-                for k, run in enumerate(runs)
-            },
-        )
-        return d
-
-
-@dataclass(frozen=True, eq=False)
-class Summary:
-    """Mean and std over the pooled (seed, test run) pairs of one method's successful fits."""
-
-    case: str
-    method: str
-    n_fits: int
-    n_failed: int
-    score_mean: np.ndarray  # (n,)  NaN when every fit failed
-    score_std: np.ndarray
-    rmse_mean: np.ndarray  # (n,) signal units per coordinate
-    rmse_std: np.ndarray
-    metric_rmse_mean: float
-    metric_rmse_std: float
-
-    @staticmethod
-    def of(case: str, method: str, records: Sequence[FitRecord], n: int) -> "Summary":
-        ok = [r for r in records if r.ok]
-        if not ok:
-            nan = np.full(n, np.nan)
-            return Summary(case, method, len(records), len(records), nan, nan, nan, nan, float("nan"), float("nan"))
-        S = np.concatenate([r.scores for r in ok])
-        R = np.concatenate([r.rmse for r in ok])
-        E = np.concatenate([r.metric_rmse for r in ok])
-        return Summary(
-            case, method, len(records), len(records) - len(ok), S.mean(0), S.std(0), R.mean(0), R.std(0),
-            float(E.mean()), float(E.std()),
-        )
-
-    def as_dict(self, coordinates: Sequence[str]) -> dict:
-        c = list(coordinates)
-        return {
-            "n_fits": self.n_fits,
-            "n_failed": self.n_failed,
-            "score_mean": dict(zip(c, self.score_mean.tolist())),
-            "score_std": dict(zip(c, self.score_std.tolist())),
-            "rmse_mean": dict(zip(c, self.rmse_mean.tolist())),
-            "rmse_std": dict(zip(c, self.rmse_std.tolist())),
-            "metric_rmse_mean": self.metric_rmse_mean,
-            "metric_rmse_std": self.metric_rmse_std,
-        }
-
-
-@dataclass(frozen=True, eq=False)
-class Trace:
-    """Predicted and measured signal on one test run (for trajectory plots); predicted None if failed."""
-
-    case: str
-    method: str
-    run: str
-    t: np.ndarray  # (T,) [s]
-    measured: np.ndarray  # (T, n)
-    predicted: np.ndarray | None  # (T, n)
-
-
-def _clean(x):
-    """JSON-safe: NaN/inf → None, numpy scalars → Python."""
-    if isinstance(x, dict):
-        return {k: _clean(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
-    if isinstance(x, (float, np.floating)):
-        return float(x) if np.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
-
-
-@dataclass(frozen=True, eq=False)
-class StudyResult:
-    system: str
-    kind: str  # "inertia" | "drag"
-    signal: str  # "acceleration" | "velocity": what is predicted and scored
-    coordinates: tuple[str, ...]
-    shape_coordinates: tuple[str, ...]
-    parameter_names: tuple[str, ...]
-    methods: tuple[str, ...]
-    cases: tuple[str, ...]
-    test_runs: tuple[str, ...]
-    records: tuple[FitRecord, ...]
-    summaries: tuple[Summary, ...]
-    truth: Summary  # the true θ's prediction: what noise and unmodelled effects allow
-    traces: tuple[Trace, ...]
-    config: dict  # seeds, max_shift, ablation chart, low-data size, …
-
-    def summary(self, case: str, method: str) -> Summary:
-        for s in self.summaries:
-            if s.case == case and s.method == method:
-                return s
-        raise KeyError(f"no summary for case {case!r}, method {method!r}; cases {self.cases}, methods {self.methods}")
-
-    def failures(self) -> tuple[FitRecord, ...]:
-        return tuple(r for r in self.records if not r.ok)
-
-    def as_dict(self) -> dict:
-        c = self.coordinates
-        return _clean({
-            "system": self.system,
-            "kind": self.kind,
-            "signal": self.signal,
-            "coordinates": list(c),
-            "shape_coordinates": list(self.shape_coordinates),
-            "parameter_names": list(self.parameter_names),
-            "methods": list(self.methods),
-            "test_runs": list(self.test_runs),
-            "config": self.config,
-            "truth": self.truth.as_dict(c),
-            "cases": {
-                case: {
-                    "summary": {s.method: s.as_dict(c) for s in self.summaries if s.case == case},
-                    "fits": [r.as_dict(self.test_runs, c) for r in self.records if r.case == case],
-                }
-                for case in self.cases
-            },
-        })
-
-    def to_json(self, indent: int | None = 2) -> str:
-        return json.dumps(self.as_dict(), indent=indent, allow_nan=False)
-
-    def to_markdown(self) -> str:
-        c = self.coordinates
-        sym = "a" if self.signal == "acceleration" else "v"
-        lines = [
-            f"# {self.system}: identification study",
-            "",
-            f"Predicted forward dynamics ({self.signal}s, {self.kind}-dominated) on {len(self.test_runs)} test runs. "
-            f"Score: max normalized cross-correlation within ±{self.config.get('max_shift')} samples "
-            f"(±T/72 of the slowest period {self.config.get('slowest_period')} s); mean ± std over test runs"
-            + (" and seeds" if "low" in self.cases else "") + ". Shape coordinates: "
-            + ", ".join(self.shape_coordinates) + ".",
-        ]
-        if self.config.get("ablation") is not None:
-            lines += ["", f"Ablation: fitted in a re-charted problem, B = diag({self.config['ablation_B_diag']})."]
-        for case in self.cases:
-            title = {"low": f"Low-data case ({self.config.get('low_data_samples')} samples, "
-                            f"{len(self.config.get('seeds') or [])} seeds)", "high": "High-data case (all samples)"}[case]
-            lines += ["", f"## {title}", "", "### Score (higher is better, max 1)", ""]
-            lines += _table(["method"] + [f"{sym}:{x}" for x in c] + ["failed"],
-                            [[methods_table.label(s.method)] + [_pm(m, d, 3) for m, d in zip(s.score_mean, s.score_std)]
-                             + [f"{s.n_failed}/{s.n_fits}"] for s in self.summaries if s.case == case])
-            lines += ["", "### RMSE per coordinate (signal units) and chart-invariant RMSE √(mean eᵀMe)", ""]
-            lines += _table(["method"] + [f"{sym}:{x}" for x in c] + ["√(eᵀMe)"],
-                            [[methods_table.label(s.method)] + [_pm(m, d, 3, "g") for m, d in zip(s.rmse_mean, s.rmse_std)]
-                             + [_pm(s.metric_rmse_mean, s.metric_rmse_std, 3, "g")] for s in self.summaries if s.case == case])
-        t = self.truth
-        lines += ["", "## Reference: the true parameters", ""]
-        lines += _table(["", *[f"{sym}:{x}" for x in c], "√(eᵀMe)"],
-                        [["score"] + [_pm(m, d, 3) for m, d in zip(t.score_mean, t.score_std)] + [""],
-                         ["RMSE"] + [_pm(m, d, 3, "g") for m, d in zip(t.rmse_mean, t.rmse_std)]
-                         + [_pm(t.metric_rmse_mean, t.metric_rmse_std, 3, "g")]])
-        failed = self.failures()
-        if failed:
-            lines += ["", "## Failed fits", ""]
-            for r in failed:
-                seed = f", seed {r.seed}" if r.seed is not None else ""
-                lines.append(f"- {r.case}, {methods_table.label(r.method)}{seed}: {r.error}")
-        return "\n".join(lines) + "\n"
-
-
-def _pm(m: float, d: float, digits: int, fmt: str = "f") -> str:
-    if not np.isfinite(m):
-        return "failed"
-    return f"{m:.{digits}{fmt}} ± {d:.{digits}{fmt}}" if fmt == "f" else f"{m:.{digits}g} ± {d:.{digits - 1}g}"
-
-
-def _table(header: list[str], rows: list[list[str]]) -> list[str]:
-    out = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * len(header)) + "|"]
-    return out + ["| " + " | ".join(r) + " |" for r in rows]
 
 
 # --- progress -------------------------------------------------------------------------------
@@ -496,24 +286,20 @@ class _Fixed:
         return IdentificationResult("fixed", self.theta, problem.parameters, float("nan"), "given", "none", 0.0)
 
 
-def reproduce(
+
+
+def simulate_and_run(
     system_name: str,
-    out_dir,
     case: Case = "both",
     seeds: int = 5,
     noise: str = "realistic",
     size: str = "default",
     ablation: None | str | np.ndarray = None,
-    overwrite: bool = False,
     progress=None,
 ) -> StudyResult:
-    """Simulate the named system, run the study and write results.json, results.md and figures to out_dir."""
-    from dualid.report.study import check_out_dir, write_report
+    """Simulate the named system (data-set seed 0) and run the study on it."""
     from dualid.systems.base import make_system
 
-    check_out_dir(out_dir, overwrite)  # fail before the (long) study, not after
     system = make_system(system_name, seed=0, noise=noise, size=size)
     result = run_study(system, case=case, seeds=seeds, progress=progress, ablation=ablation)
-    result = replace(result, config={**result.config, "noise": noise, "size": size, "system_seed": 0})
-    write_report(result, out_dir, overwrite=overwrite)
-    return result
+    return replace(result, config={**result.config, "noise": noise, "size": size, "system_seed": 0})

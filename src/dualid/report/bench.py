@@ -9,14 +9,13 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.ticker import FuncFormatter, LogLocator
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.ticker import FuncFormatter, LogLocator  # noqa: E402
-
-from dualid.bench.runner import PROBLEMS, SOLVERS  # noqa: E402
+from dualid.bench.runner import PROBLEMS, SOLVERS
+from dualid.report.figures import new_figure
+from dualid.report.io import write_json
 
 LABELS = {
     "newton": "dual metric, Newton (interior point)",
@@ -37,14 +36,14 @@ def _reason(error: str) -> str:
     return re.split(r"[;(]", error, maxsplit=1)[0].strip()[:60]
 
 
-def scaling_plot(result: dict, path) -> Path:
-    """Wall time and peak RSS vs N (log-log) per solver and problem from a benchmark results dict; PNG at path."""
+def scaling_plot(result: dict) -> Figure:
+    """Wall time and peak RSS vs N (log-log) per solver and problem from a benchmark results dict."""
     runs = result["runs"]
     problems = [p for p in PROBLEMS if any(r["problem"] == p for r in runs)]
     problems += sorted({r["problem"] for r in runs} - set(problems))
     if not problems:
         raise ValueError("scaling_plot: the results hold no runs")
-    fig, axes = plt.subplots(2, len(problems), figsize=(5.6 * len(problems), 7.6), squeeze=False, sharex="col")
+    fig, axes = new_figure(2, len(problems), figsize=(5.6 * len(problems), 7.6), sharex="col")
     for col, name in enumerate(problems):
         rows = [r for r in runs if r["problem"] == name]
         ok = [r for r in rows if "error" not in r]
@@ -84,8 +83,48 @@ def scaling_plot(result: dict, path) -> Path:
     fig.suptitle(f"Dual-metric solvers: time and memory vs N ({m.get('cpu', 'unknown CPU')}, "
                  f"{m.get('cores', '?')} cores)", fontsize=11)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return fig
+
+
+def to_markdown(result: dict) -> str:
+    """results.md: machine, set-up, one table row per run (errors included) and any findings."""
+    m = result["machine"]
+    lines = [
+        "# Dual-metric solver benchmark",
+        "",
+        f"Machine: {m['cpu']}, {m['cores']} cores, {m['memory_GB']} GB RAM; Python {m['python']}, numpy {m['numpy']}; "
+        f"OPENBLAS_NUM_THREADS={m['OPENBLAS_NUM_THREADS']}; load average {m.get('load_note', 'at start')} "
+        f"{tuple(round(x, 2) for x in m['load_average_at_start'])} "
+        "(the machine was shared with other jobs: absolute times are pessimistic, ratios are indicative).",
+        "",
+        f"Random states, τ = Yθ + {int(100 * result['noise'])} % noise; up to {result['base_samples']:,} distinct samples, "
+        "larger N repeat them with fresh noise. Peak memory = the run's process maximum RSS (data + solver). "
+        "Objective gap: (f − f_SDP/Clarabel) / f_SDP/Clarabel (negative: lower than the SDP's).",
+        "",
+        "| problem | solver | N | wall time [s] | peak RSS [GB] | data [GB] | iterations | objective | gap to SDP |",
+        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+    ]
+    for r in result["runs"]:
+        if "error" in r:
+            lines.append(f"| {r['problem']} | {r['solver']} | {r['N']:,} | error: {r['error'][:80]} | | | | | |")
+            continue
+        gap = r.get("objective_gap_to_sdp_clarabel")
+        obj = r.get("dual_metric_objective")
+        obj = float("nan") if r["solver"] == "ols_constrained" or obj is None else obj  # f of the DM solvers only
+        lines.append(
+            f"| {r['problem']} | {r['solver']} | {r['N']:,} | {r['wall_time_s']:.3f} | {r['peak_rss_GB']:.2f} | "
+            f"{r['data_GB']:.2f} | {r['iterations'] if r['iterations'] is not None else ''} | {obj:.10g} | "
+            f"{'' if gap is None else f'{gap:.2e}'} |"
+        )
+    if result.get("findings"):
+        lines += ["", "## Findings", ""] + ([result["newton_rows_note"], ""] if result.get("newton_rows_note") else [])
+        lines += [f"- {x}" for x in result["findings"]]
+    return "\n".join(lines) + "\n"
+
+
+def write_results(result: dict, out: Path) -> tuple[Path, Path]:
+    """results.json and results.md in the directory ``out``; their paths."""
+    out = Path(out)
+    js, md = write_json(out / "results.json", result, indent=2), out / "results.md"
+    md.write_text(to_markdown(result))
+    return js, md

@@ -11,21 +11,22 @@ Files in the output folder:
 
 from __future__ import annotations
 
-import json
 import re
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import yaml
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from dualid.errors import DualidError  # noqa: E402
-from dualid.model.urdf import write_urdf  # noqa: E402
-from dualid.estimators.methods import color as method_color, method as method_entry
-from dualid.robot.fit import FitOutcome, armature_of, friction_of  # noqa: E402
-from dualid.robot.validate import Validation  # noqa: E402
+from dualid.errors import DualidError
+from dualid.estimators.methods import color as method_color
+from dualid.estimators.methods import method as method_entry
+from dualid.evaluation.validation import Validation
+from dualid.report.figures import cycle_color, new_figure, save_figure
+from dualid.report.io import jsonable, to_json, write_json
+from dualid.report.outdir import write_output
+from dualid.report.urdf import write_urdf
+from dualid.robot.fit import FitOutcome, armature_of, friction_of
 
 UNCERTAINTY_NOTE = (
     "std_error: σ̂·sqrt((H⁺)_kk) of the quadratic estimators (ols, wls, energy), H their normal matrix, "
@@ -35,24 +36,8 @@ UNCERTAINTY_NOTE = (
 )
 
 
-def _clean(x):
-    if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return float(x) if np.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.ndarray):
-        return _clean(x.tolist())
-    if isinstance(x, Path):
-        return str(x)
-    return x
-
-
 def _color(label: str, k: int) -> str:
-    return method_color(label) or plt.get_cmap("tab10")(k % 10)
+    return method_color(label) or cycle_color(k)
 
 
 def _slug(s: str) -> str:
@@ -60,13 +45,13 @@ def _slug(s: str) -> str:
 
 
 # --- figures ----------------------------------------------------------------------------------
-def signal_plot(validations: dict[str, Validation], run: int, path, signal: str = "tau") -> Path:
+def signal_plot(validations: dict[str, Validation], run: int, signal: str = "tau") -> Figure:
     """Measured vs predicted effort ("tau", inverse dynamics) or acceleration ("a", forward dynamics)
     on one held-out run, one panel per joint."""
     first = next(iter(validations.values()))
     coords = first.coordinates
     meas_run = first.runs[run]
-    fig, axes = plt.subplots(len(coords), 1, figsize=(10, 2.6 * len(coords)), sharex=True, squeeze=False)
+    fig, axes = new_figure(len(coords), 1, figsize=(10, 2.6 * len(coords)), sharex=True)
     unit = "N m" if signal == "tau" else "rad/s²"
     what = "effort: inverse dynamics Y(q,v,a)θ̂" if signal == "tau" else "acceleration: forward dynamics M̂⁻¹(τ−ĥ)"
     for j, ax in enumerate(axes[:, 0]):
@@ -87,18 +72,16 @@ def signal_plot(validations: dict[str, Validation], run: int, path, signal: str 
     axes[-1, 0].set_xlabel("time [s]")
     fig.suptitle(f"held-out run {meas_run.run}: {what}", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=120, bbox_inches="tight")
-    plt.close(fig)
-    return Path(path)
+    return fig
 
 
-def score_bars(validations: dict[str, Validation], path) -> Path:
+def score_bars(validations: dict[str, Validation]) -> Figure:
     """Grouped bars per joint of held-out effort RMSE and NCC, and acceleration NCC (mean ± std over runs)."""
     first = next(iter(validations.values()))
     coords = first.coordinates
     panels = (("tau_rmse", "effort RMSE [N m] (lower is better)"), ("tau_ncc", "effort NCC (higher is better)"),
               ("a_ncc", "forward-dynamics acceleration NCC"))
-    fig, axes = plt.subplots(1, 3, figsize=(13, 4), squeeze=False)
+    fig, axes = new_figure(1, 3, figsize=(13, 4))
     x = np.arange(len(coords))
     w = 0.8 / len(validations)
     for ax, (key, title) in zip(axes[0], panels):
@@ -116,9 +99,7 @@ def score_bars(validations: dict[str, Validation], path) -> Path:
     fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 8), fontsize=8, frameon=False,
                bbox_to_anchor=(0.5, -0.04))
     fig.tight_layout(rect=(0, 0.06, 1, 1))
-    fig.savefig(path, dpi=120, bbox_inches="tight")
-    plt.close(fig)
-    return Path(path)
+    return fig
 
 
 # --- tables -----------------------------------------------------------------------------------
@@ -184,7 +165,7 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str]) -> dict:
             "bodies": [b.as_dict() for b in r.bodies],
             "validation": None if f.validation is None else f.validation.as_dict(),
         }
-    return _clean({
+    return jsonable({
         "model": {"urdf": outcome.config.model.urdf, "floating_base": outcome.config.model.floating_base,
                   "gravity": list(outcome.rigid.gravity)},
         "data": {"train": list(outcome.config.train), "test": list(outcome.config.test),
@@ -204,12 +185,13 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str]) -> dict:
     })
 
 
-def write_fit(outcome: FitOutcome, out: str | Path) -> dict[str, Path]:
-    """Write every output of a fit into ``out`` (which the caller has prepared); returns name -> path."""
-    import yaml
+def write_fit(outcome: FitOutcome, out: str | Path, force: bool = False) -> dict[str, Path]:
+    """parameters.yaml/json, <method>.urdf, identifiability.txt, report.md and figures in ``out``
+    (under the output-directory policy of dualid.report.outdir; force = --force)."""
+    return write_output(out, force, lambda d: _write_fit(outcome, d))
 
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+
+def _write_fit(outcome: FitOutcome, out: Path) -> dict[str, Path]:
     written: dict[str, Path] = {}
     urdfs: dict[str, str] = {}
     p0 = outcome.rigid.parameters.p
@@ -227,7 +209,7 @@ def write_fit(outcome: FitOutcome, out: str | Path) -> dict[str, Path]:
         written[f"{m}.urdf"] = path
     record = parameters_record(outcome, urdfs)
     (out / "parameters.yaml").write_text(yaml.safe_dump(record, sort_keys=False, allow_unicode=True))
-    (out / "parameters.json").write_text(json.dumps(record, indent=1, ensure_ascii=False))
+    write_json(out / "parameters.json", record)
     written["parameters.yaml"], written["parameters.json"] = out / "parameters.yaml", out / "parameters.json"
     (out / "identifiability.txt").write_text(outcome.identifiability_text() + "\n")
     written["identifiability.txt"] = out / "identifiability.txt"
@@ -238,11 +220,11 @@ def write_fit(outcome: FitOutcome, out: str | Path) -> dict[str, Path]:
     if validations:
         run = outcome.test[0].name
         for signal, stem in (("tau", "effort"), ("a", "acceleration")):
-            p = signal_plot(validations, 0, out / f"{stem}_{_slug(run)}.png", signal)
+            p = save_figure(signal_plot(validations, 0, signal), out / f"{stem}_{_slug(run)}.png", bbox_inches="tight")
             written[p.name] = p
             figures.append(p.name)
         if len(validations) > 1:
-            p = score_bars(validations, out / "scores.png")
+            p = save_figure(score_bars(validations), out / "scores.png", bbox_inches="tight")
             written[p.name] = p
             figures.append(p.name)
     report = _report_md(outcome, validations, urdfs, figures)
@@ -259,7 +241,7 @@ def _report_md(outcome: FitOutcome, validations, urdfs, figures) -> str:
         f"- training runs: {', '.join(p.name for p in cfg.train)}",
         f"- held-out runs: {', '.join(p.name for p in cfg.test) or '(none: no validation)'}",
         f"- samples after preprocessing: {outcome.problem.N} × {outcome.problem.n} joints; parameters: {outcome.problem.p}",
-        f"- preprocessing: `{json.dumps(_clean(outcome.steps))}`",
+        f"- preprocessing: `{to_json(outcome.steps, indent=None)}`",
         f"- joint terms: viscous={cfg.joint_terms.viscous}, coulomb={cfg.joint_terms.coulomb} "
         f"(v_c = {cfg.joint_terms.coulomb_velocity} rad/s), armature={cfg.joint_terms.armature}",
         "",
@@ -301,16 +283,20 @@ def _report_md(outcome: FitOutcome, validations, urdfs, figures) -> str:
     return "\n".join(lines)
 
 
-def write_validation(validation: Validation, out: str | Path, meta: dict) -> dict[str, Path]:
+def write_validation(validation: Validation, out: str | Path, meta: dict, force: bool = False) -> dict[str, Path]:
+    """validation.json, report.md and figures in ``out`` (under the output-directory policy)."""
+    return write_output(out, force, lambda d: _write_validation(validation, d, meta))
+
+
+def _write_validation(validation: Validation, out: Path, meta: dict) -> dict[str, Path]:
     """``dualid validate`` outputs: validation.json, report.md and the effort/acceleration PNGs."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    record = _clean({**meta, "validation": validation.as_dict()})
-    (out / "validation.json").write_text(json.dumps(record, indent=1, ensure_ascii=False))
+    record = jsonable({**meta, "validation": validation.as_dict()})
+    write_json(out / "validation.json", record)
     written = {"validation.json": out / "validation.json"}
     figures = []
     for signal, stem in (("tau", "effort"), ("a", "acceleration")):
-        p = signal_plot({validation.label: validation}, 0, out / f"{stem}_{_slug(validation.runs[0].run)}.png", signal)
+        p = save_figure(signal_plot({validation.label: validation}, 0, signal), out / f"{stem}_{_slug(validation.runs[0].run)}.png",
+                      bbox_inches="tight")
         written[p.name] = p
         figures.append(p.name)
     md = [f"# Validation of {meta.get('model', validation.label)}", "",

@@ -4,21 +4,25 @@
   WLS, energy, DM; right panel log-det WLS, pullback WLS, DM.
 - ``trajectory_plot``: the paper's Fig. 3/5 — predicted vs measured signal of the shape coordinate
   where the methods differ most, on one test run.
-- ``write_report``: results.json, results.md and the PNGs in an output directory.
+- ``study_markdown``, ``study_json``: the study's tables and record.
+- ``write_report``: results.json, results.md and the PNGs in an output directory; ``reproduce``:
+  simulate, run the study and write its report.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from dualid.estimators.methods import color as method_color, label as method_label  # noqa: E402
-from dualid.paper.study import StudyResult  # noqa: E402
+from dualid.estimators.methods import color as method_color
+from dualid.estimators.methods import label as method_label
+from dualid.paper.results import StudyResult
+from dualid.paper.study import Case, simulate_and_run
+from dualid.report.figures import new_figure, save_figure
+from dualid.report.io import markdown_table, to_json
+from dualid.report.outdir import check_output_dir, write_output
 
 PANELS = (("wls", "energy", "dm"), ("logdet", "pullback", "dm"))
 TRAJECTORY_METHODS = ("dm", "wls", "energy", "logdet", "pullback")
@@ -39,8 +43,8 @@ def _check_case(result: StudyResult, case: str) -> None:
         raise ValueError(f"case: expected one of {list(result.cases)} (the cases of this study), got {case!r}")
 
 
-def score_bars(result: StudyResult, case: str, path) -> Path:
-    """Grouped bars of the score per coordinate (mean ± std), two panels as in the paper; PNG at path."""
+def score_bars(result: StudyResult, case: str) -> Figure:
+    """Grouped bars of the score per coordinate (mean ± std), two panels as in the paper."""
     _check_case(result, case)
     coords = result.coordinates
     n = len(coords)
@@ -54,7 +58,7 @@ def score_bars(result: StudyResult, case: str, path) -> Path:
     ymin = min(lows)
     ymin = 0.0 if ymin >= 0 else max(-1.05, np.floor(ymin * 10) / 10 - 0.05)
     width_in = min(16.0, max(8.0, 0.8 * n * len(panels) + 2))
-    fig, axes = plt.subplots(1, len(panels), figsize=(width_in, 4.2), sharey=True, squeeze=False)
+    fig, axes = new_figure(1, len(panels), figsize=(width_in, 4.2), sharey=True)
     x = np.arange(n)
     for ax, panel in zip(axes[0], panels):
         w = 0.8 / len(panel)
@@ -82,10 +86,7 @@ def score_bars(result: StudyResult, case: str, path) -> Path:
                  f"mean ± std over test runs{' and seeds' if case == 'low' else ''}; shaded: shape coordinates",
                  fontsize=9)
     fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=150)
-    plt.close(fig)
-    return path
+    return fig
 
 
 def most_contested_coordinate(result: StudyResult, case: str, methods=TRAJECTORY_METHODS) -> str:
@@ -103,8 +104,8 @@ def most_contested_coordinate(result: StudyResult, case: str, methods=TRAJECTORY
     return max(candidates, key=lambda c: spread[c])
 
 
-def trajectory_plot(result: StudyResult, case: str, path, coordinate: str | None = None,
-                    methods=TRAJECTORY_METHODS, max_duration: float = 15.0) -> Path:
+def trajectory_plot(result: StudyResult, case: str, coordinate: str | None = None,
+                    methods=TRAJECTORY_METHODS, max_duration: float = 15.0) -> Figure:
     """Predicted (each method) and measured signal of one coordinate on the study's trace run; PNG at path.
 
     coordinate: default the shape coordinate where the methods differ most. Only the first
@@ -122,7 +123,8 @@ def trajectory_plot(result: StudyResult, case: str, path, coordinate: str | None
     first = next(iter(traces.values()))
     t = first.t - first.t[0]
     keep = t <= max_duration
-    fig, ax = plt.subplots(figsize=(9, 4.2))
+    fig, axes = new_figure(figsize=(9, 4.2))
+    ax = axes[0, 0]
     measured = first.measured[keep, k]
     ax.plot(t[keep], measured, color="k", lw=2.2, alpha=0.45, label="measured")
     # the axis follows the measured signal (±100 % margin): a prediction far off scale is clipped and
@@ -154,10 +156,7 @@ def trajectory_plot(result: StudyResult, case: str, path, coordinate: str | None
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.2), frameon=False)
     fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=150)
-    plt.close(fig)
-    return path
+    return fig
 
 
 def _run_score(result: StudyResult, trace, k: int) -> float:
@@ -172,30 +171,83 @@ def _run_score(result: StudyResult, trace, k: int) -> float:
     return float(recs[0].scores[j, k])  # records are in seed order; traces keep the first seed
 
 
-def check_out_dir(out_dir, overwrite: bool = False) -> Path:
-    """The output directory, refusing an existing non-empty one unless overwrite=True."""
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise FileExistsError(f"output directory {str(out)!r} exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()) and not overwrite:
-        raise FileExistsError(
-            f"output directory {str(out)!r} exists and is not empty; choose another or pass overwrite=True"
-        )
-    return out
+def study_markdown(self: StudyResult) -> str:
+    """The study's tables (scores, RMSEs, the truth row, failed fits) as Markdown."""
+    c = self.coordinates
+    sym = "a" if self.signal == "acceleration" else "v"
+    lines = [
+        f"# {self.system}: identification study",
+        "",
+        f"Predicted forward dynamics ({self.signal}s, {self.kind}-dominated) on {len(self.test_runs)} test runs. "
+        f"Score: max normalized cross-correlation within ±{self.config.get('max_shift')} samples "
+        f"(±T/72 of the slowest period {self.config.get('slowest_period')} s); mean ± std over test runs"
+        + (" and seeds" if "low" in self.cases else "") + ". Shape coordinates: "
+        + ", ".join(self.shape_coordinates) + ".",
+    ]
+    if self.config.get("ablation") is not None:
+        lines += ["", f"Ablation: fitted in a re-charted problem, B = diag({self.config['ablation_B_diag']})."]
+    for case in self.cases:
+        title = {"low": f"Low-data case ({self.config.get('low_data_samples')} samples, "
+                        f"{len(self.config.get('seeds') or [])} seeds)", "high": "High-data case (all samples)"}[case]
+        lines += ["", f"## {title}", "", "### Score (higher is better, max 1)", ""]
+        lines += markdown_table(["method"] + [f"{sym}:{x}" for x in c] + ["failed"],
+                        [[method_label(s.method)] + [_pm(m, d, 3) for m, d in zip(s.score_mean, s.score_std)]
+                         + [f"{s.n_failed}/{s.n_fits}"] for s in self.summaries if s.case == case])
+        lines += ["", "### RMSE per coordinate (signal units) and chart-invariant RMSE √(mean eᵀMe)", ""]
+        lines += markdown_table(["method"] + [f"{sym}:{x}" for x in c] + ["√(eᵀMe)"],
+                        [[method_label(s.method)] + [_pm(m, d, 3, "g") for m, d in zip(s.rmse_mean, s.rmse_std)]
+                         + [_pm(s.metric_rmse_mean, s.metric_rmse_std, 3, "g")] for s in self.summaries if s.case == case])
+    t = self.truth
+    lines += ["", "## Reference: the true parameters", ""]
+    lines += markdown_table(["", *[f"{sym}:{x}" for x in c], "√(eᵀMe)"],
+                    [["score"] + [_pm(m, d, 3) for m, d in zip(t.score_mean, t.score_std)] + [""],
+                     ["RMSE"] + [_pm(m, d, 3, "g") for m, d in zip(t.rmse_mean, t.rmse_std)]
+                     + [_pm(t.metric_rmse_mean, t.metric_rmse_std, 3, "g")]])
+    failed = self.failures()
+    if failed:
+        lines += ["", "## Failed fits", ""]
+        for r in failed:
+            seed = f", seed {r.seed}" if r.seed is not None else ""
+            lines.append(f"- {r.case}, {method_label(r.method)}{seed}: {r.error}")
+    return "\n".join(lines) + "\n"
 
 
-def write_report(result: StudyResult, out_dir, overwrite: bool = False) -> dict[str, Path]:
-    """results.json, results.md, score_bars_<case>.png and trajectory_<case>.png in out_dir."""
-    out = check_out_dir(out_dir, overwrite)
-    out.mkdir(parents=True, exist_ok=True)
+
+
+def _pm(m: float, d: float, digits: int, fmt: str = "f") -> str:
+    if not np.isfinite(m):
+        return "failed"
+    return f"{m:.{digits}{fmt}} ± {d:.{digits}{fmt}}" if fmt == "f" else f"{m:.{digits}g} ± {d:.{digits - 1}g}"
+
+
+def study_json(result: StudyResult) -> str:
+    return to_json(result.as_dict(), indent=2)
+
+
+def _write_study(result: StudyResult, out: Path) -> dict[str, Path]:
     written = {"json": out / "results.json", "markdown": out / "results.md"}
-    written["json"].write_text(result.to_json() + "\n")
-    md = result.to_markdown()
+    written["json"].write_text(study_json(result) + "\n")
     figures = []
     for case in result.cases:
-        bars = score_bars(result, case, out / f"score_bars_{case}.png")
-        traj = trajectory_plot(result, case, out / f"trajectory_{case}.png")
+        bars = save_figure(score_bars(result, case), out / f"score_bars_{case}.png", dpi=150)
+        traj = save_figure(trajectory_plot(result, case), out / f"trajectory_{case}.png", dpi=150)
         written[f"score_bars_{case}"], written[f"trajectory_{case}"] = bars, traj
         figures += [f"![scores, {case}]({bars.name})", f"![trajectory, {case}]({traj.name})"]
-    written["markdown"].write_text(md + "\n## Figures\n\n" + "\n\n".join(figures) + "\n")
+    written["markdown"].write_text(study_markdown(result) + "\n## Figures\n\n" + "\n\n".join(figures) + "\n")
     return written
+
+
+def write_report(result: StudyResult, out_dir: str | Path, overwrite: bool = False) -> dict[str, Path]:
+    """results.json, results.md, score_bars_<case>.png and trajectory_<case>.png in out_dir
+    (under the output-directory policy of dualid.report.outdir; overwrite = --force)."""
+    return write_output(out_dir, overwrite, lambda d: _write_study(result, d))
+
+
+def reproduce(system_name: str, out_dir: str | Path, case: Case = "both", seeds: int = 5, noise: str = "realistic",
+              size: str = "default", ablation: None | str | np.ndarray = None, overwrite: bool = False,
+              progress=None) -> StudyResult:
+    """Simulate the named system, run the study and write its report to out_dir."""
+    check_output_dir(out_dir, overwrite)  # fail before the (long) study, not after
+    result = simulate_and_run(system_name, case, seeds, noise, size, ablation, progress)
+    write_report(result, out_dir, overwrite=overwrite)
+    return result

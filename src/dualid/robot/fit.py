@@ -28,19 +28,20 @@ from typing import Callable
 
 import numpy as np
 
+from dualid.data.io import ColumnMap, load_log, read_table
+from dualid.data.preprocessing import preprocess
+from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError, DualidError
 from dualid.estimators import OLS, IdentificationResult
 from dualid.estimators.least_squares import covariance_weight, energy_statistics, statistics
-from dualid.estimators.methods import make_estimator, method as method_entry
-from dualid.data.io import ColumnMap, load_log, read_table
-from dualid.problem import build_problem
+from dualid.estimators.methods import make_estimator
+from dualid.estimators.methods import method as method_entry
+from dualid.evaluation.validation import Validation, validate
+from dualid.linalg import pinv_psd
 from dualid.model.joint_terms import JointTermsModel, with_joint_terms
 from dualid.model.rigid_body import RigidBodyModel
-from dualid.problem import Identifiability, IdentificationProblem
-from dualid.data.preprocessing import preprocess
-from dualid.data.trajectory import Trajectory
+from dualid.problem import Identifiability, IdentificationProblem, build_problem
 from dualid.robot.config import FitConfig
-from dualid.robot.validate import Validation, validate
 
 NOT_IDENTIFIABLE = "not identifiable"
 
@@ -205,11 +206,8 @@ def standard_errors(method: str, problem: IdentificationProblem, result: Identif
         H, dof = statistics(problem, W).H, problem.N * problem.n
     else:
         H, dof = energy_statistics(problem).H, problem.N
-    d = np.sqrt(np.clip(np.diag(H), 0, None))
-    d[d == 0] = 1.0
-    Hs_pinv = np.linalg.pinv(H / np.outer(d, d), rcond=1e-10, hermitian=True)
-    rank = int(np.linalg.matrix_rank(H / np.outer(d, d), tol=1e-10 * np.abs(H / np.outer(d, d)).max(), hermitian=True))
-    var = np.diag(Hs_pinv) / d**2
+    H_pinv, rank = pinv_psd(H)
+    var = np.diag(H_pinv)
     sigma2 = float(result.info.get("data_objective", result.objective)) / max(dof - rank, 1)
     unident = set(ident.unidentifiable)
     return tuple(

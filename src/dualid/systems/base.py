@@ -11,8 +11,8 @@ from typing import Literal
 
 import numpy as np
 
-from dualid.model.base import Model
 from dualid.data.trajectory import Trajectory
+from dualid.model.base import Model
 
 Noise = Literal["realistic", "ideal", "none"]  # ideal: i.i.d. Gaussian force noise only; none: exact data
 Size = Literal["default", "small"]  # small: a few short runs, for tests and smoke runs

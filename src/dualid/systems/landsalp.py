@@ -22,9 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from dualid.model.landsalp import LandSalpModel, configuration
 from dualid.data.preprocessing import lowpass
 from dualid.data.trajectory import Trajectory
+from dualid.model.landsalp import LandSalpModel, configuration
 
 # published identified values (Yang & Hatton): link b (longitudinal, lateral, rotational), joint dampings
 TRUE_THETA = np.array([55.94, 42.73, 0.6726, 73.66, 86.93, 0.7322, 57.76, 23.30, 0.2602, 0.01154, 0.01369])

@@ -8,9 +8,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from dualid.model.pan_tilt import PanTilt, jacobian
 from dualid.data.preprocessing import savgol_derivatives
 from dualid.data.trajectory import Trajectory
+from dualid.model.pan_tilt import PanTilt, jacobian
 
 TRUE_THETA = np.array([0.5, 0.02, 0.03])  # m [kg], b_pan, b_tilt [N m s/rad] (invented)
 NOMINAL_THETA = np.array([0.6, 0.01, 0.01])  # a "CAD" guess, deliberately off

@@ -1,0 +1,31 @@
+"""Writing identified URDFs (the text comes from ``dualid.model.urdf.identified_urdf``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from dualid.errors import OutputError
+from dualid.model.rigid_body import RigidBodyModel
+from dualid.model.urdf import identified_urdf
+
+
+def write_urdf(
+    source_urdf: str | Path,
+    model: RigidBodyModel,
+    theta: np.ndarray,
+    out_path: str | Path,
+    overwrite: bool = False,
+    friction: dict[str, tuple[float, float]] | None = None,
+    armature: dict[str, float] | None = None,
+) -> Path:
+    """Write ``identified_urdf(source_urdf, model, θ, ...)`` to ``out_path``; refuses an existing file
+    unless overwrite=True. Returns the written path."""
+    out_path = Path(out_path)
+    if out_path.exists() and not overwrite:
+        raise OutputError(f"write_urdf: {out_path} already exists; pass overwrite=True to replace it")
+    text = identified_urdf(source_urdf, model, theta, out_path.parent, friction=friction, armature=armature)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    out_path.write_text(text)
+    return out_path

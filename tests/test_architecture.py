@@ -1,0 +1,146 @@
+"""The package's layering, stated as a test: a numeric core (data → model → problem → estimators →
+evaluation, plus the simulated systems) that never draws or writes files, applications above it
+(paper, robot, bench) that do not import each other, one report leaf that writes and draws, and the
+CLI on top. No import circles, no ``matplotlib.use``, no module over 400 lines."""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / "src" / "dualid"
+LAYERS = {
+    "dualid.errors": 0, "dualid.linalg": 0,
+    "dualid.data": 1,
+    "dualid.model": 2,
+    "dualid.problem": 3,
+    "dualid.estimators": 4,
+    "dualid.evaluation": 5,
+    "dualid.systems": 6,
+    "dualid.paper": 7, "dualid.robot": 7, "dualid.bench": 7, "dualid.excite": 7,
+    "dualid.report": 8,
+    "dualid.cli": 9,
+}
+CORE = 6  # layers 0..6 are the numeric core
+APPLICATIONS = ("dualid.paper", "dualid.robot", "dualid.bench", "dualid.excite")
+GUI_OR_CLI = ("matplotlib", "typer", "rich")
+WRITERS = ("write_text", "write_bytes", "savefig", "to_parquet", "to_csv", "savez", "savez_compressed", "mkdir",
+           "safe_dump", "dump")
+MAX_LINES = 400
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(SRC.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+MODULES = {_module_name(p): p for p in sorted(SRC.rglob("*.py"))}
+
+
+def _layer_key(module: str) -> str:
+    for key in sorted(LAYERS, key=len, reverse=True):
+        if module == key or module.startswith(key + "."):
+            return key
+    raise AssertionError(f"module {module} belongs to no layer; add its package to LAYERS")
+
+
+def _imports(path: Path) -> list[tuple[str, int]]:
+    """(imported module, line) for every import in the file, at any depth (lazy imports count)."""
+    tree = ast.parse(path.read_text())
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [(a.name, node.lineno) for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.append((node.module, node.lineno))
+            out += [(f"{node.module}.{a.name}", node.lineno) for a in node.names
+                    if f"{node.module}.{a.name}" in MODULES]
+    return out
+
+
+def _internal_edges() -> dict[str, set[str]]:
+    edges: dict[str, set[str]] = {m: set() for m in MODULES}
+    for m, path in MODULES.items():
+        for target, _ in _imports(path):
+            if target.startswith("dualid") and target in MODULES and target != m:
+                edges[m].add(target)
+    return edges
+
+
+def test_every_module_is_in_a_layer():
+    for m in MODULES:
+        if m != "dualid":
+            _layer_key(m)
+
+
+@pytest.mark.parametrize("module", [m for m in MODULES if m != "dualid"])
+def test_imports_follow_the_layers(module):
+    key = _layer_key(module)
+    layer = LAYERS[key]
+    bad = []
+    for target, line in _imports(MODULES[module]):
+        top = target.split(".")[0]
+        if target == "dualid":
+            bad.append(f"line {line}: imports the package root (the public API); import the defining module")
+        elif target.startswith("dualid."):
+            tkey = _layer_key(target)
+            if LAYERS[tkey] > layer:
+                bad.append(f"line {line}: {target} (layer {LAYERS[tkey]}) is above {key} (layer {layer})")
+            elif key in APPLICATIONS and tkey in APPLICATIONS and tkey != key:
+                bad.append(f"line {line}: application {key} imports application {tkey}")
+        elif layer <= CORE and top in GUI_OR_CLI:
+            bad.append(f"line {line}: the numeric core imports {top}")
+    assert not bad, f"{module}:\n" + "\n".join(bad)
+
+
+def test_no_import_circles():
+    edges = _internal_edges()
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(m: str) -> list[str] | None:
+        state[m] = 1
+        stack.append(m)
+        for t in sorted(edges[m]):
+            # a package's __init__ re-exporting its own submodules is not a circle
+            if m == t.rsplit(".", 1)[0] or t == m.rsplit(".", 1)[0]:
+                continue
+            if state.get(t) == 1:
+                return stack[stack.index(t):] + [t]
+            if t not in state and (cycle := visit(t)):
+                return cycle
+        stack.pop()
+        state[m] = 2
+        return None
+
+    for m in sorted(edges):
+        if m not in state and (cycle := visit(m)):
+            pytest.fail("import circle: " + " -> ".join(cycle))
+
+
+def test_the_core_writes_no_files():
+    bad = []
+    for m, path in MODULES.items():
+        if m == "dualid" or LAYERS[_layer_key(m)] > CORE:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in WRITERS:
+                bad.append(f"{m}:{node.lineno} calls .{node.func.attr}()")
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "open":
+                modes = [a.value for a in node.args[1:2] if isinstance(a, ast.Constant)]
+                modes += [k.value.value for k in node.keywords if k.arg == "mode" and isinstance(k.value, ast.Constant)]
+                if any(set(str(x)) & set("wax+") for x in modes):
+                    bad.append(f"{m}:{node.lineno} opens a file for writing")
+    assert not bad, "\n".join(bad)
+
+
+def test_nobody_sets_the_matplotlib_backend():
+    bad = [f"{m}:{n.lineno}" for m, p in MODULES.items() for n in ast.walk(ast.parse(p.read_text()))
+           if isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute) and n.func.attr == "use"
+           and isinstance(n.func.value, ast.Name) and n.func.value.id == "matplotlib"]
+    assert not bad, f"matplotlib.use called at {bad}"
+
+
+def test_no_module_is_too_long():
+    long = {m: n for m, p in MODULES.items() if (n := len(p.read_text().splitlines())) > MAX_LINES}
+    assert not long, f"modules over {MAX_LINES} lines: {long}"
