@@ -144,3 +144,22 @@ def test_nobody_sets_the_matplotlib_backend():
 def test_no_module_is_too_long():
     long = {m: n for m, p in MODULES.items() if (n := len(p.read_text().splitlines())) > MAX_LINES}
     assert not long, f"modules over {MAX_LINES} lines: {long}"
+
+
+def test_importing_dualid_keeps_the_users_matplotlib_backend():
+    import subprocess
+    import sys
+
+    code = ("import matplotlib; matplotlib.use('svg'); import importlib, pkgutil, dualid\n"
+            "for m in pkgutil.walk_packages(dualid.__path__, 'dualid.'):\n"
+            "    if m.name != 'dualid.cli.__main__': importlib.import_module(m.name)\n"
+            "print(matplotlib.get_backend())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "svg"
+
+
+def test_the_public_api_resolves():
+    import dualid
+
+    missing = [n for n in dualid.__all__ if not hasattr(dualid, n)]
+    assert not missing and len(set(dualid.__all__)) == len(dualid.__all__)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from dualid import OLS, WLS, DualMetric, EnergyLS, RegularizedWLS
-from dualid.errors import ConsistencyError, DataError, IdentifiabilityError, MetricError, SolverError
+from dualid.errors import ConfigError, ConsistencyError, DataError, IdentifiabilityError, MetricError, SolverError
 from dualid.model.metric import AffineMetric
 from dualid.problem import IdentificationProblem, build_problem
 from dualid.systems import pan_tilt
@@ -133,8 +133,8 @@ def test_nominal_must_be_physically_consistent():
         RegularizedWLS(theta0=bad).fit(problem)
     with pytest.raises(ValueError, match=r"nominal θ₀: expected shape \(9,\), got \(3,\)"):
         RegularizedWLS(theta0=theta[:3]).fit(problem)
-    with pytest.raises(ValueError, match=r"regularizer: expected 'logdet' or 'pullback', got 'l2'"):
-        RegularizedWLS(theta0=theta, regularizer="l2").fit(problem)
+    with pytest.raises(ConfigError, match=r"^RegularizedWLS: regularizer must be 'logdet' or 'pullback', got 'l2'$"):
+        RegularizedWLS(theta0=theta, regularizer="l2")
 
 
 def test_infeasible_constraints_raise_with_the_solver_status():
@@ -162,8 +162,31 @@ def test_metric_that_cannot_be_positive_definite_is_a_metric_error():
 
 def test_unknown_solver_names_are_rejected():
     problem, _ = drag_problem(np.random.default_rng(0), N=20, n=3)
-    with pytest.raises(ValueError, match=r"solver: expected one of \('CLARABEL', 'SCS'\), got 'MOSEK'"):
-        OLS(solver="MOSEK").fit(problem)
+    with pytest.raises(ConfigError, match=r"^OLS: solver must be one of CLARABEL, SCS, got 'MOSEK'$"):
+        OLS(solver="MOSEK")
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: RegularizedWLS(theta0=None), r"^RegularizedWLS: needs a nominal θ₀ \(theta0=...\)$"),
+    (lambda: RegularizedWLS(theta0=[1.0, float("nan")]), r"^RegularizedWLS: theta0 must be a finite vector"),
+    (lambda: RegularizedWLS(theta0=[1.0], gamma=float("nan")), r"^RegularizedWLS: gamma must be a finite number ≥ 0, got nan$"),
+    (lambda: RegularizedWLS(theta0=[1.0], gamma=-1), r"^RegularizedWLS: gamma must be a finite number ≥ 0, got -1$"),
+    (lambda: WLS(covariance=[[1.0, 2.0], [2.0, 1.0]]), r"^WLS: covariance must be a finite symmetric positive-definite matrix$"),
+    (lambda: WLS(covariance=[1.0, 2.0]), r"^WLS: covariance must be a square \(n, n\) matrix, got shape \(2,\)$"),
+    (lambda: OLS(constrained="yes"), r"^OLS: constrained must be True or False, got 'yes'$"),
+    (lambda: OLS(solver_options={"max_iter": [1, 2]}), r"^OLS: solver_options: option 'max_iter' must be a number, string or bool, got list$"),
+])
+def test_hyperparameters_are_checked_at_construction(make, message):
+    with pytest.raises(ConfigError, match=message):
+        make()
+
+
+def test_estimators_are_values():
+    theta0 = np.array([1.0, 2.0])
+    a = RegularizedWLS(theta0=theta0, gamma=0.1, solver_options={"max_iter": 50})
+    b = RegularizedWLS(theta0=theta0.copy(), gamma=0.1, solver_options={"max_iter": 50})
+    assert a == b and hash(a) == hash(b) and len({a, b, OLS(), OLS()}) == 2
+    assert WLS(covariance=np.eye(2)) == WLS(covariance=[[1.0, 0.0], [0.0, 1.0]])
 
 
 def test_per_equation_gamma_scales_with_the_number_of_equations():

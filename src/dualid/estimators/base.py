@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from dualid.errors import ConsistencyError, IdentifiabilityError, SolverError
+from dualid.errors import ConfigError, ConsistencyError, IdentifiabilityError, SolverError
 from dualid.model.parameters import ParameterSpace
 from dualid.problem import IdentificationProblem
 
@@ -21,6 +23,34 @@ DEFAULT_OPTIONS = {
     "CLARABEL": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10, "max_iter": 500},
     "SCS": {"eps": 1e-9, "max_iters": 200000},
 }
+
+
+def freeze_options(options: Mapping[str, Any] | None, what: str) -> tuple[tuple[str, Any], ...] | None:
+    """A solver-options mapping as a sorted tuple of (key, value) pairs, so estimators stay hashable
+    values; ``dict(frozen)`` gives it back."""
+    if options is None:
+        return None
+    if not isinstance(options, (Mapping, tuple)):
+        raise ConfigError(f"{what}: expected a mapping of option names to values, got {type(options).__name__}")
+    items = tuple(sorted(dict(options).items()))
+    for key, value in items:
+        if not isinstance(key, str):
+            raise ConfigError(f"{what}: option names must be strings, got {key!r}")
+        if isinstance(value, (list, dict, np.ndarray)):
+            raise ConfigError(f"{what}: option {key!r} must be a number, string or bool, got {type(value).__name__}")
+    return items
+
+
+def check_covariance(covariance, who: str) -> tuple[tuple[float, ...], ...] | None:
+    """A given residual covariance (n, n): symmetric positive definite and finite; stored as tuples."""
+    if covariance is None:
+        return None
+    C = np.asarray(covariance, dtype=float)
+    if C.ndim != 2 or C.shape[0] != C.shape[1] or C.shape[0] == 0:
+        raise ConfigError(f"{who}: covariance must be a square (n, n) matrix, got shape {C.shape}")
+    if not np.all(np.isfinite(C)) or not np.allclose(C, C.T) or np.linalg.eigvalsh(0.5 * (C + C.T))[0] <= 0:
+        raise ConfigError(f"{who}: covariance must be a finite symmetric positive-definite matrix")
+    return tuple(tuple(float(x) for x in row) for row in C)
 
 
 def check_identifiable(problem: IdentificationProblem, rank: int | None = None, what: str = "regressor") -> None:
@@ -117,7 +147,7 @@ def solve_cvxpy(problem, variable, solver: str, solver_options: dict | None, wha
     if solver not in SOLVERS:
         raise ValueError(f"solver: expected one of {SOLVERS}, got {solver!r}")
     options = dict(DEFAULT_OPTIONS.get(solver, {}))
-    options.update(solver_options or {})
+    options.update(dict(solver_options or ()))
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*dimension greater than 2.*")

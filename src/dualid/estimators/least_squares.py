@@ -7,14 +7,20 @@ the samples), so the conic problem handed to the solver has the size of θ, not 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from dualid.errors import ConfigError, DataError
 from dualid.estimators.base import (
+    SOLVERS,
+    check_covariance,
     check_identifiable,
     check_nominal,
     consistency_constraints,
+    freeze_options,
     parameter_scale,
     solve_cvxpy,
 )
@@ -202,10 +208,22 @@ def fit_quadratic(
 
 @dataclass(frozen=True)
 class _Common:
+    """Hyperparameters every quadratic estimator shares, checked at construction. Estimators are
+    values: arrays and option mappings are stored as tuples, so equality and hashing work."""
+
     constrained: bool = True  # physical-consistency constraints (pseudo-inertia ⪰ 0, drag ⪰ 0, bounds)
     solver: str = "CLARABEL"  # or "SCS"
-    solver_options: dict | None = None
+    solver_options: Mapping[str, Any] | None = None
     allow_unidentifiable: bool = False  # accept one minimiser when the data do not determine θ
+
+    def __post_init__(self) -> None:
+        name = type(self).__name__
+        for flag in ("constrained", "allow_unidentifiable"):
+            if not isinstance(getattr(self, flag), (bool, np.bool_)):
+                raise ConfigError(f"{name}: {flag} must be True or False, got {getattr(self, flag)!r}")
+        if self.solver not in SOLVERS:
+            raise ConfigError(f"{name}: solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
+        object.__setattr__(self, "solver_options", freeze_options(self.solver_options, f"{name}: solver_options"))
 
 
 @dataclass(frozen=True)
@@ -244,9 +262,8 @@ def covariance_weight(problem: IdentificationProblem, covariance, reference: _Co
         covariance = np.asarray(covariance, dtype=float)
         source = "given"
         if covariance.shape != (problem.n, problem.n):
-            raise ValueError(f"covariance: expected shape ({problem.n}, {problem.n}), got {covariance.shape}")
-        if not np.allclose(covariance, covariance.T) or np.linalg.eigvalsh(covariance)[0] <= 0:
-            raise ValueError("covariance: expected a symmetric positive-definite matrix")
+            raise DataError(f"covariance: expected shape ({problem.n}, {problem.n}) for this problem's "
+                            f"{problem.n} coordinates, got {covariance.shape}")
     W = np.linalg.inv(covariance)
     return 0.5 * (W + W.T), {"covariance": source, "covariance_diag": covariance.diagonal().tolist()}
 
@@ -255,8 +272,12 @@ def covariance_weight(problem: IdentificationProblem, covariance, reference: _Co
 class WLS(_Common):
     """Covariance-weighted least squares: Σ r_iᵀ Σ̂⁻¹ r_i, Σ̂ given or from the OLS residuals."""
 
-    covariance: np.ndarray | None = None  # (n, n)
+    covariance: np.ndarray | None = None  # (n, n) symmetric positive definite; None: from OLS residuals
     name = "wls"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "covariance", check_covariance(self.covariance, "WLS"))
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
         W, info = covariance_weight(problem, self.covariance, self)
@@ -296,17 +317,25 @@ class RegularizedWLS(_Common):
     per_equation: bool = False  # γ_eff = γ·N·n: with W = Σ̂⁻¹ the data term is ≈ N·n at its optimum,
     # so a per-equation γ weighs the prior the same against 20 samples as against 20,000
 
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.regularizer not in ("logdet", "pullback"):
+            raise ConfigError(f"RegularizedWLS: regularizer must be 'logdet' or 'pullback', got {self.regularizer!r}")
+        if self.theta0 is None:
+            raise ConfigError("RegularizedWLS: needs a nominal θ₀ (theta0=...)")
+        theta0 = np.asarray(self.theta0, dtype=float)
+        if theta0.ndim != 1 or not np.all(np.isfinite(theta0)):
+            raise ConfigError(f"RegularizedWLS: theta0 must be a finite vector, got {self.theta0!r}")
+        object.__setattr__(self, "theta0", tuple(theta0.tolist()))
+        if not isinstance(self.gamma, (int, float, np.number)) or not (np.isfinite(self.gamma) and self.gamma >= 0):
+            raise ConfigError(f"RegularizedWLS: gamma must be a finite number ≥ 0, got {self.gamma!r}")
+        object.__setattr__(self, "covariance", check_covariance(self.covariance, "RegularizedWLS"))
+
     @property
     def name(self) -> str:
         return f"{self.regularizer}_wls"
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
-        if self.regularizer not in ("logdet", "pullback"):
-            raise ValueError(f"regularizer: expected 'logdet' or 'pullback', got {self.regularizer!r}")
-        if self.theta0 is None:
-            raise ValueError("RegularizedWLS needs a nominal θ₀ (theta0=...)")
-        if not (np.isfinite(self.gamma) and self.gamma >= 0):
-            raise ValueError(f"gamma: expected a finite number ≥ 0, got {self.gamma}")
         theta0 = check_nominal(problem.parameters, self.theta0, strict=True)
         W, info = covariance_weight(problem, self.covariance, self)
         gamma = float(self.gamma) * (problem.N * problem.n if self.per_equation else 1.0)
