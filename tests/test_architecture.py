@@ -163,3 +163,17 @@ def test_the_public_api_resolves():
 
     missing = [n for n in dualid.__all__ if not hasattr(dualid, n)]
     assert not missing and len(set(dualid.__all__)) == len(dualid.__all__)
+
+
+BUILTIN_ERRORS = {"ValueError", "TypeError", "KeyError", "IndexError", "FileNotFoundError", "FileExistsError",
+                  "RuntimeError", "OSError", "PermissionError", "NotImplementedError"}
+
+
+def test_every_error_raised_on_purpose_is_a_dualid_error():
+    bad = []
+    for m, path in MODULES.items():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Raise) and isinstance(node.exc, ast.Call) and isinstance(node.exc.func, ast.Name) \
+                    and node.exc.func.id in BUILTIN_ERRORS:
+                bad.append(f"{m}:{node.lineno} raises {node.exc.func.id}")
+    assert not bad, "raise a dualid.errors type instead:\n" + "\n".join(bad)

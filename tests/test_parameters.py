@@ -4,6 +4,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from dualid.errors import ModelError
 from dualid.model.parameters import ParameterBlock, ParameterSpace, pseudo_inertia_basis, rigid_body_space
 from tests.factories import box_inertia
 
@@ -41,7 +42,7 @@ def test_block_and_space_errors_are_explicit():
         ParameterSpace(("a", "a"), ("kg", "kg"))
     with pytest.raises(ValueError, match=r"block 'x': parameters \[0\] already in another block"):
         ParameterSpace(("a",), ("kg",), (ParameterBlock("w", "nonnegative", (0,)), ParameterBlock("x", "free", (0,))))
-    with pytest.raises(KeyError, match=r"no parameter named 'c'"):
+    with pytest.raises(ModelError, match=r"^no parameter named 'c'; parameters are \['a'\]$"):
         ParameterSpace(("a",), ("kg",)).index("c")
 
 

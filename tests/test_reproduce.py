@@ -133,7 +133,7 @@ def test_input_errors(system):
         run_study(system, case="high", methods=("ols",), ablation="meters")
     with pytest.raises(ValueError, match=r"ablation: expected a diagonal \(2,\) or a matrix \(2, 2\), got shape \(3,\)"):
         run_study(system, case="high", methods=("ols",), ablation=np.ones(3))
-    with pytest.raises(TypeError, match="progress: expected a callable"):
+    with pytest.raises(ConfigError, match="^progress: expected a callable"):
         run_study(system, case="high", methods=("ols",), progress=42)
 
 

@@ -36,3 +36,12 @@ class ConfigError(DualidError, ValueError):
 
 class OutputError(DualidError, OSError):
     """An output file or directory that cannot be written under dualid's output policy."""
+
+
+class ModelError(DualidError, ValueError):
+    """A model that cannot be built or used as given: a URDF, a parameter space, a metric, a joint
+    selection; the message names the file, body or joint."""
+
+
+class MissingFileError(DataError, FileNotFoundError):
+    """An input file (log, URDF, config, data set part) that does not exist; the message names it."""

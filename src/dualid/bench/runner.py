@@ -35,6 +35,8 @@ from typing import Any
 
 import numpy as np
 
+from dualid.errors import ConfigError
+
 PROBLEMS = ("crazyflie", "arm7")
 SOLVERS = ("newton", "ols_constrained", "sdp_clarabel", "sdp_scs")  # run order within one N
 SIZES = (100, 1_000, 10_000, 100_000, 1_000_000)
@@ -60,18 +62,18 @@ class BenchConfig:
     def __post_init__(self):
         for what, given, known in (("problem", self.problems, PROBLEMS), ("solver", self.solvers, SOLVERS)):
             if not given:
-                raise ValueError(f"{what}s: expected at least one of {', '.join(known)}, got none")
+                raise ConfigError(f"{what}s: expected at least one of {', '.join(known)}, got none")
             unknown = [x for x in given if x not in known]
             if unknown:
-                raise ValueError(f"unknown {what} {unknown[0]!r}; expected one of {', '.join(known)}")
+                raise ConfigError(f"unknown {what} {unknown[0]!r}; expected one of {', '.join(known)}")
         if self.max_n < SIZES[0]:
-            raise ValueError(f"max_n: expected at least {SIZES[0]} (the smallest N), got {self.max_n}")
+            raise ConfigError(f"max_n: expected at least {SIZES[0]} (the smallest N), got {self.max_n}")
         for name in ("budget", "timeout"):
             if not getattr(self, name) > 0:
-                raise ValueError(f"{name}: expected a positive number of seconds, got {getattr(self, name)}")
+                raise ConfigError(f"{name}: expected a positive number of seconds, got {getattr(self, name)}")
         bad = [k for k in self.caps if k not in PROBLEMS]
         if bad:
-            raise ValueError(f"caps: unknown problem {bad[0]!r}; expected one of {', '.join(PROBLEMS)}")
+            raise ConfigError(f"caps: unknown problem {bad[0]!r}; expected one of {', '.join(PROBLEMS)}")
         object.__setattr__(self, "problems", tuple(self.problems))
         object.__setattr__(self, "solvers", tuple(s for s in SOLVERS if s in self.solvers))
         object.__setattr__(self, "caps", dict(self.caps))
@@ -128,7 +130,7 @@ def _pinocchio_model(name: str):
             inertia = pin.Inertia(2.0 - 0.2 * j, np.array([0.01, 0.0, 0.12]), np.diag([0.05, 0.05, 0.01]))
             m.appendBodyToJoint(parent, inertia, pin.SE3.Identity())
         return m
-    raise ValueError(f"unknown problem {name!r}; expected one of {', '.join(PROBLEMS)}")
+    raise ConfigError(f"unknown problem {name!r}; expected one of {', '.join(PROBLEMS)}")
 
 
 def base_samples(name: str, cache: Path, count: int = BASE_SAMPLES) -> Path:
@@ -136,7 +138,7 @@ def base_samples(name: str, cache: Path, count: int = BASE_SAMPLES) -> Path:
     names for ``count`` random states, cached as ``cache/NAME-COUNT.npz``. The states come from fixed
     seeds, so fewer samples are a prefix of more."""
     if not 1 <= count <= BASE_SAMPLES:
-        raise ValueError(f"count: expected 1 … {BASE_SAMPLES} samples, got {count}")
+        raise ConfigError(f"count: expected 1 … {BASE_SAMPLES} samples, got {count}")
     cache = Path(cache)
     path = cache / f"{name}-{count}.npz"
     if path.exists():
@@ -172,7 +174,7 @@ def build_problem(path: Path, N: int):
     from dualid.problem import IdentificationProblem
 
     if N < 1:
-        raise ValueError(f"N: expected a positive number of samples, got {N}")
+        raise ConfigError(f"N: expected a positive number of samples, got {N}")
     data = np.load(path)
     count = data["Y"].shape[0]
     idx = np.arange(N) % count
@@ -198,7 +200,7 @@ def _estimator(solver: str):
         return DualMetric(solver="sdp", sdp_solver="SCS", allow_unidentifiable=True)
     if solver == "ols_constrained":
         return OLS(allow_unidentifiable=True)
-    raise ValueError(f"unknown solver {solver!r}; expected one of {', '.join(SOLVERS)}")
+    raise ConfigError(f"unknown solver {solver!r}; expected one of {', '.join(SOLVERS)}")
 
 
 # --- one run ------------------------------------------------------------------------------------
@@ -337,11 +339,11 @@ def load_results(path: Path) -> dict:
     result = json.loads(path.read_text())
     missing = [k for k in ("machine", "noise", "base_samples", "runs") if k not in result]
     if missing:
-        raise ValueError(f"{path}: expected a benchmark results.json with keys machine, noise, base_samples, "
+        raise ConfigError(f"{path}: expected a benchmark results.json with keys machine, noise, base_samples, "
                          f"runs; missing {', '.join(missing)}")
     for i, r in enumerate(result["runs"]):
         if any(k not in r for k in RUN_KEYS) or ("error" not in r and "wall_time_s" not in r):
-            raise ValueError(f"{path}: run {i} needs problem, solver, N and wall_time_s (or error), got {sorted(r)}")
+            raise ConfigError(f"{path}: run {i} needs problem, solver, N and wall_time_s (or error), got {sorted(r)}")
     return result
 
 
@@ -356,9 +358,9 @@ def parse_list(text: str, known: Sequence[str], what: str) -> tuple[str, ...]:
     items = tuple(x.strip() for x in text.split(",") if x.strip())
     for x in items:
         if x not in known:
-            raise ValueError(f"unknown {what} {x!r}; expected one of {', '.join(known)}")
+            raise ConfigError(f"unknown {what} {x!r}; expected one of {', '.join(known)}")
     if not items:
-        raise ValueError(f"expected a comma-separated list of {what}s from {', '.join(known)}, got {text!r}")
+        raise ConfigError(f"expected a comma-separated list of {what}s from {', '.join(known)}, got {text!r}")
     return items
 
 
@@ -368,6 +370,6 @@ def parse_caps(text: str) -> dict[str, int]:
     for item in (x.strip() for x in text.split(",") if x.strip()):
         name, sep, value = item.partition("=")
         if not sep or not value.strip().isdigit():
-            raise ValueError(f"cap: expected PROBLEM=N (e.g. arm7=100000), got {item!r}")
+            raise ConfigError(f"cap: expected PROBLEM=N (e.g. arm7=100000), got {item!r}")
         caps[name.strip()] = int(value)
     return caps

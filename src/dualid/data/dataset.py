@@ -22,7 +22,7 @@ from typing import Mapping
 import numpy as np
 
 from dualid.data.trajectory import Trajectory
-from dualid.errors import DataError
+from dualid.errors import DataError, MissingFileError
 
 FORMAT = "dualid-dataset"
 VERSION = 1
@@ -44,7 +44,7 @@ def _load_arrays(directory: Path, rel: str | None) -> dict[str, np.ndarray]:
         return {}
     path = directory / rel
     if not path.is_file():
-        raise FileNotFoundError(f"dataset meta file not found: {path} (listed in {directory / 'dataset.json'})")
+        raise MissingFileError(f"dataset meta file not found: {path} (listed in {directory / 'dataset.json'})")
     with np.load(path, allow_pickle=False) as z:
         return {k: z[k] for k in z.files}
 
@@ -54,7 +54,7 @@ def load_dataset(directory) -> tuple[dict[str, list[Trajectory]], dict]:
     directory = Path(directory)
     index = directory / "dataset.json"
     if not index.is_file():
-        raise FileNotFoundError(f"no dataset.json in {directory}; not a dataset written by dualid.report.save_dataset")
+        raise MissingFileError(f"no dataset.json in {directory}; not a dataset written by dualid.report.save_dataset")
     doc = json.loads(index.read_text())
     if doc.get("format") != FORMAT:
         raise DataError(f"{index}: format {doc.get('format')!r}, expected {FORMAT!r}")
@@ -67,7 +67,7 @@ def load_dataset(directory) -> tuple[dict[str, list[Trajectory]], dict]:
         for e in entries:
             path = directory / e["file"]
             if not path.is_file():
-                raise FileNotFoundError(f"dataset run file not found: {path} (listed in {index})")
+                raise MissingFileError(f"dataset run file not found: {path} (listed in {index})")
             if path.suffix == ".npz":
                 with np.load(path, allow_pickle=False) as z:
                     ch = {k: z[k] for k in z.files}

@@ -23,7 +23,7 @@ from typing import Iterable, Mapping, Sequence
 import numpy as np
 
 from dualid.data.trajectory import Trajectory
-from dualid.errors import DataError
+from dualid.errors import DataError, MissingFileError
 
 # unit -> factor to SI, per quantity
 UNITS: dict[str, dict[str, float]] = {
@@ -232,7 +232,7 @@ def load_log(
         )
 
     if not path.exists():
-        raise FileNotFoundError(f"log file not found: {path}")
+        raise MissingFileError(f"log file not found: {path}")
     if path.suffix.lower() not in FORMATS:
         raise DataError(f"{path}: unknown log format {path.suffix!r}; expected one of {', '.join(FORMATS)}")
     data, available = read_table(path)

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualid.data.trajectory import Trajectory
-from dualid.errors import MetricError
+from dualid.errors import DataError, MetricError
 from dualid.model.base import Model
 from dualid.model.metric import AffineMetric
 
@@ -65,6 +65,6 @@ def measured_signal(model: Model, trajectory: Trajectory) -> np.ndarray:
     """The signal forward dynamics predicts: accelerations (inertia) or velocities (drag)."""
     if model.kind == "inertia":
         if trajectory.a is None:
-            raise ValueError(f"trajectory {trajectory.name!r} has no accelerations to compare with")
+            raise DataError(f"trajectory {trajectory.name!r} has no accelerations to compare with")
         return trajectory.a
     return trajectory.v

@@ -19,6 +19,8 @@ import numbers
 
 import numpy as np
 
+from dualid.errors import DataError
+
 # a signal whose centered norm is below this fraction of its raw norm is treated as constant
 _CONSTANT_RTOL = 1e-12
 
@@ -30,10 +32,10 @@ def _is_constant(x: np.ndarray) -> bool:
 
 def _check_shift(max_shift, T: int) -> int:
     if isinstance(max_shift, (bool, np.bool_)) or not isinstance(max_shift, numbers.Integral):
-        raise TypeError(f"max_shift: expected an integer number of samples, got {max_shift!r}")
+        raise DataError(f"max_shift: expected an integer number of samples, got {max_shift!r}")
     max_shift = int(max_shift)
     if max_shift < 0 or max_shift > T - 2:
-        raise ValueError(
+        raise DataError(
             f"max_shift: expected an integer in [0, {T - 2}] for signals of {T} samples "
             f"(at least 2 overlapping samples), got {max_shift}"
         )
@@ -48,20 +50,20 @@ def max_normalized_xcorr(pred: np.ndarray, meas: np.ndarray, max_shift: int) -> 
     pred = np.asarray(pred, dtype=float)
     meas = np.asarray(meas, dtype=float)
     if pred.ndim != 1 or meas.ndim != 1:
-        raise ValueError(f"max_normalized_xcorr: expected two 1-D signals, got shapes {pred.shape} and {meas.shape}")
+        raise DataError(f"max_normalized_xcorr: expected two 1-D signals, got shapes {pred.shape} and {meas.shape}")
     if pred.shape != meas.shape:
-        raise ValueError(
+        raise DataError(
             f"max_normalized_xcorr: signals must have the same length, got {pred.shape[0]} and {meas.shape[0]}"
         )
     T = pred.shape[0]
     if T < 2:
-        raise ValueError(f"max_normalized_xcorr: expected signals of at least 2 samples, got {T}")
+        raise DataError(f"max_normalized_xcorr: expected signals of at least 2 samples, got {T}")
     max_shift = _check_shift(max_shift, T)
     for name, x in (("pred", pred), ("meas", meas)):
         if not np.all(np.isfinite(x)):
-            raise ValueError(f"max_normalized_xcorr: {name} has non-finite values (NaN or inf)")
+            raise DataError(f"max_normalized_xcorr: {name} has non-finite values (NaN or inf)")
         if _is_constant(x):
-            raise ValueError(
+            raise DataError(
                 f"max_normalized_xcorr: {name} is constant (value {x[0]:.6g}); the correlation of a "
                 "constant signal is undefined"
             )
@@ -76,7 +78,7 @@ def max_normalized_xcorr(pred: np.ndarray, meas: np.ndarray, max_shift: int) -> 
             continue
         best = max(best, float(a @ b) / denom)
     if best == -np.inf:
-        raise ValueError("max_normalized_xcorr: every overlap within the shift window is constant")
+        raise DataError("max_normalized_xcorr: every overlap within the shift window is constant")
     return float(np.clip(best, -1.0, 1.0))
 
 
@@ -84,7 +86,7 @@ def shift_window(slowest_period: float, dt: float) -> int:
     """Samples in ±5° of the slowest period: round((T/72) / dt)."""
     for name, x in (("slowest_period", slowest_period), ("dt", dt)):
         if not (np.isfinite(x) and x > 0):
-            raise ValueError(f"shift_window: {name} must be a positive finite number of seconds, got {x!r}")
+            raise DataError(f"shift_window: {name} must be a positive finite number of seconds, got {x!r}")
     return int(round((slowest_period / 72.0) / dt))
 
 
@@ -92,7 +94,7 @@ def _check_pair(pred, meas, what: str) -> tuple[np.ndarray, np.ndarray]:
     pred = np.asarray(pred, dtype=float)
     meas = np.asarray(meas, dtype=float)
     if pred.ndim != 2 or meas.ndim != 2 or pred.shape != meas.shape:
-        raise ValueError(
+        raise DataError(
             f"{what}: pred and meas must both have shape (T, n) and agree, got {pred.shape} and {meas.shape}"
         )
     return pred, meas
@@ -120,7 +122,7 @@ def metric_rmse(pred: np.ndarray, meas: np.ndarray, M: np.ndarray) -> float:
     M = np.asarray(M, dtype=float)
     T, n = pred.shape
     if M.shape != (T, n, n):
-        raise ValueError(f"metric_rmse: expected M of shape {(T, n, n)}, got {M.shape}")
+        raise DataError(f"metric_rmse: expected M of shape {(T, n, n)}, got {M.shape}")
     e = pred - meas
     quad = np.einsum("ta,tab,tb->t", e, M, e)
     return float(np.sqrt(max(float(np.mean(quad)), 0.0)))

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualid.data.trajectory import Trajectory
-from dualid.errors import MetricError
+from dualid.errors import DataError, MetricError
 from dualid.evaluation.prediction import forward_dynamics
 from dualid.evaluation.scores import max_normalized_xcorr, rmse
 from dualid.model.base import Model
@@ -97,12 +97,12 @@ class Validation:
 def validate_run(model: Model, theta: np.ndarray, traj: Trajectory, xcorr_window: float = 0.02) -> RunValidation:
     """Effort and acceleration predictions of θ̂ on one run (which must carry accelerations)."""
     if traj.a is None:
-        raise ValueError(
+        raise DataError(
             f"validate: run {traj.name!r} has no accelerations; differentiate it first (preprocessing step "
             "'differentiate')"
         )
     if tuple(traj.coordinates) != tuple(model.coordinates):
-        raise ValueError(f"validate: run {traj.name!r} has coordinates {traj.coordinates}, the model {model.coordinates}")
+        raise DataError(f"validate: run {traj.name!r} has coordinates {traj.coordinates}, the model {model.coordinates}")
     theta = np.asarray(theta, dtype=float)
     dt = float(np.median(np.diff(traj.t)))
     max_shift = int(round(xcorr_window / dt))
@@ -134,6 +134,6 @@ def validate(
 ) -> Validation:
     """``validate_run`` on every run."""
     if not trajectories:
-        raise ValueError("validate: no held-out runs given")
+        raise DataError("validate: no held-out runs given")
     runs = tuple(validate_run(model, theta, t, xcorr_window) for t in trajectories)
     return Validation(label, tuple(model.coordinates), runs)

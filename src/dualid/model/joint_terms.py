@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from dualid.errors import ModelError
 from dualid.model.base import Model
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.parameters import ParameterBlock, ParameterSpace
@@ -36,20 +37,20 @@ class JointTermsModel:
 
     def __post_init__(self) -> None:
         if self.base.kind != "inertia":
-            raise ValueError(
+            raise ModelError(
                 f"with_joint_terms: expected an inertia-dominated model, got kind {self.base.kind!r} "
                 "(a drag model's joint damping belongs in its drag matrix)"
             )
         if not (self.viscous or self.coulomb or self.armature):
-            raise ValueError("with_joint_terms: choose at least one of viscous, coulomb, armature")
+            raise ModelError("with_joint_terms: choose at least one of viscous, coulomb, armature")
         if not (np.isfinite(self.coulomb_velocity) and self.coulomb_velocity > 0):
-            raise ValueError(f"with_joint_terms: coulomb_velocity must be > 0, got {self.coulomb_velocity!r}")
+            raise ModelError(f"with_joint_terms: coulomb_velocity must be > 0, got {self.coulomb_velocity!r}")
         n = len(self.base.coordinates)
         dofs = tuple(int(j) for j in self.dofs)
         if not dofs:
-            raise ValueError("with_joint_terms: no joint selected")
+            raise ModelError("with_joint_terms: no joint selected")
         if len(set(dofs)) != len(dofs) or any(not 0 <= j < n for j in dofs):
-            raise ValueError(f"with_joint_terms: dofs must be distinct indices in 0..{n - 1}, got {dofs}")
+            raise ModelError(f"with_joint_terms: dofs must be distinct indices in 0..{n - 1}, got {dofs}")
         names = [self.base.coordinates[j] for j in dofs]
         p0 = self.base.parameters.p
         groups = [
@@ -75,7 +76,7 @@ class JointTermsModel:
     def index(self, group: str) -> np.ndarray:
         """Indices in θ of one group ("viscous", "coulomb", "armature"), in the order of ``dofs``."""
         if group not in self._offsets:
-            raise KeyError(f"no {group!r} parameters in this model; it has {list(self._offsets)}")
+            raise ModelError(f"no {group!r} parameters in this model; it has {list(self._offsets)}")
         return self._offsets[group] + np.arange(len(self.dofs))
 
     def _joint_columns(self, v: np.ndarray, a: np.ndarray | None) -> np.ndarray:
@@ -144,6 +145,6 @@ def with_joint_terms(
             joints = [joints]
         unknown = [name for name in joints if name not in coordinates]
         if unknown:
-            raise ValueError(f"with_joint_terms: unknown joints {unknown}; valid joints are {list(coordinates)}")
+            raise ModelError(f"with_joint_terms: unknown joints {unknown}; valid joints are {list(coordinates)}")
         dofs = tuple(coordinates.index(name) for name in joints)
     return JointTermsModel(model, dofs, viscous, coulomb, armature, coulomb_velocity)

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dualid.errors import ModelError
+
 
 def _readonly(a: np.ndarray) -> np.ndarray:
     a = np.asarray(a, dtype=float)
@@ -39,13 +41,13 @@ class MetricTerm:
         E = np.asarray(self.E, dtype=float)
         J = np.asarray(self.J, dtype=float)
         if J.ndim != 3:
-            raise ValueError(f"MetricTerm: J must have shape (N, d, n), got {J.shape}")
+            raise ModelError(f"MetricTerm: J must have shape (N, d, n), got {J.shape}")
         N, d, _ = J.shape
         k = len(self.indices)
         if E.shape not in ((k, d, d), (N, k, d, d)):
-            raise ValueError(f"MetricTerm: E must have shape ({k}, {d}, {d}) or ({N}, {k}, {d}, {d}), got {E.shape}")
+            raise ModelError(f"MetricTerm: E must have shape ({k}, {d}, {d}) or ({N}, {k}, {d}, {d}), got {E.shape}")
         if not np.allclose(E, np.swapaxes(E, -1, -2)):
-            raise ValueError("MetricTerm: every E_k must be symmetric")
+            raise ModelError("MetricTerm: every E_k must be symmetric")
         object.__setattr__(self, "indices", tuple(int(i) for i in self.indices))
         object.__setattr__(self, "E", _readonly(E))
         object.__setattr__(self, "J", _readonly(J) if J.strides[0] != 0 else J)
@@ -73,20 +75,20 @@ class AffineMetric:
 
     def __post_init__(self) -> None:
         if not self.terms and self.M0 is None:
-            raise ValueError("AffineMetric needs at least one term or a constant part M0")
+            raise ModelError("AffineMetric needs at least one term or a constant part M0")
         shapes = {(t.J.shape[0], t.J.shape[2]) for t in self.terms}
         if self.M0 is not None:
             M0 = _readonly(self.M0)
             if M0.ndim != 3 or M0.shape[1] != M0.shape[2]:
-                raise ValueError(f"AffineMetric: M0 must have shape (N, n, n), got {M0.shape}")
+                raise ModelError(f"AffineMetric: M0 must have shape (N, n, n), got {M0.shape}")
             object.__setattr__(self, "M0", M0)
             shapes.add((M0.shape[0], M0.shape[1]))
         if len(shapes) != 1:
-            raise ValueError(f"AffineMetric: terms disagree on (N, n): {sorted(shapes)}")
+            raise ModelError(f"AffineMetric: terms disagree on (N, n): {sorted(shapes)}")
         for t in self.terms:
             bad = [i for i in t.indices if not 0 <= i < self.n_params]
             if bad:
-                raise ValueError(f"AffineMetric: term indices {bad} outside 0..{self.n_params - 1}")
+                raise ModelError(f"AffineMetric: term indices {bad} outside 0..{self.n_params - 1}")
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -169,14 +171,14 @@ class AffineMetric:
     def with_n_params(self, p: int, offset: int = 0) -> "AffineMetric":
         """The same metric inside a larger θ ∈ R^p whose slice [offset, offset+self.p) is this θ."""
         if offset + self.n_params > p:
-            raise ValueError(f"with_n_params: {offset} + {self.n_params} > {p}")
+            raise ModelError(f"with_n_params: {offset} + {self.n_params} > {p}")
         terms = tuple(MetricTerm(tuple(i + offset for i in t.indices), t.E, t.J) for t in self.terms)
         return AffineMetric(p, terms, self.M0)
 
     def plus(self, other: "AffineMetric") -> "AffineMetric":
         """The sum of two metrics over the same samples and parameter vector."""
         if other.n_params != self.n_params or other.shape != self.shape:
-            raise ValueError(
+            raise ModelError(
                 f"AffineMetric.plus: shapes differ ({self.shape}, p={self.n_params}) vs "
                 f"({other.shape}, p={other.n_params})"
             )
@@ -193,7 +195,7 @@ class AffineMetric:
         """A metric from dense per-sample bases M_k (N, p, n, n) (costly; prefer factored terms)."""
         Mk = np.asarray(Mk, dtype=float)
         if Mk.ndim != 4 or Mk.shape[2] != Mk.shape[3]:
-            raise ValueError(f"from_dense: Mk must have shape (N, p, n, n), got {Mk.shape}")
+            raise ModelError(f"from_dense: Mk must have shape (N, p, n, n), got {Mk.shape}")
         N, p, n, _ = Mk.shape
         J = np.broadcast_to(np.eye(n), (N, n, n))
         return AffineMetric(p, (MetricTerm(tuple(range(p)), Mk, J),), M0)
@@ -206,15 +208,15 @@ class AffineMetric:
             return first
         for m in metrics[1:]:
             if m.n_params != first.n_params or len(m.terms) != len(first.terms):
-                raise ValueError("AffineMetric.concatenate: metrics have different structure")
+                raise ModelError("AffineMetric.concatenate: metrics have different structure")
         terms = []
         for j, t in enumerate(first.terms):
             parts = [m.terms[j] for m in metrics]
             if any(q.indices != t.indices for q in parts):
-                raise ValueError("AffineMetric.concatenate: terms have different parameter indices")
+                raise ModelError("AffineMetric.concatenate: terms have different parameter indices")
             E = np.concatenate([q.E for q in parts]) if t.per_sample else t.E
             terms.append(MetricTerm(t.indices, E, np.concatenate([np.asarray(q.J) for q in parts])))
         if any((m.M0 is None) != (first.M0 is None) for m in metrics):
-            raise ValueError("AffineMetric.concatenate: some metrics have M0 and some do not")
+            raise ModelError("AffineMetric.concatenate: some metrics have M0 and some do not")
         M0 = None if first.M0 is None else np.concatenate([m.M0 for m in metrics])
         return AffineMetric(first.n_params, tuple(terms), M0)

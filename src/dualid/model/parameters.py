@@ -19,6 +19,8 @@ from typing import Literal
 
 import numpy as np
 
+from dualid.errors import ModelError
+
 BlockKind = Literal["rigid_body", "drag_diagonal", "drag_matrix", "nonnegative", "free"]
 BLOCK_KINDS: tuple[str, ...] = ("rigid_body", "drag_diagonal", "drag_matrix", "nonnegative", "free")
 
@@ -66,14 +68,14 @@ class ParameterBlock:
 
     def __post_init__(self) -> None:
         if self.kind not in BLOCK_KINDS:
-            raise ValueError(f"block {self.name!r}: kind must be one of {BLOCK_KINDS}, got {self.kind!r}")
+            raise ModelError(f"block {self.name!r}: kind must be one of {BLOCK_KINDS}, got {self.kind!r}")
         k = len(self.indices)
         if self.kind == "rigid_body" and k != 10:
-            raise ValueError(f"block {self.name!r}: a rigid_body block has 10 parameters, got {k}")
+            raise ModelError(f"block {self.name!r}: a rigid_body block has 10 parameters, got {k}")
         if self.kind == "drag_matrix":
             d = int(round((np.sqrt(8 * k + 1) - 1) / 2))
             if d * (d + 1) // 2 != k:
-                raise ValueError(
+                raise ModelError(
                     f"block {self.name!r}: a drag_matrix block needs d(d+1)/2 parameters, got {k}"
                 )
 
@@ -111,22 +113,22 @@ class ParameterSpace:
     def __post_init__(self) -> None:
         p = len(self.names)
         if len(self.units) != p:
-            raise ValueError(f"ParameterSpace: {p} names but {len(self.units)} units")
+            raise ModelError(f"ParameterSpace: {p} names but {len(self.units)} units")
         if len(set(self.names)) != p:
             dup = sorted({n for n in self.names if self.names.count(n) > 1})
-            raise ValueError(f"ParameterSpace: duplicate parameter names {dup}")
+            raise ModelError(f"ParameterSpace: duplicate parameter names {dup}")
         seen: set[int] = set()
         for b in self.blocks:
             bad = [i for i in b.indices if not 0 <= i < p]
             if bad:
-                raise ValueError(f"block {b.name!r}: indices {bad} outside 0..{p - 1}")
+                raise ModelError(f"block {b.name!r}: indices {bad} outside 0..{p - 1}")
             overlap = seen.intersection(b.indices)
             if overlap:
-                raise ValueError(f"block {b.name!r}: parameters {sorted(overlap)} already in another block")
+                raise ModelError(f"block {b.name!r}: parameters {sorted(overlap)} already in another block")
             seen.update(b.indices)
         for label, bound in (("lower", self.lower), ("upper", self.upper)):
             if bound is not None and len(bound) != p:
-                raise ValueError(f"ParameterSpace: {label} bounds have {len(bound)} entries, expected {p}")
+                raise ModelError(f"ParameterSpace: {label} bounds have {len(bound)} entries, expected {p}")
         object.__setattr__(self, "_index", {n: i for i, n in enumerate(self.names)})
 
     @property
@@ -137,7 +139,7 @@ class ParameterSpace:
         try:
             return self._index[name]
         except KeyError:
-            raise KeyError(f"no parameter named {name!r}; parameters are {list(self.names)}") from None
+            raise ModelError(f"no parameter named {name!r}; parameters are {list(self.names)}") from None
 
     def with_bounds(self, lower=None, upper=None) -> "ParameterSpace":
         """A copy with bounds; each of lower/upper is an array (p,) or a {name: value} dict."""
@@ -152,7 +154,7 @@ class ParameterSpace:
                 return tuple(float(x) for x in arr)
             arr = np.asarray(bound, dtype=float)
             if arr.shape != (self.p,):
-                raise ValueError(f"bounds: expected shape ({self.p},), got {arr.shape}")
+                raise ModelError(f"bounds: expected shape ({self.p},), got {arr.shape}")
             return tuple(float(x) for x in arr)
 
         return ParameterSpace(

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from dualid.errors import DataError
+from dualid.errors import DataError, MissingFileError, ModelError
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.parameters import ParameterSpace, rigid_body_space
 
@@ -113,18 +113,18 @@ class RigidBodyModel:
 
     def __post_init__(self) -> None:
         if not isinstance(self.model, pin.Model):
-            raise TypeError(f"RigidBodyModel: expected a pinocchio.Model, got {type(self.model).__name__}")
+            raise ModelError(f"RigidBodyModel: expected a pinocchio.Model, got {type(self.model).__name__}")
         model = pin.Model(self.model)  # our own copy: the caller's model may change later
         if self.gravity is not None:
             g = np.asarray(self.gravity, dtype=float)
             if g.shape != (3,) or not np.all(np.isfinite(g)):
-                raise ValueError(f"RigidBodyModel: gravity must be 3 finite numbers [m/s²], got {self.gravity!r}")
+                raise ModelError(f"RigidBodyModel: gravity must be 3 finite numbers [m/s²], got {self.gravity!r}")
             model.gravity = pin.Motion(g, np.zeros(3))
             object.__setattr__(self, "gravity", tuple(float(x) for x in g))
         else:
             object.__setattr__(self, "gravity", tuple(float(x) for x in model.gravity.linear))
         if model.njoints < 2:
-            raise ValueError("RigidBodyModel: the model has no moving joint, so nothing to identify")
+            raise ModelError("RigidBodyModel: the model has no moving joint, so nothing to identify")
         bodies = tuple(model.names[j] for j in range(1, model.njoints))
         coordinates, base = _joint_coordinates(model)
         object.__setattr__(self, "model", model)
@@ -140,7 +140,7 @@ class RigidBodyModel:
         """The rigid-body model of a URDF; ``floating_base`` adds a free-flyer root joint."""
         path = Path(path)
         if not path.is_file():
-            raise FileNotFoundError(f"RigidBodyModel.from_urdf: no URDF file at {path}")
+            raise MissingFileError(f"RigidBodyModel.from_urdf: no URDF file at {path}")
         root_joint = (pin.JointModelFreeFlyer(),) if floating_base else ()
         xml = _with_implicit_world(path)
         if xml is None:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from dualid.errors import ConsistencyError
+from dualid.errors import ConsistencyError, ModelError
 from dualid.model.rigid_body import RigidBodyModel
 
 
@@ -120,7 +120,7 @@ def identified_urdf(
     source_urdf = Path(source_urdf)
     theta = np.asarray(theta, dtype=float)
     if theta.shape != (model.parameters.p,):
-        raise ValueError(
+        raise ModelError(
             f"write_urdf: θ must have shape ({model.parameters.p},) (the RigidBodyModel's parameters), got "
             f"{theta.shape}; pass only the rigid-body part θ[:{model.parameters.p}] of a larger model"
         )
@@ -138,10 +138,10 @@ def identified_urdf(
         elif model.base_coordinates and name == model.bodies[0]:  # free-flyer root: the URDF's root link
             roots = [link for link in links if link not in children]
             if len(roots) != 1:
-                raise ValueError(f"write_urdf: cannot tell the URDF's root link among {roots}")
+                raise ModelError(f"write_urdf: cannot tell the URDF's root link among {roots}")
             carrier = roots[0]
         else:
-            raise ValueError(
+            raise ModelError(
                 f"write_urdf: the model's joint {name!r} is not a moving joint of {source_urdf}; "
                 "was the model built from another URDF?"
             )
@@ -149,7 +149,7 @@ def identified_urdf(
         if carrier not in links:  # e.g. an undeclared "world" root welded to the robot's base link
             declared = [link for link in merged if link in links]
             if not declared:
-                raise ValueError(f"write_urdf: no link of {source_urdf} carries body {name!r}")
+                raise ModelError(f"write_urdf: no link of {source_urdf} carries body {name!r}")
             carrier, merged = declared[0], [link for link in merged if link != declared[0]]
         _replace_inertial(
             links[carrier],
@@ -168,7 +168,7 @@ def identified_urdf(
     def dynamics_of(joint_name: str, what: str) -> ET.Element:
         if joint_name not in joints or joints[joint_name].get("type") == "fixed":
             moving = [n for n, j in joints.items() if j.get("type") != "fixed"]
-            raise ValueError(f"write_urdf: {what} for unknown joint {joint_name!r}; moving joints are {moving}")
+            raise ModelError(f"write_urdf: {what} for unknown joint {joint_name!r}; moving joints are {moving}")
         dynamics = joints[joint_name].find("dynamics")
         return ET.SubElement(joints[joint_name], "dynamics") if dynamics is None else dynamics
 

@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from dualid.errors import ConfigError
+
 
 @dataclass(frozen=True, eq=False)
 class FitRecord:
@@ -127,7 +129,7 @@ class StudyResult:
         for s in self.summaries:
             if s.case == case and s.method == method:
                 return s
-        raise KeyError(f"no summary for case {case!r}, method {method!r}; cases {self.cases}, methods {self.methods}")
+        raise ConfigError(f"no summary for case {case!r}, method {method!r}; cases {self.cases}, methods {self.methods}")
 
     def failures(self) -> tuple[FitRecord, ...]:
         return tuple(r for r in self.records if not r.ok)

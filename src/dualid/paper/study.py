@@ -29,7 +29,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from dualid.errors import DualidError, IdentifiabilityError
+from dualid.errors import ConfigError, DualidError, IdentifiabilityError
 from dualid.estimators import methods as methods_table
 from dualid.evaluation.prediction import PredictionData, measured_signal
 from dualid.evaluation.scores import metric_rmse, rmse, score_run, shift_window
@@ -68,16 +68,16 @@ def _ablation_chart(ablation, problem: IdentificationProblem) -> np.ndarray | No
         return None
     if isinstance(ablation, str):
         if ablation != "units":
-            raise ValueError(f"ablation: expected None, 'units' or a constant matrix B, got {ablation!r}")
+            raise ConfigError(f"ablation: expected None, 'units' or a constant matrix B, got {ablation!r}")
         return np.diag(units_chart(problem.coordinates))
     B = np.asarray(ablation, dtype=float)
     n = problem.n
     if B.shape == (n,):
         B = np.diag(B)
     if B.shape != (n, n):
-        raise ValueError(f"ablation: expected a diagonal ({n},) or a matrix ({n}, {n}), got shape {B.shape}")
+        raise ConfigError(f"ablation: expected a diagonal ({n},) or a matrix ({n}, {n}), got shape {B.shape}")
     if not np.all(np.isfinite(B)) or abs(np.linalg.det(B)) == 0.0:
-        raise ValueError("ablation: the chart B must be finite and invertible")
+        raise ConfigError("ablation: the chart B must be finite and invertible")
     return B
 
 
@@ -95,7 +95,7 @@ class _Progress:
         elif callable(progress):
             self.callback = progress
         else:
-            raise TypeError(f"progress: expected a callable (done, total, description) or a rich Progress, got {progress!r}")
+            raise ConfigError(f"progress: expected a callable (done, total, description) or a rich Progress, got {progress!r}")
 
     def step(self, description: str) -> None:
         self.done += 1
@@ -112,7 +112,7 @@ def low_data_subset(problem: IdentificationProblem, n_samples: int, seed: int, r
     if rank is None:
         rank = problem.identifiability().rank
     if not 0 < n_samples <= problem.N:
-        raise ValueError(f"low-data case: expected 1 ≤ samples ≤ {problem.N} (training samples), got {n_samples}")
+        raise ConfigError(f"low-data case: expected 1 ≤ samples ≤ {problem.N} (training samples), got {n_samples}")
     rng = np.random.default_rng(seed)
     best = -1
     for _ in range(max_tries):
@@ -177,22 +177,22 @@ def run_study(
     """
     cases = {"both": ("low", "high"), "low": ("low",), "high": ("high",)}.get(case)
     if cases is None:
-        raise ValueError(f"case: expected 'both', 'low' or 'high', got {case!r}")
+        raise ConfigError(f"case: expected 'both', 'low' or 'high', got {case!r}")
     seed_list = list(range(seeds)) if isinstance(seeds, (int, np.integer)) else [int(s) for s in seeds]
     if "low" in cases and not seed_list:
-        raise ValueError(f"seeds: the low-data case needs at least one seed, got {seeds!r}")
+        raise ConfigError(f"seeds: the low-data case needs at least one seed, got {seeds!r}")
     if isinstance(methods, Mapping):
         estimators = dict(methods)
     else:
         if isinstance(methods, str):
-            raise TypeError(f"methods: expected a sequence of method names, got the string {methods!r}")
+            raise ConfigError(f"methods: expected a sequence of method names, got the string {methods!r}")
         estimators = {m: make_estimator(m, system) for m in methods}
     if not estimators:
-        raise ValueError("methods: expected at least one method")
+        raise ConfigError("methods: expected at least one method")
     if not system.test:
-        raise ValueError(f"system {system.name!r} has no test runs to predict")
+        raise ConfigError(f"system {system.name!r} has no test runs to predict")
     if not 0 <= trace_run < len(system.test):
-        raise ValueError(f"trace_run: expected an index in [0, {len(system.test) - 1}], got {trace_run}")
+        raise ConfigError(f"trace_run: expected an index in [0, {len(system.test) - 1}], got {trace_run}")
 
     problem = build_problem(system.model, list(system.train))
     rank = problem.identifiability().rank

@@ -14,6 +14,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter, LogLocator
 
 from dualid.bench.runner import PROBLEMS, SOLVERS
+from dualid.errors import ConfigError
 from dualid.report.figures import new_figure
 from dualid.report.io import write_json
 
@@ -42,7 +43,7 @@ def scaling_plot(result: dict) -> Figure:
     problems = [p for p in PROBLEMS if any(r["problem"] == p for r in runs)]
     problems += sorted({r["problem"] for r in runs} - set(problems))
     if not problems:
-        raise ValueError("scaling_plot: the results hold no runs")
+        raise ConfigError("scaling_plot: the results hold no runs")
     fig, axes = new_figure(2, len(problems), figsize=(5.6 * len(problems), 7.6), sharex="col")
     for col, name in enumerate(problems):
         rows = [r for r in runs if r["problem"] == name]

@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from dualid.errors import DataError
+
 
 def jsonable(x: Any) -> Any:
     """Plain JSON values: numpy arrays and scalars to Python, NaN/inf to None, tuples/sets to lists,
@@ -32,7 +34,7 @@ def jsonable(x: Any) -> Any:
         return str(x)
     if x is None or isinstance(x, str):
         return x
-    raise TypeError(f"cannot write {type(x).__name__} to JSON: {x!r}")
+    raise DataError(f"cannot write {type(x).__name__} to JSON: {x!r}")
 
 
 def to_json(x: Any, indent: int | None = 1) -> str:

@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from dualid.errors import OutputError
+from dualid.errors import DataError, OutputError
 
 MANIFEST = ".dualid-manifest.json"
 
@@ -31,7 +31,7 @@ def _manifest(directory: Path) -> list[str]:
     try:
         files = json.loads(path.read_text())["files"]
         if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
-            raise TypeError("'files' is not a list of strings")
+            raise DataError("'files' is not a list of strings")
     except (ValueError, KeyError, TypeError) as exc:
         raise OutputError(
             f"{path}: unreadable dualid manifest ({exc}); refusing to overwrite a directory whose "

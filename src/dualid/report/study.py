@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from dualid.errors import ConfigError
 from dualid.estimators.methods import color as method_color
 from dualid.estimators.methods import label as method_label
 from dualid.paper.results import StudyResult
@@ -40,7 +41,7 @@ def _coord_label(result: StudyResult, c: str) -> str:
 
 def _check_case(result: StudyResult, case: str) -> None:
     if case not in result.cases:
-        raise ValueError(f"case: expected one of {list(result.cases)} (the cases of this study), got {case!r}")
+        raise ConfigError(f"case: expected one of {list(result.cases)} (the cases of this study), got {case!r}")
 
 
 def score_bars(result: StudyResult, case: str) -> Figure:
@@ -115,11 +116,11 @@ def trajectory_plot(result: StudyResult, case: str, coordinate: str | None = Non
     if coordinate is None:
         coordinate = most_contested_coordinate(result, case, methods)
     if coordinate not in result.coordinates:
-        raise ValueError(f"coordinate: expected one of {list(result.coordinates)}, got {coordinate!r}")
+        raise ConfigError(f"coordinate: expected one of {list(result.coordinates)}, got {coordinate!r}")
     k = result.coordinates.index(coordinate)
     traces = {tr.method: tr for tr in result.traces if tr.case == case}
     if not traces:
-        raise ValueError(f"the study kept no trajectories for case {case!r}")
+        raise ConfigError(f"the study kept no trajectories for case {case!r}")
     first = next(iter(traces.values()))
     t = first.t - first.t[0]
     keep = t <= max_duration

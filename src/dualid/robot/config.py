@@ -27,7 +27,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from dualid.errors import ConfigError
+from dualid.errors import ConfigError, MissingFileError
 from dualid.estimators.methods import METHODS  # the one list of method names
 
 DEFAULT_PREPROCESSING = (
@@ -227,7 +227,7 @@ class FitConfig:
 
         path = Path(path)
         if not path.is_file():
-            raise FileNotFoundError(f"config file not found: {path}")
+            raise MissingFileError(f"config file not found: {path}")
         with open(path) as f:
             d = yaml.safe_load(f) or {}
         return FitConfig.from_dict(d, base_dir=path.resolve().parent)

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from dualid.errors import ConfigError, DataError, MissingFileError
 from dualid.model.joint_terms import JointTermsModel
 from dualid.model.rigid_body import RigidBodyModel
 
@@ -44,12 +45,12 @@ def load_reference(yml_path: str | Path) -> dict[str, float]:
 
     path = Path(yml_path)
     if not path.is_file():
-        raise FileNotFoundError(f"DFKI reference parameters not found: {path}")
+        raise MissingFileError(f"DFKI reference parameters not found: {path}")
     with open(path) as f:
         d = yaml.safe_load(f) or {}
     missing = [k for k in KEYS if k not in d]
     if missing:
-        raise ValueError(f"{path}: missing DFKI parameters {missing}; expected {list(KEYS)}")
+        raise DataError(f"{path}: missing DFKI parameters {missing}; expected {list(KEYS)}")
     return {k: float(v) for k, v in d.items() if isinstance(v, (int, float))}
 
 
@@ -57,7 +58,7 @@ def _geometry(rigid: RigidBodyModel) -> tuple[list[np.ndarray], list[np.ndarray]
     """Per joint at q = 0: axis and downward unit vector in the joint frame; joint 2's origin in frame 1; world axes."""
     model = rigid.model
     if rigid.base_coordinates or model.nv != 2 or model.njoints != 3:
-        raise ValueError(
+        raise DataError(
             f"DFKI reference: expected a fixed-base chain of 2 revolute joints, got joints {list(rigid.bodies)} "
             f"(nv = {model.nv})"
         )
@@ -67,24 +68,24 @@ def _geometry(rigid: RigidBodyModel) -> tuple[list[np.ndarray], list[np.ndarray]
     pin.computeJointJacobians(model, data, q0)
     g = np.array(model.gravity.linear)
     if np.linalg.norm(g) == 0:
-        raise ValueError("DFKI reference: the model has zero gravity, so 'down' is undefined")
+        raise DataError("DFKI reference: the model has zero gravity, so 'down' is undefined")
     down_w = g / np.linalg.norm(g)
     axes, downs, axes_w = [], [], []
     for j in (1, 2):
         J = pin.getJointJacobian(model, data, j, pin.LOCAL)
         axis = J[3:, j - 1]
         if np.linalg.norm(J[:3, j - 1]) > 1e-12 or abs(np.linalg.norm(axis) - 1) > 1e-9:
-            raise ValueError(f"DFKI reference: joint {model.names[j]!r} is not a revolute joint")
+            raise DataError(f"DFKI reference: joint {model.names[j]!r} is not a revolute joint")
         R = data.oMi[j].rotation
         d = R.T @ down_w
         d = d - axis * (axis @ d)
         if np.linalg.norm(d) < 1e-9:
-            raise ValueError(f"DFKI reference: joint {model.names[j]!r} rotates about the vertical")
+            raise DataError(f"DFKI reference: joint {model.names[j]!r} rotates about the vertical")
         axes.append(axis)
         downs.append(d / np.linalg.norm(d))
         axes_w.append(R @ axis)
     if axes_w[0] @ axes_w[1] < 1 - 1e-9:
-        raise ValueError("DFKI reference: the two joint axes are not parallel and equally oriented")
+        raise DataError("DFKI reference: the two joint axes are not parallel and equally oriented")
     p12 = model.jointPlacements[2].translation  # joint 2's origin in joint 1's frame
     return axes, downs, p12, np.array(axes_w)
 
@@ -92,7 +93,7 @@ def _geometry(rigid: RigidBodyModel) -> tuple[list[np.ndarray], list[np.ndarray]
 def _body(m: float, r: float, I_axis: float, axis: np.ndarray, down: np.ndarray, name: str) -> np.ndarray:
     Ic = I_axis - m * r * r
     if not (m > 0 and Ic > 0):
-        raise ValueError(
+        raise DataError(
             f"DFKI reference: body {name!r} has m = {m}, inertia about the axis {I_axis} and m r² = {m * r * r}: "
             "the inertia about the centre of mass would not be positive"
         )
@@ -110,13 +111,13 @@ def reference_theta(yml_path: str | Path, model: JointTermsModel | RigidBodyMode
     P = load_reference(yml_path)
     rigid = model.base if isinstance(model, JointTermsModel) else model
     if not isinstance(rigid, RigidBodyModel):
-        raise TypeError(f"DFKI reference: expected a RigidBodyModel (or with joint terms), got {type(rigid).__name__}")
+        raise ConfigError(f"DFKI reference: expected a RigidBodyModel (or with joint terms), got {type(rigid).__name__}")
     axes, downs, p12, _ = _geometry(rigid)
     l1_urdf = float(np.linalg.norm(p12 - axes[0] * (axes[0] @ p12)))
     if abs(l1_urdf - P["l1"]) > 1e-3:
-        raise ValueError(f"DFKI reference: l1 = {P['l1']} m but the URDF puts joint 2 at {l1_urdf:.4f} m from joint 1")
+        raise DataError(f"DFKI reference: l1 = {P['l1']} m but the URDF puts joint 2 at {l1_urdf:.4f} m from joint 1")
     if abs(np.linalg.norm(rigid.gravity) - P["g"]) > 1e-2:
-        raise ValueError(f"DFKI reference: g = {P['g']} but the model's gravity is {np.linalg.norm(rigid.gravity):.4g} m/s²")
+        raise DataError(f"DFKI reference: g = {P['g']} but the model's gravity is {np.linalg.norm(rigid.gravity):.4g} m/s²")
     c = -P["gr"] * P["Ir"]  # the constant M12 term of motor 2's rotor
     theta_rigid = np.concatenate([
         _body(P["m1"], P["r1"], P["I1"], axes[0], downs[0], rigid.bodies[0]),
@@ -125,7 +126,7 @@ def reference_theta(yml_path: str | Path, model: JointTermsModel | RigidBodyMode
     if not isinstance(model, JointTermsModel):
         extra = {k: P[k] for k in ("Ir", "b1", "b2", "cf1", "cf2") if P[k] != 0}
         if extra:
-            raise ValueError(f"DFKI reference: the model has no joint terms for the nonzero lab parameters {extra}")
+            raise DataError(f"DFKI reference: the model has no joint terms for the nonzero lab parameters {extra}")
         return theta_rigid
     theta = np.zeros(model.parameters.p)
     theta[: rigid.parameters.p] = theta_rigid
@@ -144,7 +145,7 @@ def reference_theta(yml_path: str | Path, model: JointTermsModel | RigidBodyMode
             if name in names:
                 theta[names.index(name)] = value
             elif value != 0:
-                raise ValueError(f"DFKI reference: the model has no parameter {name!r} for the lab's value {value:.6g}")
+                raise DataError(f"DFKI reference: the model has no parameter {name!r} for the lab's value {value:.6g}")
     return theta
 
 

@@ -31,7 +31,7 @@ import numpy as np
 from dualid.data.io import ColumnMap, load_log, read_table
 from dualid.data.preprocessing import preprocess
 from dualid.data.trajectory import Trajectory
-from dualid.errors import DataError, DualidError
+from dualid.errors import DataError, DualidError, MissingFileError
 from dualid.estimators import OLS, IdentificationResult
 from dualid.estimators.least_squares import covariance_weight, energy_statistics, statistics
 from dualid.estimators.methods import make_estimator
@@ -56,7 +56,7 @@ def column_map(config_columns, joints: tuple[str, ...], first_log: Path) -> Colu
         return ColumnMap.from_dict(config_columns)
     cmap = ColumnMap.pattern(joints)
     if not Path(first_log).exists():
-        raise FileNotFoundError(f"log file not found: {first_log}")
+        raise MissingFileError(f"log file not found: {first_log}")
     _, available = read_table(Path(first_log))
     missing = [c for c in cmap.columns() if c not in available]
     if missing:
@@ -157,7 +157,7 @@ def prior_theta(config: FitConfig, rigid: RigidBodyModel, model, ols_theta: np.n
         source, _, pick = config.prior.source.partition("#")
         path = Path(source)
         if not path.is_file():
-            raise FileNotFoundError(f"prior.source: no parameters file at {path}")
+            raise MissingFileError(f"prior.source: no parameters file at {path}")
         if path.suffix == ".json":
             d = json.loads(path.read_text())
         else:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dualid.errors import DataError
 from dualid.evaluation.validation import Validation, validate
 from dualid.model.joint_terms import JointTermsModel, with_joint_terms
 from dualid.model.rigid_body import RigidBodyModel
@@ -26,7 +27,7 @@ def validate_urdf(urdf, data, columns=None, preprocessing=None, xcorr_window: fl
     urdf = Path(urdf)
     data = [Path(p) for p in data]
     if not data:
-        raise ValueError("validate: no log files given")
+        raise DataError("validate: no log files given")
     rigid = RigidBodyModel.from_urdf(urdf, floating_base, gravity)
     joints = tuple(j for j in rigid.coordinates if j not in rigid.base_coordinates)
     model = with_joint_terms(rigid, True, True, True, joints, coulomb_velocity)

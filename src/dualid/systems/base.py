@@ -12,6 +12,7 @@ from typing import Literal
 import numpy as np
 
 from dualid.data.trajectory import Trajectory
+from dualid.errors import ConfigError
 from dualid.model.base import Model
 
 Noise = Literal["realistic", "ideal", "none"]  # ideal: i.i.d. Gaussian force noise only; none: exact data
@@ -50,6 +51,6 @@ def make_system(name: str, seed: int = 0, noise: Noise = "realistic", size: Size
     import importlib
 
     if name not in _REGISTRY:
-        raise ValueError(f"unknown system {name!r}; expected one of {sorted(_REGISTRY)}")
+        raise ConfigError(f"unknown system {name!r}; expected one of {sorted(_REGISTRY)}")
     module = importlib.import_module(_REGISTRY[name])
     return module.make(seed=seed, noise=noise, size=size, **kw)

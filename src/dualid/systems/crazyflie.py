@@ -22,6 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from dualid.data.preprocessing import lowpass, savgol_derivatives
 from dualid.data.trajectory import Trajectory
+from dualid.errors import ConfigError
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.systems import crazyflie_model as cf
 from dualid.systems.crazyflie_control import (
@@ -101,7 +102,7 @@ class CrazyflieNoise:
         """A copy with i.i.d. noise (6,) on the base wrench [N, N m]."""
         force_std = tuple(float(x) for x in force_std)
         if len(force_std) != 6 or min(force_std) < 0:
-            raise ValueError(f"force_std: expected 6 non-negative standard deviations, got {force_std}")
+            raise ConfigError(f"force_std: expected 6 non-negative standard deviations, got {force_std}")
         return dataclasses.replace(self, force_std=force_std)
 
     def __post_init__(self) -> None:
@@ -111,12 +112,12 @@ class CrazyflieNoise:
                         "motor_spread": self.motor_spread}
             bad = {k: v for k, v in measured.items() if v != 0}
             if bad:
-                raise ValueError(
+                raise ConfigError(
                     f"CrazyflieNoise: cutoff = 0 means exact states and forces, but measurement errors {bad} "
                     "are set; give a low-pass cutoff [Hz] to simulate the measurement chain"
                 )
         if self.force_std and self.cutoff != 0.0:
-            raise ValueError("CrazyflieNoise: force_std (i.i.d. force noise) applies to exact states only (cutoff = 0)")
+            raise ConfigError("CrazyflieNoise: force_std (i.i.d. force noise) applies to exact states only (cutoff = 0)")
 
     @property
     def exact_states(self) -> bool:
@@ -202,7 +203,7 @@ def simulate(
     gains = np.ones(4) if gains is None else np.asarray(gains, dtype=float)
     dt, sub = 1.0 / SIM_RATE, int(round(SIM_RATE / RATE))
     if sub * RATE != SIM_RATE:
-        raise ValueError(f"simulate: SIM_RATE ({SIM_RATE} Hz) must be a multiple of RATE ({RATE} Hz)")
+        raise ConfigError(f"simulate: SIM_RATE ({SIM_RATE} Hz) must be a multiple of RATE ({RATE} Hz)")
     T = int(round(duration * RATE))
     n_warm = int(round(WARMUP * SIM_RATE))
     n_steps = n_warm + T * sub
@@ -323,12 +324,12 @@ def dataset(seed: int = 0, n_train: int = 6, n_test: int = 6, duration: float = 
     if isinstance(noise, str):
         presets = {"realistic": CrazyflieNoise.realistic, "ideal": CrazyflieNoise.ideal, "none": CrazyflieNoise.none}
         if noise not in presets:
-            raise ValueError(f"noise: expected one of {sorted(presets)}, got {noise!r}")
+            raise ConfigError(f"noise: expected one of {sorted(presets)}, got {noise!r}")
         noise = presets[noise]()
     if n_train < 1 or n_test < 0:
-        raise ValueError(f"dataset: expected n_train ≥ 1 and n_test ≥ 0, got {n_train} and {n_test}")
+        raise ConfigError(f"dataset: expected n_train ≥ 1 and n_test ≥ 0, got {n_train} and {n_test}")
     if duration < 1.0:
-        raise ValueError(f"dataset: duration must be at least 1 s (derivative filters), got {duration}")
+        raise ConfigError(f"dataset: duration must be at least 1 s (derivative filters), got {duration}")
     rng = np.random.default_rng(seed)
     lo, hi = noise.gain_error
     # true thrust / calibrated thrust: one calibration error for the batch of motors plus a small spread
@@ -347,7 +348,7 @@ def make(seed: int = 0, noise: str = "realistic", size: str = "default"):
 
     sizes = {"default": (6, 6, 35.0), "small": (2, 2, 8.0)}
     if size not in sizes:
-        raise ValueError(f"size: expected one of {sorted(sizes)}, got {size!r}")
+        raise ConfigError(f"size: expected one of {sorted(sizes)}, got {size!r}")
     n_train, n_test, duration = sizes[size]
     model, train, test, theta = dataset(seed, n_train, n_test, duration, noise)
     return SystemData(

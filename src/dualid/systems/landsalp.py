@@ -24,6 +24,7 @@ from scipy.integrate import solve_ivp
 
 from dualid.data.preprocessing import lowpass
 from dualid.data.trajectory import Trajectory
+from dualid.errors import ConfigError
 from dualid.model.landsalp import LandSalpModel, configuration
 
 # published identified values (Yang & Hatton): link b (longitudinal, lateral, rotational), joint dampings
@@ -247,7 +248,7 @@ def training_inputs(rng: np.random.Generator):
 
 def gait_inputs(name: str):
     if name not in GAITS:
-        raise ValueError(f"unknown LandSalp gait {name!r}; expected one of {sorted(GAITS)}")
+        raise ConfigError(f"unknown LandSalp gait {name!r}; expected one of {sorted(GAITS)}")
     mean, sin_amp, cos_amp = GAITS[name]
     spec = {"mean": mean, "sin_amp": sin_amp, "cos_amp": cos_amp, "freq": (GAIT_FREQUENCY,) * 3, "gait": name}
     return (lambda t: wheel_forces(t, mean, sin_amp, cos_amp, GAIT_FREQUENCY)), spec
@@ -299,13 +300,13 @@ def make(seed: int = 0, noise: str = "realistic", size: str = "default"):
         "none": (TrueEffects.none(), None),
     }
     if noise not in levels:
-        raise ValueError(f"noise: expected one of {sorted(levels)}, got {noise!r}")
+        raise ConfigError(f"noise: expected one of {sorted(levels)}, got {noise!r}")
     sizes = {
         "default": dict(n_train=8, train_duration=22.5, gaits=tuple(GAITS), test_duration=12.0),
         "small": dict(n_train=2, train_duration=6.0, gaits=("forward", "turn"), test_duration=6.0),
     }
     if size not in sizes:
-        raise ValueError(f"size: expected one of {sorted(sizes)}, got {size!r}")
+        raise ConfigError(f"size: expected one of {sorted(sizes)}, got {size!r}")
     effects, measurement = levels[noise]
     model, train, test, theta = dataset(seed, effects=effects, measurement=measurement, **sizes[size])
     return SystemData(

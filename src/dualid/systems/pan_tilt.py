@@ -10,6 +10,7 @@ from scipy.integrate import solve_ivp
 
 from dualid.data.preprocessing import savgol_derivatives
 from dualid.data.trajectory import Trajectory
+from dualid.errors import ConfigError
 from dualid.model.pan_tilt import PanTilt, jacobian
 
 TRUE_THETA = np.array([0.5, 0.02, 0.03])  # m [kg], b_pan, b_tilt [N m s/rad] (invented)
@@ -115,10 +116,10 @@ def make(seed: int = 0, noise: str = "realistic", size: str = "default"):
         "none": PanTiltNoise.noiseless(),
     }
     if noise not in levels:
-        raise ValueError(f"noise: expected one of {sorted(levels)}, got {noise!r}")
+        raise ConfigError(f"noise: expected one of {sorted(levels)}, got {noise!r}")
     sizes = {"default": (3, 3, 10.0), "small": (1, 2, 3.0)}
     if size not in sizes:
-        raise ValueError(f"size: expected one of {sorted(sizes)}, got {size!r}")
+        raise ConfigError(f"size: expected one of {sorted(sizes)}, got {size!r}")
     n_train, n_test, duration = sizes[size]
     model, train, test, theta = dataset(seed, n_train, n_test, noise=levels[noise], duration=duration)
     return SystemData(
