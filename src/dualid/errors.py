@@ -45,3 +45,7 @@ class ModelError(DualidError, ValueError):
 
 class MissingFileError(DataError, FileNotFoundError):
     """An input file (log, URDF, config, data set part) that does not exist; the message names it."""
+
+
+class SimulationError(DualidError, RuntimeError):
+    """A simulator (the paper's systems) failed: an integrator diverged or the state left its range."""

@@ -44,7 +44,7 @@ def spatial_inertia_basis() -> np.ndarray:
         E[k] = Gk - G0
     exact = np.round(E)
     if np.abs(exact - E).max() > 1e-9:  # pragma: no cover - guards a change in Pinocchio's conventions
-        raise RuntimeError("spatial_inertia_basis: Pinocchio's spatial inertia is not linear in the parameters")
+        raise ModelError("spatial_inertia_basis: Pinocchio's spatial inertia is not linear in the parameters")
     exact.setflags(write=False)
     return exact
 

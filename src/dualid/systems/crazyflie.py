@@ -22,7 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from dualid.data.preprocessing import lowpass, savgol_derivatives
 from dualid.data.trajectory import Trajectory
-from dualid.errors import ConfigError
+from dualid.errors import ConfigError, SimulationError
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.systems import crazyflie_model as cf
 from dualid.systems.crazyflie_control import (
@@ -236,7 +236,7 @@ def simulate(
         for b in range(B):
             q[b], v[b] = plant.step(q[b], v[b], tau[b], dt)
         if not np.all(np.isfinite(v)) or np.any(np.abs(q[:, 2] - Z_CENTRE) > 5.0):
-            raise RuntimeError(f"crazyflie simulation diverged at t = {t:.3f} s")
+            raise SimulationError(f"crazyflie simulation diverged at t = {t:.3f} s")
 
     arr = {key: np.swapaxes(np.array(val), 0, 1) for key, val in out.items()}  # (B, T, ...)
     a = np.array([[plant.accel(qi, vi, ui) for qi, vi, ui in zip(*x)] for x in zip(arr["q"], arr["v"], arr["tau"])])

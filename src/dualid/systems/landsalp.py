@@ -24,7 +24,7 @@ from scipy.integrate import solve_ivp
 
 from dualid.data.preprocessing import lowpass
 from dualid.data.trajectory import Trajectory
-from dualid.errors import ConfigError
+from dualid.errors import ConfigError, SimulationError
 from dualid.model.landsalp import LandSalpModel, configuration
 
 # published identified values (Yang & Hatton): link b (longitudinal, lateral, rotational), joint dampings
@@ -161,7 +161,7 @@ class TrueLandSalp:
             if np.max(np.abs(step)) < 1e-12:
                 break
         else:
-            raise RuntimeError("LandSalp true dynamics: Newton did not converge in 50 iterations")
+            raise SimulationError("LandSalp true dynamics: Newton did not converge in 50 iterations")
         return v[..., 0]
 
 
@@ -195,7 +195,7 @@ def simulate_run(
     t = np.arange(int(round(duration * rate))) / rate
     sol = solve_ivp(rhs, (0.0, t[-1]), np.asarray(state0, dtype=float), t_eval=t, **SIM_OPTIONS)
     if not sol.success:
-        raise RuntimeError(f"LandSalp simulation {name!r} failed: {sol.message}")
+        raise SimulationError(f"LandSalp simulation {name!r} failed: {sol.message}")
     state = sol.y.T  # (T, 5)
     q = configuration(*state.T)
     F = forces(t)
@@ -281,7 +281,7 @@ def dataset(
             if np.abs(run.meta["state_true"][:, 3:]).max() <= max_shape:
                 break
         else:
-            raise RuntimeError(f"LandSalp: no training input kept the shape within ±{max_shape} rad")
+            raise SimulationError(f"LandSalp: no training input kept the shape within ±{max_shape} rad")
         train.append(run)
     for g in gaits:
         forces, spec = gait_inputs(g)

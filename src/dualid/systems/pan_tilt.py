@@ -10,7 +10,7 @@ from scipy.integrate import solve_ivp
 
 from dualid.data.preprocessing import savgol_derivatives
 from dualid.data.trajectory import Trajectory
-from dualid.errors import ConfigError
+from dualid.errors import ConfigError, SimulationError
 from dualid.model.pan_tilt import PanTilt, jacobian
 
 TRUE_THETA = np.array([0.5, 0.02, 0.03])  # m [kg], b_pan, b_tilt [N m s/rad] (invented)
@@ -81,7 +81,7 @@ def simulate_run(
     q0, v0, _ = ref(0.0)
     sol = solve_ivp(rhs, (0, t[-1]), np.concatenate([q0, v0]), t_eval=t, rtol=1e-8, atol=1e-9, method="DOP853")
     if not sol.success:
-        raise RuntimeError(f"pan-tilt simulation failed: {sol.message}")
+        raise SimulationError(f"pan-tilt simulation failed: {sol.message}")
     q_true, v_true = sol.y[:2].T, sol.y[2:].T
     tau_true = np.array([control(ti, qi, vi) for ti, qi, vi in zip(t, q_true, v_true)])
     if noise.filter_window == 0.0:  # exact states and accelerations; force noise only
