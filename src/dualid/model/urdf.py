@@ -14,21 +14,14 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 
 from dualid.errors import ConsistencyError, ModelError
+from dualid.model.consistency import body_at_com
 from dualid.model.rigid_body import RigidBodyModel
 
 
 def _fmt(x: float) -> str:
     return repr(float(x))
-
-
-def _body_at_com(theta_b: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """(m [kg], c (3,) [m], I_c (3, 3) [kg m²] about the centre of mass) of 10 dynamic parameters."""
-    m = float(theta_b[0])
-    inertia = pin.Inertia.FromDynamicParameters(np.asarray(theta_b, dtype=float))
-    return m, np.array(inertia.lever), np.array(inertia.inertia)
 
 
 def _check_body(name: str, theta_b: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
@@ -40,7 +33,7 @@ def _check_body(name: str, theta_b: np.ndarray) -> tuple[float, np.ndarray, np.n
             f"write_urdf: body {name!r} has mass {m:.6g} kg (expected > 0); θ is not physically "
             "consistent and would make an invalid URDF"
         )
-    m, c, Ic = _body_at_com(theta_b)
+    m, c, Ic = body_at_com(theta_b)
     lam = np.linalg.eigvalsh(0.5 * (Ic + Ic.T))
     if lam[0] < -1e-12 * max(1.0, abs(lam[-1])):
         raise ConsistencyError(
