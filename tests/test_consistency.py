@@ -14,8 +14,9 @@ def test_body_at_com_is_the_parallel_axis_theorem(seed):
     rng = np.random.default_rng(seed)
     m = rng.uniform(0.1, 5.0)
     c = rng.normal(size=3) * 0.3
-    A = rng.normal(size=(3, 3))
-    I_c = A @ A.T * 0.01 + np.eye(3) * 1e-3
+    A = rng.normal(size=(3, 3)) * 0.1
+    S = A @ A.T * m + np.eye(3) * 1e-4  # second moment of a mass distribution about its centre
+    I_c = np.trace(S) * np.eye(3) - S  # a physically realizable inertia (triangle inequality holds)
     I_o = I_c + m * (c @ c * np.eye(3) - np.outer(c, c))  # about the body frame's origin
     theta = np.array([m, *(m * c), I_o[0, 0], I_o[0, 1], I_o[1, 1], I_o[0, 2], I_o[1, 2], I_o[2, 2]])
     m2, c2, I2 = body_at_com(theta)
