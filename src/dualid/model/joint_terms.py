@@ -79,6 +79,27 @@ class JointTermsModel:
             raise ModelError(f"no {group!r} parameters in this model; it has {list(self._offsets)}")
         return self._offsets[group] + np.arange(len(self.dofs))
 
+    def _group_values(self, theta: np.ndarray, group: str) -> np.ndarray:
+        """A group's values; a constrained fit may sit a rounding error (1e-9 relative) below 0,
+        which reads as 0; anything more negative is returned as it is (and the URDF writer refuses it)."""
+        x = np.asarray(theta, dtype=float)[self.index(group)]
+        tol = 1e-9 * max(1.0, float(np.max(np.abs(x))) if x.size else 1.0)
+        return np.where((x < 0) & (x >= -tol), 0.0, x)
+
+    def friction(self, theta: np.ndarray) -> dict[str, tuple[float, float]]:
+        """{joint: (viscous b [N m s/rad], Coulomb fc [N m])} from θ (0 for a term the model lacks)."""
+        zero = np.zeros(len(self.dofs))
+        b = self._group_values(theta, "viscous") if self.viscous else zero
+        fc = self._group_values(theta, "coulomb") if self.coulomb else zero
+        return {self.coordinates[j]: (float(b[k]), float(fc[k])) for k, j in enumerate(self.dofs)}
+
+    def armature_values(self, theta: np.ndarray) -> dict[str, float]:
+        """{joint: armature Ia [kg m²]} from θ (empty when the model has no armature terms)."""
+        if not self.armature:
+            return {}
+        Ia = self._group_values(theta, "armature")
+        return {self.coordinates[j]: float(Ia[k]) for k, j in enumerate(self.dofs)}
+
     def _joint_columns(self, v: np.ndarray, a: np.ndarray | None) -> np.ndarray:
         """(T, n, p_extra): the friction (and armature when a is given) regressor columns."""
         T, n = v.shape

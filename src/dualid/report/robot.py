@@ -22,11 +22,12 @@ from dualid.errors import DualidError
 from dualid.estimators.methods import color as method_color
 from dualid.estimators.methods import method as method_entry
 from dualid.evaluation.validation import Validation
+from dualid.model.joint_terms import JointTermsModel
 from dualid.report.figures import cycle_color, new_figure, save_figure
 from dualid.report.io import jsonable, to_json, write_json
 from dualid.report.outdir import write_output
 from dualid.report.urdf import write_urdf
-from dualid.robot.fit import FitOutcome, armature_of, friction_of
+from dualid.robot.fit import FitOutcome
 
 UNCERTAINTY_NOTE = (
     "std_error: σ̂·sqrt((H⁺)_kk) of the quadratic estimators (ols, wls, energy), H their normal matrix, "
@@ -38,6 +39,14 @@ UNCERTAINTY_NOTE = (
 
 def _color(label: str, k: int) -> str:
     return method_color(label) or cycle_color(k)
+
+
+def _friction(model, theta) -> dict[str, tuple[float, float]]:
+    return model.friction(theta) if isinstance(model, JointTermsModel) else {}
+
+
+def _armature(model, theta) -> dict[str, float]:
+    return model.armature_values(theta) if isinstance(model, JointTermsModel) else {}
 
 
 def _slug(s: str) -> str:
@@ -200,8 +209,8 @@ def _write_fit(outcome: FitOutcome, out: Path) -> dict[str, Path]:
             continue
         try:
             path = write_urdf(outcome.config.model.urdf, outcome.rigid, f.result.theta[:p0], out / f"{m}.urdf",
-                              overwrite=True, friction=friction_of(outcome.model, f.result.theta),
-                              armature=armature_of(outcome.model, f.result.theta))
+                              overwrite=True, friction=_friction(outcome.model, f.result.theta),
+                              armature=_armature(outcome.model, f.result.theta))
         except (DualidError, ValueError) as exc:  # e.g. a fit on the consistency boundary the URDF writer refuses
             urdfs[m] = f"not written: {exc}"
             continue

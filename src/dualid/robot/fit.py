@@ -107,26 +107,6 @@ def with_bounds(problem: IdentificationProblem, bounds) -> IdentificationProblem
     return dataclasses.replace(problem, parameters=params)
 
 
-def friction_of(model, theta: np.ndarray) -> dict[str, tuple[float, float]]:
-    """{joint: (viscous b, Coulomb fc)} from θ of a model with joint terms (for URDF <dynamics>)."""
-    if not isinstance(model, JointTermsModel):
-        return {}
-    out = {}
-    for k, j in enumerate(model.dofs):
-        b = float(theta[model.index("viscous")[k]]) if model.viscous else 0.0
-        fc = float(theta[model.index("coulomb")[k]]) if model.coulomb else 0.0
-        out[model.coordinates[j]] = (max(b, 0.0), max(fc, 0.0))
-    return out
-
-
-def armature_of(model, theta: np.ndarray) -> dict[str, float]:
-    """{joint: armature Ia [kg m²]} from θ of a model with armature terms."""
-    if not isinstance(model, JointTermsModel) or not model.armature:
-        return {}
-    # clamped like friction_of: a constrained fit can sit a rounding error below 0
-    return {model.coordinates[j]: max(float(theta[model.index("armature")[k]]), 0.0) for k, j in enumerate(model.dofs)}
-
-
 def urdf_joint_terms(urdf: Path, joints: tuple[str, ...]) -> dict[str, dict[str, float]]:
     """{joint: {damping, friction, armature}} from the <dynamics> of the URDF's moving joints (0 if absent)."""
     root = ET.parse(urdf).getroot()
