@@ -10,10 +10,8 @@ from typer.testing import CliRunner
 
 from dualid.cli import app
 
-SHARED = Path(__file__).resolve().parents[2] / "shared"
-DFKI = SHARED / "datasets" / "dfki-double-pendulum"
+DFKI = Path(__file__).resolve().parents[1] / "examples" / "dfki" / "data"  # shipped with the repository
 URDF = DFKI / "pendubot_model_2.1.urdf"
-pytestmark = pytest.mark.skipif(not DFKI.is_dir(), reason="shared DFKI data set not available")
 runner = CliRunner()
 
 STEPS = [

@@ -12,8 +12,7 @@ from dualid.errors import DataError, OutputError
 from dualid.report.dataset import save_dataset
 
 JOINTS = ["Joint1", "Joint2"]
-SHARED = Path(__file__).resolve().parents[2] / "shared"
-DFKI = SHARED / "datasets" / "dfki-double-pendulum"
+DFKI = Path(__file__).resolve().parents[1] / "examples" / "dfki" / "data"  # shipped with the repository
 
 
 def frame(T=200, rate=100.0):
@@ -247,7 +246,6 @@ def test_dataset_overwrite_guard(tmp_path):
 
 
 # --- real data -----------------------------------------------------------------------------------
-@pytest.mark.skipif(not DFKI.is_dir(), reason=f"shared data folder not found at {DFKI} (clone shared/ beside the repo)")
 def test_dfki_double_pendulum_log():
     raw = load_log(DFKI / "trajectory_00.csv", ColumnMap.pattern(JOINTS), JOINTS)
     assert raw.q.shape == (raw.T, 2) and raw.T > 4000

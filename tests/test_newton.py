@@ -7,6 +7,8 @@ when not); active constraints; coordinate invariance; the documented errors.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -259,15 +261,33 @@ def test_unknown_solver_name():
         DualMetric(solver="qp").fit(problem)
 
 
-def test_warm_start_from_a_subsample_reaches_the_same_optimum():
-    problem, _ = rigid_body_problem(crazyflie_like(), 60, seed=7, noise=0.05)
+def test_warm_start_from_a_subsample_starts_at_its_optimum_and_reaches_the_same_optimum():
+    problem, _ = rigid_body_problem(crazyflie_like(), 200, seed=7, noise=0.05)
     cold = fit_dual_metric_newton(problem, warm_start_samples=0)
-    warm = fit_dual_metric_newton(problem, warm_start_samples=12)
-    # 12 of 60 samples is a harsh warm start: it may jam, and then the cold start runs (and says so)
-    assert warm.info["start"].startswith("warm start from 12 samples")
+    warm = fit_dual_metric_newton(problem, warm_start_samples=25)
+    assert re.fullmatch(r"warm start from 25 samples \(\d+ iterations\)", warm.info["start"])  # no fallback
+    # the full solve starts at the subsample's optimum: f there, from an independent SDP fit of the
+    # same strided subsample (the warm start solves it to 1e-4 only, hence rtol)
+    sub = problem.subset(slice(0, None, problem.N // 25))
+    theta_sub = DualMetric(solver="sdp", allow_unidentifiable=True).fit(sub).theta
+    f_sub = dual_metric_derivatives(problem, theta_sub, 0, 4096).f
+    assert warm.info["objective_start"] == pytest.approx(f_sub, rel=1e-4)
+    assert warm.info["objective_start"] < 0.5 * cold.info["objective_start"]
+    assert warm.info["iterations"] < cold.info["iterations"]  # 6 against 11 when measured
     assert warm.info["relative_gap"] <= 1e-9
     np.testing.assert_allclose(warm.objective, cold.objective, rtol=1e-8)
     np.testing.assert_allclose(problem.Y @ warm.theta, problem.Y @ cold.theta, atol=1e-5 * np.abs(problem.Y @ cold.theta).max())
+
+
+def test_a_failed_warm_start_is_recorded_and_the_cold_start_runs():
+    problem, _ = rigid_body_problem(crazyflie_like(), 60, seed=7, noise=0.05)
+    cold = fit_dual_metric_newton(problem, warm_start_samples=0)
+    warm = fit_dual_metric_newton(problem, warm_start_samples=12)
+    # 12 of 60 samples is a harsh warm start: the full solve from it jams, and the cold start runs
+    assert re.fullmatch(r"warm start from 12 samples \(\d+ iterations\) failed \(max_iterations\); .+", warm.info["start"])
+    assert warm.info["start"].endswith("; " + cold.info["start"])
+    assert warm.info["iterations"] == cold.info["iterations"]
+    np.testing.assert_allclose(warm.objective, cold.objective, rtol=1e-8)
 
 
 def test_unconstrained_null_space_is_handled_without_failing():

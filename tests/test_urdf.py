@@ -13,11 +13,7 @@ from dualid.errors import ConsistencyError, OutputError
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.report.urdf import write_urdf
 
-SHARED = Path(__file__).resolve().parents[2] / "shared"
-PENDUBOT = SHARED / "datasets" / "dfki-double-pendulum" / "pendubot_model_2.1.urdf"
-needs_pendubot = pytest.mark.skipif(
-    not PENDUBOT.is_file(), reason=f"DFKI pendulum URDF not found at {PENDUBOT} (shared data folder absent)"
-)
+PENDUBOT = Path(__file__).resolve().parents[1] / "examples" / "dfki" / "data" / "pendubot_model_2.1.urdf"  # shipped with the repository
 
 CHAIN = """<robot name="chain">
   <link name="a"><inertial><origin xyz="0.1 0 0"/><mass value="1"/>
@@ -44,7 +40,6 @@ def perturbed(theta: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.concatenate(out)
 
 
-@needs_pendubot
 def test_pendubot_round_trip(tmp_path):
     model = RigidBodyModel.from_urdf(PENDUBOT)
     assert model.bodies == ("Joint1", "Joint2")

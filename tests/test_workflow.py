@@ -1,4 +1,4 @@
-"""The real-robot workflow on the shared DFKI double-pendulum logs (small, downsampled)."""
+"""The real-robot workflow on the DFKI double-pendulum logs (small, downsampled)."""
 
 from __future__ import annotations
 
@@ -17,10 +17,8 @@ from dualid.robot.dfki import load_reference, reference_mass_matrix, reference_t
 from dualid.robot.fit import fit_robot
 from dualid.robot.validate import validate_urdf
 
-SHARED = Path(__file__).resolve().parents[2] / "shared"
-DFKI = SHARED / "datasets" / "dfki-double-pendulum"
+DFKI = Path(__file__).resolve().parents[1] / "examples" / "dfki" / "data"  # shipped with the repository
 URDF = DFKI / "pendubot_model_2.1.urdf"
-pytestmark = pytest.mark.skipif(not DFKI.is_dir(), reason="shared DFKI data set not available")
 
 # short, coarse runs keep the tests fast: 4 s of each run at 50 Hz
 STEPS = [
