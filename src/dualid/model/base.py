@@ -18,9 +18,16 @@ Kind = Literal["inertia", "drag"]
 
 @runtime_checkable
 class Model(Protocol):
-    kind: Kind  # "inertia": τ = M(q)a + h(q, v); "drag": τ = M(q)v
-    parameters: ParameterSpace
-    coordinates: tuple[str, ...]  # names of the n velocity coordinates
+    @property
+    def kind(self) -> Kind:
+        """"inertia": τ = M(q)a + h(q, v); "drag": τ = M(q)v."""
+
+    @property
+    def parameters(self) -> ParameterSpace: ...
+
+    @property
+    def coordinates(self) -> tuple[str, ...]:
+        """Names of the n velocity coordinates."""
 
     def regressor(self, q: np.ndarray, v: np.ndarray, a: np.ndarray | None) -> np.ndarray:
         """Y (T, n, p) with τ = Y θ."""

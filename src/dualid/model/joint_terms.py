@@ -11,11 +11,12 @@ Inertia models only: in a drag model τ = M(q) v has no acceleration or Coulomb 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
 from dualid.errors import ModelError
-from dualid.model.base import Model
+from dualid.model.base import Kind, Model
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.parameters import ParameterBlock, ParameterSpace
 
@@ -30,7 +31,7 @@ class JointTermsModel:
     coulomb: bool = True
     armature: bool = False
     coulomb_velocity: float = 0.01  # v_c [rad/s or m/s] of the smooth sign tanh(v / v_c)
-    kind = "inertia"
+    kind: ClassVar[Kind] = "inertia"
     parameters: ParameterSpace = field(init=False)
     coordinates: tuple[str, ...] = field(init=False)
     _offsets: dict = field(init=False, repr=False)  # group name -> first index in θ

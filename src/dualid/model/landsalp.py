@@ -27,11 +27,13 @@ joint2.damping] in [N s/m, N s/m, N m s/rad, …, N m s/rad, N m s/rad].
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 import pinocchio as pin
 
 from dualid.errors import DataError
+from dualid.model.base import Kind
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.parameters import ParameterBlock, ParameterSpace
 
@@ -94,7 +96,7 @@ class LandSalpModel:
 
     link_length: float = LINK_LENGTH  # [m]
     wheel_angles_deg: tuple[float, float, float] = WHEEL_ANGLES_DEG
-    kind = "drag"
+    kind: ClassVar[Kind] = "drag"
     coordinates = COORDINATES
     parameters = _parameter_space()
     pinocchio_model: pin.Model = field(init=False, repr=False)

@@ -10,9 +10,11 @@ horizontal axis, viscous damping in each joint. Closed form; the teaching exampl
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
+from dualid.model.base import Kind
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.parameters import ParameterBlock, ParameterSpace
 
@@ -51,7 +53,7 @@ def jacobian_dot_v(q: np.ndarray, v: np.ndarray, length: float) -> np.ndarray:
 class PanTilt:
     length: float = 0.3  # L [m]
     gravity: float = 9.81  # [m/s²], along −z
-    kind = "inertia"
+    kind: ClassVar[Kind] = "inertia"
     coordinates = ("pan", "tilt")
     parameters = ParameterSpace(
         names=("m", "b_pan", "b_tilt"),

@@ -18,11 +18,13 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import pinocchio as pin
 
 from dualid.errors import DataError, MissingFileError, ModelError
+from dualid.model.base import Kind
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.parameters import ParameterSpace, rigid_body_space
 
@@ -104,7 +106,7 @@ class RigidBodyModel:
 
     model: pin.Model
     gravity: tuple[float, float, float] | None = None
-    kind = "inertia"
+    kind: ClassVar[Kind] = "inertia"
     parameters: ParameterSpace = field(init=False)
     coordinates: tuple[str, ...] = field(init=False)  # n = nv velocity coordinate names
     base_coordinates: tuple[str, ...] = field(init=False)  # the free-flyer root's, or ()

@@ -179,6 +179,11 @@ def identified_urdf(
             raise ConsistencyError(f"write_urdf: joint {joint_name!r} armature must be ≥ 0, got {value}")
         dynamics.set("armature", repr(float(value)))
 
+    undeclared = sorted({j.find("parent").get("link") for j in joints.values() if j.find("parent") is not None}
+                        - set(links))
+    for k, name in enumerate(undeclared):  # e.g. an implicit "world": other URDF tools refuse it undeclared
+        root.insert(k, ET.Comment(f" dualid: declared the link {name!r} the source URDF referred to without declaring it "))
+        root.insert(k + 1, ET.Element("link", {"name": name}))
     if out_dir is not None:
         _relocate_meshes(root, source_urdf.resolve().parent, Path(out_dir).resolve())
     ET.indent(tree, space="  ")
