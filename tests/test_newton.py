@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from dualid import DualMetric
-from dualid.errors import MetricError, SolverError
+from dualid.errors import MetricError, SolverError, SolverOptionError
 from dualid.estimators.newton import _apply_quad, dual_metric_derivatives, fit_dual_metric_newton
 from dualid.models.pan_tilt import PanTilt
 from dualid.models.rigid_body import RigidBodyModel
@@ -255,7 +255,7 @@ def test_iteration_limit_raises_solver_error_naming_the_gap():
 
 def test_unknown_solver_name():
     problem = pan_tilt_problem(20, seed=0, theta=np.array([1.0, 0.2, 0.1]))
-    with pytest.raises(ValueError, match=r"solver: expected 'sdp' or 'newton', got 'qp'"):
+    with pytest.raises(SolverOptionError, match=r"solver: expected one of \('newton', 'sdp', 'sdp_clarabel', 'sdp_scs'\), got 'qp'"):
         DualMetric(solver="qp").fit(problem)
 
 

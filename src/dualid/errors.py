@@ -27,3 +27,7 @@ class SolverError(DualidError):
     def __init__(self, message: str, status: str | None = None):
         super().__init__(message)
         self.status = status
+
+
+class SolverOptionError(DualidError, ValueError):
+    """An estimator's solver, tolerance, iteration limit or fallback chain is not one it accepts."""
