@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from dualid.errors import SolverError
+
 import numpy as np
 
 from dualid.estimators.base import (
@@ -189,22 +191,66 @@ def fit_quadratic(
                 reg = reg - cp.log_det(0.5 * (C + C.T)) + cp.sum(cp.multiply(C0inv, C))
             else:
                 G = pullback_metric(V, C0)
-                L = np.linalg.cholesky(0.5 * (G + G.T) + 1e-12 * np.trace(G) * np.eye(k))
-                reg = reg + cp.sum_squares(L.T @ (th - theta0[idx]))
+                # G = F Fᵀ exactly (eigen-factor): a ridge added for a Cholesky factor (1e-12·tr G) changes the
+                # objective by ~1e-4 relative on thin links, where tr G is dominated by a near-null direction of C0
+                w, U = np.linalg.eigh(0.5 * (G + G.T))
+                F = U * np.sqrt(np.maximum(w, 0.0))
+                reg = reg + cp.sum_squares(F.T @ (th - theta0[idx]))
         objective = objective + (gamma / norm) * reg
     constraints = consistency_constraints(theta, problem.parameters) if constrained else []
     cvx = cp.Problem(cp.Minimize(objective), constraints)
-    solved = solve_cvxpy(cvx, phi, solver, solver_options, what=f"{method} fit")
-    theta_hat = s * solved.value
+    solved, theta_hat, status, used, iterations, solve_time = _solve_with_fallback(
+        cvx, phi, s, stats, problem, method, constrained, solver, solver_options, regularizer, info
+    )
     value = stats.objective(problem, theta_hat)
     if regularizer is not None:
         kind, theta0, gamma = regularizer
         info["data_objective"] = value
         value += gamma * regularizer_value(kind, problem.parameters, theta_hat, theta0)
     return IdentificationResult(
-        method, theta_hat, problem.parameters, value, solved.status, solved.solver,
-        solved.solve_time, solved.iterations, constrained, info,
+        method, theta_hat, problem.parameters, value, status, used, solve_time, iterations, constrained, info,
     )
+
+
+def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solver, solver_options, regularizer, info):
+    """cvxpy first; when it fails or returns only optimal_inaccurate, dualid's own interior-point method
+    (estimators.quadratic_newton). What happened is recorded in info (solver_chain, fallback_used,
+    solver_warnings); an inaccurate cvxpy result is returned only, and labelled, if that fails too."""
+    import time
+    import warnings
+
+    from dualid.estimators.quadratic_newton import fit_quadratic_newton
+
+    solved, failure = None, None
+    with warnings.catch_warnings(record=True) as caught:  # cvxpy's warnings go into the result, not the terminal
+        warnings.simplefilter("always")
+        try:
+            solved = solve_cvxpy(cvx, phi, solver, solver_options, what=f"{method} fit")
+        except SolverError as exc:
+            if exc.status and ("infeasible" in exc.status or "unbounded" in exc.status):
+                raise
+            failure = f"{solver} failed ({exc.status}): {exc}"
+    notes = sorted({f"{w.category.__name__}: {w.message}" for w in caught})
+    if notes:
+        info["solver_warnings"] = " | ".join(notes)
+    if solved is not None and solved.status == "optimal":
+        info.update(solver_chain=f"{solver} optimal", fallback_used=False)
+        return solved, s * solved.value, solved.status, solved.solver, solved.iterations, solved.solve_time
+    first = failure or f"{solver} returned {solved.status}"
+    t0 = time.perf_counter()
+    try:
+        theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, constrained=constrained,
+                                          regularizer=regularizer)
+    except SolverError as exc:
+        if solved is None:
+            raise SolverError(f"{method} fit: {first}; then dualid's interior-point method failed: {exc}",
+                              status="all_solvers_failed") from exc
+        info.update(solver_chain=f"{first} → newton failed ({exc.status}) → {solver} {solved.status}",
+                    fallback_used=False, fallback_reason=first)
+        return solved, s * solved.value, solved.status, solved.solver, solved.iterations, solved.solve_time
+    info.update(solver_chain=f"{first} → newton optimal", fallback_used=True, fallback_reason=first,
+                relative_gap=ipm["relative_gap"])
+    return None, theta, "optimal", "newton", ipm["iterations"], time.perf_counter() - t0
 
 
 @dataclass(frozen=True)

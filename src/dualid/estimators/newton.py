@@ -625,16 +625,24 @@ def fit_dual_metric_newton(
     )
 
 
-def _interior_point(problem, cons: _Constraints, theta, Z, z, tol, max_iter, chunk, verbose, der=None, gap0=1.0):
+def _interior_point(problem, cons: _Constraints, theta, Z, z, tol, max_iter, chunk, verbose, der=None, gap0=1.0,
+                    objective=None, f_scale=None):
     """Primal–dual iterations from a strictly feasible θ (and dual Z, z, or None: centred at θ, gap0·f).
 
-    Returns (θ, Z, z, info) at relative gap ≤ tol; raises SolverError otherwise.
+    Returns (θ, Z, z, info) at relative gap ≤ tol; raises SolverError otherwise. objective(θ, order) → _Derivatives
+    (raising _NotPositiveDefinite outside its domain) replaces the dual-metric f, with f_scale its size
+    (then problem is unused): the same method for any smooth convex f under these constraints.
     """
-    p = problem.p
+    p = len(theta)
+    if objective is None:
+        def objective(th, order):
+            return dual_metric_derivatives(problem, th, order, chunk)
     nu = cons.size  # barrier parameter: μ = gap / ν on the central path
-    der = dual_metric_derivatives(problem, theta, 2, chunk) if der is None else der
+    der = objective(theta, 2) if der is None else der
     f_start = der.f
-    f_scale = max(f_start, _force_scale(problem, theta, chunk))  # exact data drive f → 0
+    if f_scale is None:
+        f_scale = _force_scale(problem, theta, chunk)
+    f_scale = max(f_start, f_scale)  # exact data drive f → 0
     if Z is None:
         mu = gap0 * max(der.f, 1e-300) / max(nu, 1)  # dual start on the central path: Z_b = μ C_b⁻¹, z = μ / s
         Z = [mu * np.linalg.inv(c.C(theta)) for c in cons.lmis]
@@ -642,7 +650,7 @@ def _interior_point(problem, cons: _Constraints, theta, Z, z, tol, max_iter, chu
     history, n_evals = [], 0
     for it in range(max_iter + 1):
         if der is None:
-            der = dual_metric_derivatives(problem, theta, 2, chunk)
+            der = objective(theta, 2)
         f, grad, K = der.f, der.grad, der.hess.copy()
         Cinv = [np.linalg.inv(c.C(theta)) for c in cons.lmis]
         s = cons.G @ theta + cons.h
@@ -693,13 +701,16 @@ def _interior_point(problem, cons: _Constraints, theta, Z, z, tol, max_iter, chu
             if first:
                 # the first trial is usually accepted: evaluate all derivatives there, for the next iteration
                 try:
-                    der_trial = dual_metric_derivatives(problem, trial, 2, chunk)
+                    der_trial = objective(trial, 2)
                     phi1 = der_trial.f
                 except _NotPositiveDefinite:
                     der_trial, phi1 = None, np.inf
             else:
                 der_trial = None
-                phi1 = _objective(problem, trial, chunk)
+                try:
+                    phi1 = objective(trial, 0).f
+                except _NotPositiveDefinite:
+                    phi1 = np.inf
             first = False
             if np.isfinite(phi1):
                 phi1 += target * _barrier(cons, trial)
