@@ -92,6 +92,35 @@ def _slack_scale(problem: IdentificationProblem) -> float:
     return t_scale if np.isfinite(t_scale) and t_scale > 0 else 1.0
 
 
+def whitening_chart(problem: IdentificationProblem, chunk: int = 4096) -> tuple[np.ndarray, float, str]:
+    """(B (N, n, n), slack scale, description): B_i = L_i⁻ᵀ with M_i(θ_s) = L_i L_iᵀ, so M̃_i(θ_s) = I.
+
+    θ_s is the Newton solver's starting point, computed from chart-invariant quantities only (every M_i(θ_s)
+    ≻ 0, constraints strictly satisfied), so the whitened problem is the same in every chart up to a
+    rotation per sample, which the PSD cone does not see. The slack scale is the residual size: the
+    frozen-metric least-squares objective at θ_s per sample (a chart-invariant estimate of f*/N from
+    below), floored at 1e-12 of the signal size τ̃ᵀτ̃ so exact data still give a positive scale.
+    """
+    from dualid.estimators.newton import _frozen_metric_ls, build_constraints, starting_point
+
+    cons = build_constraints(problem.parameters, True)
+    theta_s, _ = starting_point(problem, cons, chunk)
+    B = np.empty((problem.N, problem.n, problem.n))
+    for start in range(0, problem.N, chunk):
+        rows = slice(start, start + chunk)
+        L = np.linalg.cholesky(problem.metric.evaluate(theta_s, rows))
+        B[rows] = np.swapaxes(np.linalg.inv(L), 1, 2)  # L⁻ᵀ
+    whitened = problem.in_coordinates(B, problem.coordinates)
+    theta_f = _frozen_metric_ls(problem, theta_s, chunk)
+    signal = float(np.mean(np.sum(whitened.tau**2, axis=1)))
+    residual = np.nan
+    if theta_f is not None:
+        r = whitened.residual(theta_f)
+        residual = float(np.mean(np.sum(r * r, axis=1)))
+    scale = max(residual if np.isfinite(residual) else signal, 1e-12 * signal, 1e-300)
+    return B, scale, "whitened at the Newton start"
+
+
 def fit_dual_metric_sdp(
     problem: IdentificationProblem,
     *,
@@ -104,10 +133,17 @@ def fit_dual_metric_sdp(
     import cvxpy as cp
 
     original = problem
-    problem = problem.in_coordinates(internal_chart(problem), problem.coordinates)
+    try:
+        B, s_slack, chart = whitening_chart(problem)
+    except (MetricError, SolverError, np.linalg.LinAlgError) as exc:  # no interior start: the diagonal chart
+        B, s_slack, chart = None, None, f"diagonal (whitening failed: {exc})"
+    if B is None:
+        problem = problem.in_coordinates(internal_chart(problem), problem.coordinates)
+        s_slack = _slack_scale(problem)
+    else:
+        problem = problem.in_coordinates(B, problem.coordinates)
     N, n, p = problem.N, problem.n, problem.p
     s_theta = parameter_scale(problem)
-    s_slack = _slack_scale(problem)
     A_theta, A_s, b = _schur_blocks(problem, s_theta, s_slack)
     phi = cp.Variable(p)
     sigma = cp.Variable(N)
@@ -136,7 +172,7 @@ def fit_dual_metric_sdp(
     return IdentificationResult(
         method, theta, problem.parameters, objective, solved.status, f"sdp/{solver}",
         solved.solve_time, solved.iterations, constrained,
-        {"sdp_objective": float(np.sum(s_slack * np.asarray(sigma.value)))},
+        {"sdp_objective": float(np.sum(s_slack * np.asarray(sigma.value))), "sdp_chart": chart, "slack_scale": s_slack},
     )
 
 
