@@ -101,7 +101,8 @@ def whitening_chart(problem: IdentificationProblem, chunk: int = 4096) -> tuple[
     frozen-metric least-squares objective at θ_s per sample (a chart-invariant estimate of f*/N from
     below), floored at 1e-12 of the signal size τ̃ᵀτ̃ so exact data still give a positive scale.
     """
-    from dualid.estimators.newton import _frozen_metric_ls, build_constraints, starting_point
+    from dualid.estimators.newton import build_constraints, starting_point
+    from dualid.estimators.newton.start import _frozen_metric_ls
 
     cons = build_constraints(problem.parameters, True)
     theta_s, _ = starting_point(problem, cons, chunk)

@@ -9,10 +9,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from dualid.errors import SolverError
-
 import numpy as np
 
+from dualid.errors import SolverError
 from dualid.estimators.base import (
     check_identifiable,
     check_nominal,

@@ -8,7 +8,7 @@ so f is accurate where it is small compared with c) and R one of the priors of L
     pullback: Σ_b (θ_b − θ_b0)ᵀ g_b (θ_b − θ_b0)                         (quadratic)
     logdet:   Σ_b −log det C_b(θ) + log det C_b0 + tr(C_b0⁻¹ C_b(θ)) − m_b   (smooth and convex on C_b ≻ 0)
 
-The iterations are those of the dual-metric solver (``newton._interior_point``: primal–dual HKM steps on the
+The iterations are those of the dual-metric solver (``newton.interior_point._interior_point``: primal–dual HKM steps on the
 pseudo-inertia LMIs, a line search that keeps every C_b ≻ 0); only f, ∇f, ∇²f differ:
 
     ∇f = 2H(θ − θ_ls) [+ γ (2 g_b (θ_b − θ_b0))]  [+ γ (−tr(C_b⁻¹V_k) + tr(C_b0⁻¹V_k))_k]
@@ -23,14 +23,11 @@ from __future__ import annotations
 import numpy as np
 
 from dualid.errors import SolverError
-from dualid.estimators.newton import (
-    _central_point,
-    _Derivatives,
-    _interior_point,
-    _NotPositiveDefinite,
-    _solve_psd,
-    build_constraints,
-)
+from dualid.estimators.newton.constraints import build_constraints
+from dualid.estimators.newton.interior_point import _interior_point
+from dualid.estimators.newton.linalg import _solve_psd
+from dualid.estimators.newton.objective import _Derivatives, _NotPositiveDefinite
+from dualid.estimators.newton.start import _central_point
 
 
 def _blocks(regularizer, parameters):
