@@ -119,3 +119,9 @@ def test_optimal_inaccurate_comes_back_labelled_when_the_next_solver_fails(probl
         "sdp returned optimal_inaccurate (objective " + f"{result.objective:.10g}) → newton failed "
         "(line_search_failed): dual-metric Newton: line search failed → sdp/CLARABEL optimal_inaccurate"
     )
+
+
+def test_no_sdp_fallback_on_large_problems(problem, monkeypatch):
+    monkeypatch.setattr(dual_metric, "SDP_FALLBACK_MAX_N", 10)
+    with pytest.raises(SolverError, match=r"newton failed \(max_iterations\).*; then sdp skipped \(N = 30 > 10"):
+        DualMetric(max_iter=2, allow_unidentifiable=True).fit(problem)

@@ -178,7 +178,8 @@ def fit_dual_metric_sdp(
 
 
 NEWTON_OPTIONS = ("tol", "max_iter", "chunk", "warm_start_samples", "verbose")
-SOLVER_NAMES = ("newton", "sdp", "sdp_clarabel", "sdp_scs")  # "sdp": the SDP with DualMetric.sdp_solver
+SOLVER_NAMES = ("newton", "sdp", "sdp_clarabel", "sdp_scs")
+SDP_FALLBACK_MAX_N = 20_000  # an SDP fallback beyond this would take minutes and GBs (one LMI per sample)  # "sdp": the SDP with DualMetric.sdp_solver
 
 
 @dataclass(frozen=True)
@@ -195,9 +196,10 @@ class DualMetric:
     order when the one before fails (SolverError) or returns only ``optimal_inaccurate``; the
     result's ``info["solver_chain"]`` says which solver produced θ̂ and what failed before it, and its
     ``status`` is the producing solver's (``optimal_inaccurate`` is reported, never turned into
-    ``optimal``). solver_options: extra options for the first solver only (Newton: tol, max_iter,
-    chunk, warm_start_samples, verbose; the SDP: cvxpy/solver options). Options are checked here,
-    in the constructor (SolverOptionError).
+    ``optimal``). An SDP fallback is skipped (and recorded) above SDP_FALLBACK_MAX_N samples.
+    solver_options: extra options for the first solver only (Newton: tol, max_iter, chunk,
+    warm_start_samples, verbose; the SDP: cvxpy/solver options). Options are checked here, in the
+    constructor (SolverOptionError).
     """
 
     constrained: bool = True
@@ -270,6 +272,9 @@ class DualMetric:
             check_identifiable(problem)
         chain, failures, inaccurate = self._chain(), [], None
         for k, solver in enumerate(chain):
+            if k and solver != "newton" and problem.N > SDP_FALLBACK_MAX_N:
+                failures.append(f"{solver} skipped (N = {problem.N} > {SDP_FALLBACK_MAX_N}: too large for a fallback SDP)")
+                continue
             with warnings.catch_warnings(record=True) as caught:  # e.g. cvxpy's "Solution may be inaccurate"
                 warnings.simplefilter("always")
                 try:
