@@ -147,3 +147,19 @@ def test_dual_metric_picks_the_same_point_of_a_non_unique_optimum_in_every_chart
         other = DualMetric(allow_unidentifiable=True).fit(problem.in_coordinates(B))
         # along the flat face only the barrier holds θ, so rounding moves it ~1e-6 (an OLS start: ~1e-2)
         assert rel(other.theta, base.theta) < 1e-5, name
+
+
+@settings(max_examples=4, deadline=None)
+@given(seeds)
+def test_sdp_and_newton_agree_to_1e6_in_every_chart(seed):
+    """Both DM solvers, every chart (incl. units over 1e-6…1e6): the same objective and predictions Yθ to 1e-6.
+    The SDP works in a chart whitened at a chart-invariant point with a residual-sized slack scale."""
+    rng = np.random.default_rng(seed)
+    problem, _ = drag_problem(rng, N=40, n=3, noise=0.3)
+    newton = DualMetric(solver="newton").fit(problem)
+    for name, B in {"identity": np.eye(problem.n), **charts(rng, problem)}.items():
+        other = problem.in_coordinates(B)
+        sdp = DualMetric(solver="sdp", fallback=()).fit(other)
+        assert sdp.status == "optimal", name
+        assert rel(sdp.objective, newton.objective) < 1e-6, name
+        assert rel(other.Y @ sdp.theta, other.Y @ newton.theta) < 1e-6, name

@@ -49,3 +49,7 @@ class MissingFileError(DataError, FileNotFoundError):
 
 class SimulationError(DualidError, RuntimeError):
     """A simulator (the paper's systems) failed: an integrator diverged or the state left its range."""
+
+
+class SolverOptionError(ConfigError):
+    """An estimator's solver, tolerance, iteration limit or fallback chain is not one it accepts."""

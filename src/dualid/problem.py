@@ -210,7 +210,7 @@ def build_problem(model: Model, trajectories: list[Trajectory] | Trajectory) -> 
     problems = []
     for traj in trajectories:
         if model.kind == "inertia" and traj.a is None:
-            raise ValueError(
+            raise DataError(
                 f"trajectory {traj.name!r} has no accelerations; an inertia-dominated model needs them "
                 "(differentiate the velocities first, see dualid.data.preprocessing)"
             )

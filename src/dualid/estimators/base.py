@@ -80,9 +80,9 @@ def check_nominal(parameters: ParameterSpace, theta0: np.ndarray, strict: bool) 
     """θ₀ must have p finite entries and be physically consistent (strictly, for log-det priors)."""
     theta0 = np.asarray(theta0, dtype=float)
     if theta0.shape != (parameters.p,):
-        raise ValueError(f"nominal θ₀: expected shape ({parameters.p},), got {theta0.shape}")
+        raise ConsistencyError(f"nominal θ₀: expected shape ({parameters.p},), got {theta0.shape}")
     if not np.all(np.isfinite(theta0)):
-        raise ValueError("nominal θ₀ has non-finite entries (NaN or inf)")
+        raise ConsistencyError("nominal θ₀ has non-finite entries (NaN or inf)")
     for name, margin in parameters.consistency_margins(theta0).items():
         if margin < 0 or (strict and margin <= 0):
             need = "positive definite" if strict else "positive semidefinite"
@@ -102,35 +102,6 @@ def parameter_scale(problem: IdentificationProblem) -> np.ndarray:
     return s
 
 
-def consistency_constraints(theta, parameters: ParameterSpace) -> list:
-    """cvxpy constraints C_b(θ_b) ⪰ 0 for every block, and the per-parameter bounds."""
-    import cvxpy as cp
-
-    cons = []
-    for b in parameters.blocks:
-        V = b.constraint_basis
-        if V is None:
-            continue
-        th = theta[list(b.indices)]
-        if b.kind in ("drag_diagonal", "nonnegative"):
-            cons.append(th >= 0)  # diag(θ_b) ⪰ 0 is plain non-negativity
-            continue
-        k, m, _ = V.shape
-        C = cp.reshape(V.reshape(k, m * m).T @ th, (m, m), order="C")
-        cons.append(0.5 * (C + C.T) >> 0)
-    if parameters.lower is not None:
-        lo = np.asarray(parameters.lower)
-        fin = np.isfinite(lo)
-        if fin.any():
-            cons.append(theta[np.flatnonzero(fin)] >= lo[fin])
-    if parameters.upper is not None:
-        hi = np.asarray(parameters.upper)
-        fin = np.isfinite(hi)
-        if fin.any():
-            cons.append(theta[np.flatnonzero(fin)] <= hi[fin])
-    return cons
-
-
 @dataclass(frozen=True)
 class Solved:
     value: np.ndarray
@@ -145,7 +116,7 @@ def solve_cvxpy(problem, variable, solver: str, solver_options: dict | None, wha
     import cvxpy as cp
 
     if solver not in SOLVERS:
-        raise ValueError(f"solver: expected one of {SOLVERS}, got {solver!r}")
+        raise ConfigError(f"solver: expected one of {SOLVERS}, got {solver!r}")
     options = dict(DEFAULT_OPTIONS.get(solver, {}))
     options.update(dict(solver_options or ()))
     t0 = time.perf_counter()

@@ -9,15 +9,17 @@ and the physical-consistency constraints. All N blocks are one batched PSD const
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
 
-from dualid.errors import MetricError, SolverError
-from dualid.estimators.base import check_identifiable, consistency_constraints, parameter_scale, solve_cvxpy
+from dualid.errors import MetricError, SolverError, SolverOptionError
+from dualid.estimators.base import check_identifiable, parameter_scale, solve_cvxpy
 from dualid.estimators.newton import fit_dual_metric_newton
 from dualid.estimators.result import IdentificationResult
+from dualid.model.consistency import cvxpy_constraints
 from dualid.problem import IdentificationProblem
 
 
@@ -91,6 +93,36 @@ def _slack_scale(problem: IdentificationProblem) -> float:
     return t_scale if np.isfinite(t_scale) and t_scale > 0 else 1.0
 
 
+def whitening_chart(problem: IdentificationProblem, chunk: int = 4096) -> tuple[np.ndarray, float, str]:
+    """(B (N, n, n), slack scale, description): B_i = L_i⁻ᵀ with M_i(θ_s) = L_i L_iᵀ, so M̃_i(θ_s) = I.
+
+    θ_s is the Newton solver's starting point, computed from chart-invariant quantities only (every M_i(θ_s)
+    ≻ 0, constraints strictly satisfied), so the whitened problem is the same in every chart up to a
+    rotation per sample, which the PSD cone does not see. The slack scale is the residual size: the
+    frozen-metric least-squares objective at θ_s per sample (a chart-invariant estimate of f*/N from
+    below), floored at 1e-12 of the signal size τ̃ᵀτ̃ so exact data still give a positive scale.
+    """
+    from dualid.estimators.newton import feasible_set, starting_point
+    from dualid.estimators.newton.start import _frozen_metric_ls
+
+    cons = feasible_set(problem.parameters, True)
+    theta_s, _ = starting_point(problem, cons, chunk)
+    B = np.empty((problem.N, problem.n, problem.n))
+    for start in range(0, problem.N, chunk):
+        rows = slice(start, start + chunk)
+        L = np.linalg.cholesky(problem.metric.evaluate(theta_s, rows))
+        B[rows] = np.swapaxes(np.linalg.inv(L), 1, 2)  # L⁻ᵀ
+    whitened = problem.in_coordinates(B, problem.coordinates)
+    theta_f = _frozen_metric_ls(problem, theta_s, chunk)
+    signal = float(np.mean(np.sum(whitened.tau**2, axis=1)))
+    residual = np.nan
+    if theta_f is not None:
+        r = whitened.residual(theta_f)
+        residual = float(np.mean(np.sum(r * r, axis=1)))
+    scale = max(residual if np.isfinite(residual) else signal, 1e-12 * signal, 1e-300)
+    return B, scale, "whitened at the Newton start"
+
+
 def fit_dual_metric_sdp(
     problem: IdentificationProblem,
     *,
@@ -103,17 +135,24 @@ def fit_dual_metric_sdp(
     import cvxpy as cp
 
     original = problem
-    problem = problem.in_coordinates(internal_chart(problem), problem.coordinates)
+    try:
+        B, s_slack, chart = whitening_chart(problem)
+    except (MetricError, SolverError, np.linalg.LinAlgError) as exc:  # no interior start: the diagonal chart
+        B, s_slack, chart = None, None, f"diagonal (whitening failed: {exc})"
+    if B is None:
+        problem = problem.in_coordinates(internal_chart(problem), problem.coordinates)
+        s_slack = _slack_scale(problem)
+    else:
+        problem = problem.in_coordinates(B, problem.coordinates)
     N, n, p = problem.N, problem.n, problem.p
     s_theta = parameter_scale(problem)
-    s_slack = _slack_scale(problem)
     A_theta, A_s, b = _schur_blocks(problem, s_theta, s_slack)
     phi = cp.Variable(p)
     sigma = cp.Variable(N)
     blocks = cp.reshape(A_theta @ phi + A_s @ sigma + b, (N, n + 1, n + 1), order="C")
     constraints = [cp.constraints.PSD(blocks)]
     if constrained:
-        constraints += consistency_constraints(cp.multiply(s_theta, phi), problem.parameters)
+        constraints += cvxpy_constraints(cp.multiply(s_theta, phi), problem.parameters)
     cvx = cp.Problem(cp.Minimize(cp.sum(sigma) / N), constraints)
     try:
         solved = solve_cvxpy(cvx, phi, solver, solver_options, what="dual-metric SDP")
@@ -135,8 +174,13 @@ def fit_dual_metric_sdp(
     return IdentificationResult(
         method, theta, problem.parameters, objective, solved.status, f"sdp/{solver}",
         solved.solve_time, solved.iterations, constrained,
-        {"sdp_objective": float(np.sum(s_slack * np.asarray(sigma.value)))},
+        {"sdp_objective": float(np.sum(s_slack * np.asarray(sigma.value))), "sdp_chart": chart, "slack_scale": s_slack},
     )
+
+
+NEWTON_OPTIONS = ("tol", "max_iter", "chunk", "warm_start_samples", "verbose")
+SOLVER_NAMES = ("newton", "sdp", "sdp_clarabel", "sdp_scs")
+SDP_FALLBACK_MAX_N = 20_000  # an SDP fallback beyond this would take minutes and GBs (one LMI per sample)  # "sdp": the SDP with DualMetric.sdp_solver
 
 
 @dataclass(frozen=True)
@@ -144,28 +188,129 @@ class DualMetric:
     """Dual-metric weighted least squares, Σ r_iᵀ M_i(θ)⁻¹ r_i.
 
     solver: "newton" (default: the structure-exploiting primal–dual interior-point method of
-    dualid.estimators.newton, O(N·n·p) memory, about the cost of a few least-squares passes) or
-    "sdp" (the Schur-complement SDP through cvxpy: the reference, one LMI per sample, slow for
-    large N). Both solve the same convex problem; tests hold them to the same optimum.
+    dualid.estimators.newton, O(N·n·p) memory, about the cost of a few least-squares passes), "sdp"
+    (the Schur-complement SDP through cvxpy with ``sdp_solver``: the reference, one LMI per sample, slow
+    for large N), "sdp_clarabel" or "sdp_scs". Both methods solve the same convex problem.
+
+    tol, max_iter: the first solver's tolerance and iteration limit (None: its defaults; Newton: relative
+    duality gap 1e-9 and 100 iterations; the SDP: Clarabel 1e-10 and 500). fallback: solvers tried in
+    order when the one before fails (SolverError) or returns only ``optimal_inaccurate``; the
+    result's ``info["solver_chain"]`` says which solver produced θ̂ and what failed before it, and its
+    ``status`` is the producing solver's (``optimal_inaccurate`` is reported, never turned into
+    ``optimal``). An SDP fallback is skipped (and recorded) above SDP_FALLBACK_MAX_N samples.
+    solver_options: extra options for the first solver only (Newton: tol, max_iter, chunk,
+    warm_start_samples, verbose; the SDP: cvxpy/solver options). Options are checked here, in the
+    constructor (SolverOptionError).
     """
 
     constrained: bool = True
     solver: str = "newton"
     sdp_solver: str = "CLARABEL"  # cvxpy solver for solver="sdp": "CLARABEL" or "SCS"
-    solver_options: dict | None = None  # sdp: cvxpy solver options; newton: tol, max_iter, chunk
+    solver_options: dict | None = None
     allow_unidentifiable: bool = False
+    tol: float | None = None
+    max_iter: int | None = None
+    fallback: tuple[str, ...] = ("sdp",)
     name = "dual_metric"
+
+    def __post_init__(self) -> None:
+        from dualid.estimators.base import SOLVERS
+
+        if self.solver not in SOLVER_NAMES:
+            raise SolverOptionError(f"solver: expected one of {SOLVER_NAMES}, got {self.solver!r}")
+        if self.sdp_solver not in SOLVERS:
+            raise SolverOptionError(f"sdp_solver: expected one of {SOLVERS}, got {self.sdp_solver!r}")
+        fallback = (self.fallback,) if isinstance(self.fallback, str) else self.fallback
+        try:
+            fallback = tuple(fallback or ())
+        except TypeError:
+            raise SolverOptionError(f"fallback: expected a tuple of solver names, got {self.fallback!r}") from None
+        bad = [f for f in fallback if f not in SOLVER_NAMES]
+        if bad:
+            raise SolverOptionError(f"fallback: expected solver names from {SOLVER_NAMES}, got {bad}")
+        object.__setattr__(self, "fallback", fallback)
+        if self.tol is not None and not (isinstance(self.tol, (int, float)) and 0 < self.tol < 1):
+            raise SolverOptionError(f"tol: expected a relative tolerance in (0, 1), got {self.tol!r}")
+        if self.max_iter is not None and not (isinstance(self.max_iter, (int, np.integer)) and self.max_iter >= 1):
+            raise SolverOptionError(f"max_iter: expected a positive integer, got {self.max_iter!r}")
+        options = self.solver_options or {}
+        if not isinstance(options, dict):
+            raise SolverOptionError(f"solver_options: expected a dict, got {type(options).__name__}")
+        if self.solver == "newton":
+            unknown = sorted(set(options) - set(NEWTON_OPTIONS))
+            if unknown:
+                raise SolverOptionError(f"solver_options: the Newton solver accepts {NEWTON_OPTIONS}, got {unknown}")
+        both = [k for k in ("tol", "max_iter") if k in options and getattr(self, k) is not None]
+        if both:
+            raise SolverOptionError(f"{both[0]}: given both as an argument and in solver_options; give it once")
+
+    def _chain(self) -> tuple[str, ...]:
+        chain = [self.solver]
+        for f in self.fallback:
+            if f not in chain and not (f == "sdp" and _sdp_name(self, f) in [_sdp_name(self, c) for c in chain]):
+                chain.append(f)
+        return tuple(chain)
+
+    def _fit_with(self, problem: IdentificationProblem, solver: str, first: bool) -> IdentificationResult:
+        options = dict(self.solver_options or {}) if first else {}
+        if solver == "newton":
+            if first and self.tol is not None:
+                options["tol"] = self.tol
+            if first and self.max_iter is not None:
+                options["max_iter"] = self.max_iter
+            return fit_dual_metric_newton(problem, constrained=self.constrained, method=self.name, **options)
+        cvx_solver = _sdp_name(self, solver)
+        if first and self.tol is not None:
+            options.update({"tol_gap_abs": self.tol, "tol_gap_rel": self.tol, "tol_feas": self.tol}
+                           if cvx_solver == "CLARABEL" else {"eps": self.tol})
+        if first and self.max_iter is not None:
+            options["max_iter" if cvx_solver == "CLARABEL" else "max_iters"] = self.max_iter
+        return fit_dual_metric_sdp(problem, constrained=self.constrained, solver=cvx_solver,
+                                   solver_options=options or None, method=self.name)
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
         if not self.allow_unidentifiable:
             check_identifiable(problem)
-        if self.solver == "sdp":
-            return fit_dual_metric_sdp(
-                problem, constrained=self.constrained, solver=self.sdp_solver, solver_options=self.solver_options,
-                method=self.name,
-            )
-        if self.solver == "newton":
-            return fit_dual_metric_newton(
-                problem, constrained=self.constrained, method=self.name, **(self.solver_options or {})
-            )
-        raise ValueError(f"solver: expected 'sdp' or 'newton', got {self.solver!r}")
+        chain, failures, inaccurate = self._chain(), [], None
+        for k, solver in enumerate(chain):
+            if k and solver != "newton" and problem.N > SDP_FALLBACK_MAX_N:
+                failures.append(f"{solver} skipped (N = {problem.N} > {SDP_FALLBACK_MAX_N}: too large for a fallback SDP)")
+                continue
+            with warnings.catch_warnings(record=True) as caught:  # e.g. cvxpy's "Solution may be inaccurate"
+                warnings.simplefilter("always")
+                try:
+                    result = self._fit_with(problem, solver, first=k == 0)
+                except SolverError as exc:
+                    if exc.status and ("infeasible" in exc.status or "unbounded" in exc.status):
+                        raise  # a property of the problem, which another solver cannot change
+                    failures.append(f"{solver} failed ({exc.status}): {exc}")
+                    continue
+            notes = sorted({f"{w.category.__name__}: {w.message}" for w in caught})
+            if result.status == "optimal_inaccurate" and k + 1 < len(chain):
+                failures.append(f"{solver} returned optimal_inaccurate (objective {result.objective:.10g})")
+                inaccurate = inaccurate or (result, notes)
+                continue
+            return _with_chain(result, solver, failures, notes)
+        if inaccurate is not None:  # no later solver did better: the inaccurate result, reported as such
+            result, notes = inaccurate
+            return _with_chain(result, result.solver, failures, notes)
+        raise SolverError(
+            "dual-metric fit: every solver failed: " + "; then ".join(failures), status="all_solvers_failed"
+        )
+
+
+def _sdp_name(est: DualMetric, solver: str) -> str:
+    return {"sdp": est.sdp_solver, "sdp_clarabel": "CLARABEL", "sdp_scs": "SCS"}.get(solver, solver)
+
+
+def _with_chain(result: IdentificationResult, solver: str, failures: list[str], notes: list[str]) -> IdentificationResult:
+    """result with info: solver_chain (what failed first, why, and which solver produced θ̂), fallback_used,
+    solver_warnings (captured instead of printed)."""
+    info = dict(result.info)
+    info["solver_chain"] = " → ".join(failures + [f"{result.solver} {result.status}"])
+    info["fallback_used"] = bool(failures)
+    if failures:
+        info["fallback_reason"] = failures[0]
+    if notes:
+        info["solver_warnings"] = " | ".join(notes)
+    return replace(result, info=info)

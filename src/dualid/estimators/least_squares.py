@@ -13,111 +13,21 @@ from typing import Any
 
 import numpy as np
 
-from dualid.errors import ConfigError, DataError
+from dualid.errors import ConfigError, DataError, SolverError
 from dualid.estimators.base import (
     SOLVERS,
     check_covariance,
     check_identifiable,
     check_nominal,
-    consistency_constraints,
     freeze_options,
     parameter_scale,
     solve_cvxpy,
 )
 from dualid.estimators.result import IdentificationResult
+from dualid.estimators.statistics import Statistics, energy_statistics, statistics
 from dualid.linalg import gram_eigh, gram_rank
-from dualid.model.parameters import ParameterSpace
+from dualid.model.consistency import cvxpy_constraints, prior_blocks, pullback_metric, regularizer_value
 from dualid.problem import IdentificationProblem
-
-
-@dataclass(frozen=True)
-class Statistics:
-    """Sufficient statistics of Σ r_iᵀ W_i r_i = θᵀHθ − 2gᵀθ + c, and the weight they came from."""
-
-    H: np.ndarray  # (p, p)
-    g: np.ndarray  # (p,)
-    c: float
-    W: np.ndarray | None = None  # (n, n) constant weight; None: identity (or energy if energy=True)
-    energy: bool = False
-
-    def objective(self, problem: IdentificationProblem, theta: np.ndarray) -> float:
-        """Σ r_iᵀ W_i r_i from the residuals (no cancellation, unlike θᵀHθ − 2gᵀθ + c)."""
-        r = problem.residual(theta)
-        if self.energy:
-            return float(np.sum(np.einsum("na,na->n", problem.v, r) ** 2))
-        if self.W is None:
-            return float(np.sum(r * r))
-        return float(np.einsum("na,ab,nb->", r, self.W, r))
-
-
-def statistics(problem: IdentificationProblem, W: np.ndarray | None = None, chunk: int = 65536) -> Statistics:
-    """H, g, c for a constant weight W (n, n) (None: identity), accumulated in chunks of samples."""
-    p = problem.p
-    H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
-    for start in range(0, problem.N, chunk):
-        Y = problem.Y[start : start + chunk].reshape(-1, p) if W is None else None
-        tau = problem.tau[start : start + chunk]
-        if W is None:
-            t = tau.reshape(-1)
-            H += Y.T @ Y
-            g += Y.T @ t
-            c += float(t @ t)
-        else:
-            Yc = problem.Y[start : start + chunk]
-            WY = np.einsum("ab,nbp->nap", W, Yc)
-            H += np.einsum("nap,naq->pq", Yc, WY)
-            g += np.einsum("nap,na->p", WY, tau)
-            c += float(np.einsum("na,ab,nb->", tau, W, tau))
-    return Statistics(0.5 * (H + H.T), g, c, W)
-
-
-def energy_statistics(problem: IdentificationProblem, chunk: int = 65536) -> Statistics:
-    """W_i = v_i v_iᵀ: the rows e_i = Y_iᵀ v_i and targets v_iᵀ τ_i, accumulated in chunks of samples."""
-    p = problem.p
-    H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
-    for start in range(0, problem.N, chunk):
-        rows = slice(start, start + chunk)
-        e = np.einsum("nap,na->np", problem.Y[rows], problem.v[rows])
-        y = np.einsum("na,na->n", problem.tau[rows], problem.v[rows])
-        H += e.T @ e
-        g += e.T @ y
-        c += float(y @ y)
-    return Statistics(H, g, c, energy=True)
-
-
-def _regularizer_terms(kind: str, parameters: ParameterSpace, theta0: np.ndarray):
-    """Per block: (indices, V (k, m, m), C0 (m, m)) for the blocks a geometric prior applies to."""
-    out = []
-    for b in parameters.blocks:
-        V = b.constraint_basis
-        if V is None:
-            continue
-        out.append((list(b.indices), V, b.constraint_matrix(theta0)))
-    if not out:
-        raise ValueError(f"{kind} regularization: the parameter space has no constrained blocks to regularize")
-    return out
-
-
-def pullback_metric(V: np.ndarray, C0: np.ndarray) -> np.ndarray:
-    """g_kl = tr(C0⁻¹ V_k C0⁻¹ V_l): the constant pullback of the affine-invariant metric at C0."""
-    A = np.linalg.solve(C0, V)  # (k, m, m): C0⁻¹ V_k
-    return np.einsum("kab,lba->kl", A, A)
-
-
-def regularizer_value(kind: str, parameters: ParameterSpace, theta: np.ndarray, theta0: np.ndarray) -> float:
-    """R(θ): Σ_b log-det divergence D(C_b(θ)‖C_b(θ₀)) or Σ_b (θ_b − θ_b0)ᵀ g_b (θ_b − θ_b0)."""
-    total = 0.0
-    for idx, V, C0 in _regularizer_terms(kind, parameters, theta0):
-        if kind == "logdet":
-            C = np.tensordot(theta[idx], V, axes=1)
-            sign, logdet = np.linalg.slogdet(C)
-            if sign <= 0:
-                return float("inf")
-            total += -logdet + np.linalg.slogdet(C0)[1] + np.trace(np.linalg.solve(C0, C)) - C.shape[0]
-        else:
-            d = theta[idx] - theta0[idx]
-            total += float(d @ pullback_metric(V, C0) @ d)
-    return float(total)
 
 
 def fit_quadratic(
@@ -173,7 +83,7 @@ def fit_quadratic(
         objective = cp.sum_squares(R @ phi - b) / norm
     if regularizer is not None:
         kind, theta0, gamma = regularizer
-        terms = _regularizer_terms(kind, problem.parameters, theta0)
+        terms = prior_blocks(kind, problem.parameters, theta0)
         reg = 0
         for idx, V, C0 in terms:
             th = theta[idx]
@@ -188,22 +98,66 @@ def fit_quadratic(
                 reg = reg - cp.log_det(0.5 * (C + C.T)) + cp.sum(cp.multiply(C0inv, C))
             else:
                 G = pullback_metric(V, C0)
-                L = np.linalg.cholesky(0.5 * (G + G.T) + 1e-12 * np.trace(G) * np.eye(k))
-                reg = reg + cp.sum_squares(L.T @ (th - theta0[idx]))
+                # G = F Fᵀ exactly (eigen-factor): a ridge added for a Cholesky factor (1e-12·tr G) changes the
+                # objective by ~1e-4 relative on thin links, where tr G is dominated by a near-null direction of C0
+                w, U = np.linalg.eigh(0.5 * (G + G.T))
+                F = U * np.sqrt(np.maximum(w, 0.0))
+                reg = reg + cp.sum_squares(F.T @ (th - theta0[idx]))
         objective = objective + (gamma / norm) * reg
-    constraints = consistency_constraints(theta, problem.parameters) if constrained else []
+    constraints = cvxpy_constraints(theta, problem.parameters) if constrained else []
     cvx = cp.Problem(cp.Minimize(objective), constraints)
-    solved = solve_cvxpy(cvx, phi, solver, solver_options, what=f"{method} fit")
-    theta_hat = s * solved.value
+    solved, theta_hat, status, used, iterations, solve_time = _solve_with_fallback(
+        cvx, phi, s, stats, problem, method, constrained, solver, solver_options, regularizer, info
+    )
     value = stats.objective(problem, theta_hat)
     if regularizer is not None:
         kind, theta0, gamma = regularizer
         info["data_objective"] = value
         value += gamma * regularizer_value(kind, problem.parameters, theta_hat, theta0)
     return IdentificationResult(
-        method, theta_hat, problem.parameters, value, solved.status, solved.solver,
-        solved.solve_time, solved.iterations, constrained, info,
+        method, theta_hat, problem.parameters, value, status, used, solve_time, iterations, constrained, info,
     )
+
+
+def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solver, solver_options, regularizer, info):
+    """cvxpy first; when it fails or returns only optimal_inaccurate, dualid's own interior-point method
+    (estimators.quadratic_newton). What happened is recorded in info (solver_chain, fallback_used,
+    solver_warnings); an inaccurate cvxpy result is returned only, and labelled, if that fails too."""
+    import time
+    import warnings
+
+    from dualid.estimators.quadratic_newton import fit_quadratic_newton
+
+    solved, failure = None, None
+    with warnings.catch_warnings(record=True) as caught:  # cvxpy's warnings go into the result, not the terminal
+        warnings.simplefilter("always")
+        try:
+            solved = solve_cvxpy(cvx, phi, solver, solver_options, what=f"{method} fit")
+        except SolverError as exc:
+            if exc.status and ("infeasible" in exc.status or "unbounded" in exc.status):
+                raise
+            failure = f"{solver} failed ({exc.status}): {exc}"
+    notes = sorted({f"{w.category.__name__}: {w.message}" for w in caught})
+    if notes:
+        info["solver_warnings"] = " | ".join(notes)
+    if solved is not None and solved.status == "optimal":
+        info.update(solver_chain=f"{solver} optimal", fallback_used=False)
+        return solved, s * solved.value, solved.status, solved.solver, solved.iterations, solved.solve_time
+    first = failure or f"{solver} returned {solved.status}"
+    t0 = time.perf_counter()
+    try:
+        theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, constrained=constrained,
+                                          regularizer=regularizer)
+    except SolverError as exc:
+        if solved is None:
+            raise SolverError(f"{method} fit: {first}; then dualid's interior-point method failed: {exc}",
+                              status="all_solvers_failed") from exc
+        info.update(solver_chain=f"{first} → newton failed ({exc.status}) → {solver} {solved.status}",
+                    fallback_used=False, fallback_reason=first)
+        return solved, s * solved.value, solved.status, solved.solver, solved.iterations, solved.solve_time
+    info.update(solver_chain=f"{first} → newton optimal", fallback_used=True, fallback_reason=first,
+                relative_gap=ipm["relative_gap"])
+    return None, theta, "optimal", "newton", ipm["iterations"], time.perf_counter() - t0
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,12 @@
-"""Physical consistency of parameters, in one place: the per-body quantities behind the
-constraints (mass, centre of mass, inertia about it, via Pinocchio's ``pin.Inertia``) and the
-report of every block's margin. The constraint matrices themselves are defined by
-``ParameterBlock.constraint_basis`` (pseudo-inertia for rigid bodies, drag matrix for drag).
+"""Physical consistency of parameters, in one place. The constraint matrices C_b(θ) are defined by
+``ParameterBlock.constraint_basis`` (pseudo-inertia for rigid bodies, drag matrix for drag); this
+module holds every use of them:
+
+- per-body quantities (mass, centre of mass, inertia about it) via Pinocchio's ``pin.Inertia``;
+- the feasible set as small LMIs and linear rows for dualid's interior-point solvers
+  (``feasible_set``: margins, step lengths);
+- the same constraints for cvxpy (``cvxpy_constraints``);
+- the geometric priors on C_b (log-det divergence and constant pullback metric, ``regularizer_value``).
 """
 
 from __future__ import annotations
@@ -11,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from dualid.errors import ModelError
 from dualid.model.parameters import ParameterSpace
 
 
@@ -71,3 +77,171 @@ def body_properties(parameters: ParameterSpace, theta: np.ndarray) -> tuple[Body
     return tuple(out)
 
 
+# --- the feasible set for interior-point solvers ---------------------------------------------
+@dataclass(frozen=True)
+class LMI:
+    """C(θ) = C0 + Σ_k θ[idx_k] V_k ⪰ 0, an m×m block."""
+
+    name: str
+    idx: np.ndarray  # (k,) parameter indices
+    V: np.ndarray  # (k, m, m)
+    C0: np.ndarray  # (m, m)
+
+    def C(self, theta: np.ndarray) -> np.ndarray:
+        return self.C0 + np.tensordot(theta[self.idx], self.V, axes=1)
+
+    def dC(self, d: np.ndarray) -> np.ndarray:
+        return np.tensordot(d[self.idx], self.V, axes=1)
+
+
+@dataclass(frozen=True)
+class FeasibleSet:
+    """The feasible set: LMIs (rigid bodies, drag matrices) and linear rows G θ + h ≥ 0."""
+
+    lmis: tuple[LMI, ...]
+    G: np.ndarray  # (q, p)
+    h: np.ndarray  # (q,)
+    names: tuple[str, ...]  # (q,) what each linear row is, for messages
+
+    @property
+    def size(self) -> int:
+        """Σ block sizes (the barrier parameter's ν)."""
+        return sum(c.V.shape[1] for c in self.lmis) + len(self.h)
+
+    @property
+    def empty(self) -> bool:
+        return self.size == 0
+
+    def margin(self, theta: np.ndarray) -> float:
+        """Smallest eigenvalue over all blocks and rows (> 0: strictly feasible)."""
+        m = [np.linalg.eigvalsh(c.C(theta))[0] for c in self.lmis]
+        if len(self.h):
+            m.append((self.G @ theta + self.h).min())
+        return float(min(m)) if m else np.inf
+
+    def max_step(self, theta: np.ndarray, d: np.ndarray) -> float:
+        """Largest α with every constraint strictly feasible on [θ, θ + α d) (inf if unbounded)."""
+        alpha = np.inf
+        for c in self.lmis:
+            alpha = min(alpha, _max_step_psd(c.C(theta), c.dC(d)))
+        if len(self.h):
+            s, ds = self.G @ theta + self.h, self.G @ d
+            neg = ds < 0
+            if neg.any():
+                alpha = min(alpha, float(np.min(-s[neg] / ds[neg])))
+        return alpha
+
+
+def _repair_psd(X: np.ndarray, floor: float = 1e-14) -> np.ndarray:
+    """X itself if it is numerically positive definite, else its eigenvalues lifted to ≥ floor·λ_max."""
+    X = 0.5 * (X + X.T)
+    try:
+        np.linalg.cholesky(X)
+        return X
+    except np.linalg.LinAlgError:
+        lam, U = np.linalg.eigh(X)
+        return (U * np.maximum(lam, floor * max(lam.max(), 1e-300))) @ U.T
+
+
+def _max_step_psd(X: np.ndarray, dX: np.ndarray) -> float:
+    """Largest α with X + α dX ≻ 0 for X ≻ 0."""
+    L = np.linalg.cholesky(_repair_psd(X))
+    Li = np.linalg.inv(L)
+    lam = np.linalg.eigvalsh(Li @ dX @ Li.T)[0]
+    return np.inf if lam >= 0 else float(-1.0 / lam)
+
+
+def feasible_set(parameters, constrained: bool = True, fixed: np.ndarray | None = None) -> FeasibleSet:
+    """LMIs for rigid-body and drag-matrix blocks; linear rows for diagonal blocks and bounds."""
+    p = parameters.p
+    lmis, rows, h, names = [], [], [], []
+    if constrained:
+        for b in parameters.blocks:
+            V = b.constraint_basis
+            if V is None:
+                continue
+            idx = np.asarray(b.indices)
+            if b.kind in ("drag_diagonal", "nonnegative"):
+                for i in idx:
+                    g = np.zeros(p)
+                    g[i] = 1.0
+                    rows.append(g), h.append(0.0), names.append(f"{parameters.names[i]} ≥ 0")
+                continue
+            lmis.append(LMI(b.name, idx, np.asarray(V, dtype=float), np.zeros(V.shape[1:])))
+        for bound, sign in ((parameters.lower, 1.0), (parameters.upper, -1.0)):
+            if bound is None:
+                continue
+            for i, x in enumerate(bound):
+                if np.isfinite(x):
+                    g = np.zeros(p)
+                    g[i] = sign
+                    rows.append(g), h.append(-sign * x)
+                    names.append(f"{parameters.names[i]} {'≥' if sign > 0 else '≤'} {x:g}")
+    G = np.array(rows).reshape(-1, p)
+    return FeasibleSet(tuple(lmis), G, np.asarray(h, dtype=float), tuple(names))
+
+
+# --- cvxpy ------------------------------------------------------------------------------------
+def cvxpy_constraints(theta, parameters: ParameterSpace) -> list:
+    """cvxpy constraints C_b(θ_b) ⪰ 0 for every block, and the per-parameter bounds."""
+    import cvxpy as cp
+
+    cons = []
+    for b in parameters.blocks:
+        V = b.constraint_basis
+        if V is None:
+            continue
+        th = theta[list(b.indices)]
+        if b.kind in ("drag_diagonal", "nonnegative"):
+            cons.append(th >= 0)  # diag(θ_b) ⪰ 0 is plain non-negativity
+            continue
+        k, m, _ = V.shape
+        C = cp.reshape(V.reshape(k, m * m).T @ th, (m, m), order="C")
+        cons.append(0.5 * (C + C.T) >> 0)
+    if parameters.lower is not None:
+        lo = np.asarray(parameters.lower)
+        fin = np.isfinite(lo)
+        if fin.any():
+            cons.append(theta[np.flatnonzero(fin)] >= lo[fin])
+    if parameters.upper is not None:
+        hi = np.asarray(parameters.upper)
+        fin = np.isfinite(hi)
+        if fin.any():
+            cons.append(theta[np.flatnonzero(fin)] <= hi[fin])
+    return cons
+
+
+# --- geometric priors on the constraint matrices ------------------------------------------------
+def prior_blocks(kind: str, parameters: ParameterSpace, theta0: np.ndarray):
+    """Per block: (indices, V (k, m, m), C0 (m, m)) for the blocks a geometric prior applies to."""
+    out = []
+    for b in parameters.blocks:
+        V = b.constraint_basis
+        if V is None:
+            continue
+        out.append((list(b.indices), V, b.constraint_matrix(theta0)))
+    if not out:
+        raise ModelError(f"{kind} regularization: the parameter space has no constrained blocks to regularize")
+    return out
+
+
+def pullback_metric(V: np.ndarray, C0: np.ndarray) -> np.ndarray:
+    """g_kl = tr(C0⁻¹ V_k C0⁻¹ V_l): the constant pullback of the affine-invariant metric at C0."""
+    A = np.linalg.solve(C0, V)  # (k, m, m): C0⁻¹ V_k
+    return np.einsum("kab,lba->kl", A, A)
+
+
+def regularizer_value(kind: str, parameters: ParameterSpace, theta: np.ndarray, theta0: np.ndarray) -> float:
+    """R(θ): Σ_b log-det divergence D(C_b(θ)‖C_b(θ₀)) or Σ_b (θ_b − θ_b0)ᵀ g_b (θ_b − θ_b0)."""
+    total = 0.0
+    for idx, V, C0 in prior_blocks(kind, parameters, theta0):
+        if kind == "logdet":
+            C = np.tensordot(theta[idx], V, axes=1)
+            sign, logdet = np.linalg.slogdet(C)
+            if sign <= 0:
+                return float("inf")
+            total += -logdet + np.linalg.slogdet(C0)[1] + np.trace(np.linalg.solve(C0, C)) - C.shape[0]
+        else:
+            d = theta[idx] - theta0[idx]
+            total += float(d @ pullback_metric(V, C0) @ d)
+    return float(total)

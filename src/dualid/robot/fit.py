@@ -33,9 +33,10 @@ from dualid.data.preprocessing import preprocess
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError, DualidError, MissingFileError
 from dualid.estimators import OLS, IdentificationResult
-from dualid.estimators.least_squares import covariance_weight, energy_statistics, statistics
+from dualid.estimators.least_squares import covariance_weight
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.methods import method as method_entry
+from dualid.estimators.statistics import energy_statistics, statistics
 from dualid.evaluation.validation import Validation, validate
 from dualid.linalg import pinv_psd
 from dualid.model.joint_terms import JointTermsModel, with_joint_terms

@@ -1,0 +1,163 @@
+"""f(θ) = Σ r_iᵀ M_i(θ)⁻¹ r_i with its gradient and (exact) Hessian, accumulated over chunks of samples."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dualid.problem import IdentificationProblem
+
+
+class _NotPositiveDefinite(Exception):
+    """Some M_i(θ) is not positive definite (θ outside the domain)."""
+
+
+# Per-sample matrices are tiny (n ≲ 10) and numerous, where LAPACK's per-matrix calls are slow: the
+# kernels below loop over the small dimensions and vectorise over the samples of a chunk instead.
+def _cholesky(M: np.ndarray) -> np.ndarray:
+    """L (c, n, n) lower triangular with M_i = L_i L_iᵀ; raises _NotPositiveDefinite."""
+    try:
+        L = np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        raise _NotPositiveDefinite from None
+    if not np.all(np.isfinite(np.diagonal(L, axis1=1, axis2=2))):
+        raise _NotPositiveDefinite
+    return L
+
+
+def _tri_inverse(L: np.ndarray) -> np.ndarray:
+    """L⁻¹ (c, n, n) of lower-triangular L, by substitution vectorised over the samples."""
+    Lt = np.ascontiguousarray(np.moveaxis(L, 0, -1))  # (n, n, c): contiguous per-entry sample vectors
+    n = Lt.shape[0]
+    X = np.zeros_like(Lt)
+    inv_diag = 1.0 / np.diagonal(Lt).T  # (n, c)
+    for a in range(n):
+        X[a, a] = inv_diag[a]
+        for b in range(a):
+            acc = Lt[a, b] * X[b, b]
+            for k in range(b + 1, a):
+                acc += Lt[a, k] * X[k, b]
+            X[a, b] = -acc * inv_diag[a]
+    return np.moveaxis(X, -1, 0)
+
+
+def _forward(L: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """L⁻¹ r for r (c, n)."""
+    z = np.empty_like(r)
+    for a in range(L.shape[1]):
+        acc = r[:, a].copy()
+        for b in range(a):
+            acc -= L[:, a, b] * z[:, b]
+        z[:, a] = acc / L[:, a, a]
+    return z
+
+
+def _metric_chunk(metric, theta: np.ndarray, rows: slice) -> np.ndarray:
+    """M_i(θ) (c, n, n) for the samples in rows: Σ_terms J_iᵀ G(θ) J_i + M0_i."""
+    M = None
+    for t in metric.terms:
+        J = t.J[rows]  # (c, d, n)
+        G = t.G(theta)  # (d, d) or (N, d, d)
+        if t.per_sample:
+            GJ = np.matmul(G[rows], J)
+        else:
+            c, d, n = J.shape
+            GJ = (G @ np.swapaxes(J, 0, 1).reshape(d, c * n)).reshape(d, c, n).swapaxes(0, 1)
+        term = np.matmul(np.swapaxes(J, 1, 2), GJ)
+        M = term if M is None else M + term
+    if metric.M0 is not None:
+        M = metric.M0[rows].copy() if M is None else M + metric.M0[rows]
+    return M  # symmetric up to rounding; the Cholesky factorisation reads the lower triangle only
+
+
+def _as_slice(indices: tuple[int, ...]):
+    """A slice when the indices are consecutive (cheap in-place updates), else the index list."""
+    if indices and list(indices) == list(range(indices[0], indices[0] + len(indices))):
+        return slice(indices[0], indices[0] + len(indices))
+    return list(indices)
+
+
+def _apply_quad(metric, w: np.ndarray, rows: slice, out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(out − [M_ik w_i]_k (c, n, p), Σ_i w_iᵀ M_ik w_i (p,)) in one pass over the metric's factors.
+
+    With out = 0 these are ``−metric.apply(w, rows)`` and ``metric.quad(w, rows).sum(0)``; u_i = J_i w_i
+    and E_k u_i are shared between the two. ``out`` (c, n, p) is updated in place.
+    """
+    c, n = w.shape
+    out = np.zeros((c, n, metric.n_params)) if out is None else out
+    wMw = np.zeros(metric.n_params)
+    for t in metric.terms:
+        J = t.J[rows]  # (c, d, n)
+        u = np.einsum("cdn,cn->cd", J, w)  # (c, d)
+        d = u.shape[1]
+        if t.per_sample:
+            Eu = np.einsum("ckde,ce->ckd", t.E[rows], u)  # (c, k, d)
+        else:
+            k = t.E.shape[0]
+            Eu = (u @ t.E.transpose(2, 0, 1).reshape(d, k * d)).reshape(c, k, d)  # E symmetric
+        idx = _as_slice(t.indices)
+        out[:, :, idx] -= np.matmul(np.swapaxes(J, 1, 2), np.swapaxes(Eu, 1, 2))  # J_iᵀ E_k u_i
+        wMw[idx] += np.einsum("ckd,cd->k", Eu, u)
+    return out, wMw
+
+
+@dataclass(frozen=True)
+class _Derivatives:
+    f: float
+    grad: np.ndarray | None = None  # (p,)
+    hess: np.ndarray | None = None  # (p, p)
+
+
+def dual_metric_derivatives(
+    problem: IdentificationProblem, theta: np.ndarray, order: int = 2, chunk: int = 4096
+) -> _Derivatives:
+    """f (and ∇f, ∇²f for order 2) accumulated over chunks of samples (memory O(chunk·n·p)).
+
+    Raises _NotPositiveDefinite when some M_i(θ) is not positive definite.
+    """
+    N, n, p = problem.N, problem.n, problem.p
+    theta = np.asarray(theta, dtype=float)
+    f = 0.0
+    grad = np.zeros(p) if order else None
+    hess = np.zeros((p, p)) if order else None
+    for start in range(0, N, chunk):
+        rows = slice(start, min(start + chunk, N))
+        Y = problem.Y[rows]  # (c, n, p)
+        c = Y.shape[0]
+        r = (Y.reshape(c * n, p) @ theta).reshape(c, n) - problem.tau[rows]  # (c, n)
+        L = _cholesky(_metric_chunk(problem.metric, theta, rows))  # M_i = L_i L_iᵀ
+        if not order:
+            z = _forward(L, r)  # L⁻¹ r
+            f += float(np.sum(z * z))
+            continue
+        Li = _tri_inverse(L)  # (c, n, n)
+        z = np.einsum("cab,cb->ca", Li, r)  # L⁻¹ r
+        f += float(np.sum(z * z))
+        w = np.einsum("cba,cb->ca", Li, z)  # M⁻¹ r = L⁻ᵀ L⁻¹ r
+        D, wMw = _apply_quad(problem.metric, w, rows, out=Y.copy())  # D = Y_i − [M_ik w_i]_k, Σ_i w_iᵀ M_ik w_i
+        grad += 2.0 * (w.reshape(-1) @ Y.reshape(-1, p)) - wMw
+        Z = np.matmul(Li, D).reshape(-1, p)  # L⁻¹ (Y_i − M_ik w_i)
+        hess += 2.0 * (Z.T @ Z)
+    if not np.isfinite(f):
+        raise _NotPositiveDefinite
+    return _Derivatives(f, grad, None if hess is None else 0.5 * (hess + hess.T))
+
+
+def _objective(problem, theta, chunk) -> float:
+    """f(θ), +inf outside the domain."""
+    try:
+        return dual_metric_derivatives(problem, theta, order=0, chunk=chunk).f
+    except _NotPositiveDefinite:
+        return np.inf
+
+
+def _force_scale(problem, theta, chunk) -> float:
+    """Σ τ_iᵀ M_i(θ)⁻¹ τ_i: the size of the measured forces in the dual metric (the objective's scale)."""
+    total = 0.0
+    for start in range(0, problem.N, chunk):
+        rows = slice(start, start + chunk)
+        L = np.linalg.cholesky(problem.metric.evaluate(theta, rows))
+        z = np.linalg.solve(L, problem.tau[rows][..., None])
+        total += float(np.sum(z * z))
+    return total

@@ -1,0 +1,180 @@
+"""A strictly feasible, chart-invariant starting point (and phase I when the cheap one fails)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dualid.errors import MetricError, SolverError
+from dualid.estimators.newton.linalg import _solve_psd
+from dualid.estimators.newton.objective import _objective
+from dualid.estimators.statistics import energy_statistics, statistics
+from dualid.model.consistency import FeasibleSet
+from dualid.problem import IdentificationProblem
+
+
+def _ols(problem: IdentificationProblem, chunk: int) -> np.ndarray:
+    """Unconstrained least squares from the sufficient statistics (min-norm where rank deficient)."""
+    stats = statistics(problem, chunk=chunk)
+    return _solve_psd(stats.H, stats.g, rtol=1e-10)
+
+
+def _clip_psd(C: np.ndarray, eps: float = 1e-2) -> np.ndarray:
+    lam, U = np.linalg.eigh(C)
+    top = np.abs(lam).max()
+    top = top if top > 0 else 1.0
+    return (U * np.maximum(lam, eps * top)) @ U.T
+
+
+def _central_point(theta_ols: np.ndarray, cons: FeasibleSet, eps: float = 1e-2) -> np.ndarray:
+    """A strictly feasible point near θ_ols: each block's matrix with its eigenvalues lifted to ≥ eps·λ_max."""
+    theta = theta_ols.copy()
+    for c in cons.lmis:
+        k, m, _ = c.V.shape
+        target = _clip_psd(c.C(theta), eps) - c.C0
+        theta[c.idx] = np.linalg.lstsq(c.V.reshape(k, m * m).T, target.reshape(-1), rcond=None)[0]
+    if len(cons.h):
+        for j in range(len(cons.h)):
+            g = cons.G[j]
+            i = int(np.flatnonzero(g)[0])
+            s = g[i] * theta[i] + cons.h[j]
+            scale = max(abs(theta[i]), abs(cons.h[j]), 1e-6)
+            if s < 1e-2 * scale:
+                theta[i] += (1e-2 * scale - s) / g[i]
+    return theta
+
+
+def _phase_one(problem, cons: FeasibleSet, theta_ref: np.ndarray, samples: np.ndarray) -> tuple[np.ndarray, float]:
+    """max t s.t. C_b(θ) ⪰ t·c_b I, Gθ + h ≥ t·c, M_i(θ) ⪰ t·m_i I (i in samples), t ≤ 1.
+
+    A small conic problem (size p plus the listed samples), solved by cvxpy only when the cheap
+    start fails. Returns (θ, t); t ≤ 0 means no strictly feasible θ exists for these samples.
+    """
+    import cvxpy as cp
+
+    from dualid.estimators.base import parameter_scale, solve_cvxpy
+
+    s = parameter_scale(problem)
+    phi = cp.Variable(problem.p)
+    t = cp.Variable()
+    theta = cp.multiply(s, phi)
+    cons_list = [t <= 1, cp.norm(phi - theta_ref / s, "inf") <= 1e6]
+    for c in cons.lmis:
+        k, m, _ = c.V.shape
+        scale = float(np.abs(c.V * s[c.idx, None, None]).sum(axis=0).max())
+        C = c.C0 + cp.reshape(c.V.reshape(k, m * m).T @ theta[c.idx], (m, m), order="C")
+        cons_list.append(0.5 * (C + C.T) >> t * scale * np.eye(m))
+    if len(cons.h):
+        scale = np.abs(cons.G * s).sum(axis=1)
+        cons_list.append(cons.G @ theta + cons.h >= t * scale)
+    if len(samples):
+        M0, Mk = problem.metric.basis(samples)
+        n = problem.n
+        for i in range(len(samples)):
+            scale = float(np.abs(Mk[i] * s[:, None, None]).sum(axis=0).max()) or 1.0
+            Mi = M0[i] + cp.reshape(Mk[i].reshape(problem.p, n * n).T @ theta, (n, n), order="C")
+            cons_list.append(0.5 * (Mi + Mi.T) >> t * scale * np.eye(n))
+    cvx = cp.Problem(cp.Maximize(t), cons_list)
+    solved = solve_cvxpy(cvx, phi, "CLARABEL", None, what="dual-metric phase I")
+    return s * solved.value, float(t.value)
+
+
+def _not_pd_samples(problem, theta, chunk, limit=50) -> np.ndarray:
+    """Indices of (up to limit of the worst) samples where M_i(θ) is not positive definite."""
+    bad, worst = [], []
+    for start in range(0, problem.N, chunk):
+        rows = slice(start, min(start + chunk, problem.N))
+        lam = np.linalg.eigvalsh(problem.metric.evaluate(theta, rows))[:, 0]
+        scale = np.abs(lam).max() if lam.size else 1.0
+        i = np.flatnonzero(lam <= 1e-12 * scale)
+        bad.append(start + i)
+        worst.append(lam[i])
+    bad, worst = np.concatenate(bad), np.concatenate(worst)
+    return bad[np.argsort(worst)[:limit]]
+
+
+def _energy_ls(problem: IdentificationProblem, chunk: int) -> np.ndarray:
+    """min-norm argmin Σ (v_iᵀ r_i)²: v_iᵀr_i is the same in every chart, so is this θ."""
+    stats = energy_statistics(problem, chunk=chunk)
+    return _solve_psd(stats.H, stats.g, rtol=1e-10)
+
+
+def _frozen_metric_ls(problem: IdentificationProblem, theta_c: np.ndarray, chunk: int) -> np.ndarray | None:
+    """min-norm argmin Σ r_iᵀ M_i(θ_c)⁻¹ r_i (the metric frozen at θ_c): chart-invariant; None if some
+    M_i(θ_c) is not positive definite."""
+    p = problem.p
+    H, g = np.zeros((p, p)), np.zeros(p)
+    for start in range(0, problem.N, chunk):
+        rows = slice(start, start + chunk)
+        try:
+            L = np.linalg.cholesky(problem.metric.evaluate(theta_c, rows))
+        except np.linalg.LinAlgError:
+            return None
+        Z = np.linalg.solve(L, problem.Y[rows])  # L⁻¹ Y_i (n, p)
+        z = np.linalg.solve(L, problem.tau[rows][..., None])[..., 0]
+        H += np.einsum("nap,naq->pq", Z, Z)
+        g += np.einsum("nap,na->p", Z, z)
+    return _solve_psd(H, g, rtol=1e-10)
+
+
+def starting_point(problem, cons: FeasibleSet, chunk: int) -> tuple[np.ndarray, str]:
+    """A strictly feasible θ with every M_i(θ) ≻ 0, computed from chart-invariant quantities only.
+
+    The energy least-squares θ picks a central point θ_c (each block's eigenvalues lifted); the
+    frozen-metric estimate argmin Σ rᵀM(θ_c)⁻¹r is then moved toward θ_c until it is strictly
+    feasible. Both estimates are the same in every chart, and Newton steps are affine-invariant in θ,
+    so the whole iteration (and hence the chosen point of a non-unique optimal face) does not
+    depend on the coordinates, units or scaling of the data. Falls back to the OLS seed (and to a
+    phase-I problem) only when that fails.
+    """
+    for seed_name, seed in (("energy", _energy_ls), ("ols", _ols)):
+        theta_seed = seed(problem, chunk)
+        theta_c = _central_point(theta_seed, cons)
+        if cons.margin(theta_c) <= 0 or not np.isfinite(_objective(problem, theta_c, chunk)):
+            continue
+        theta_f = _frozen_metric_ls(problem, theta_c, chunk) if seed_name == "energy" else theta_seed
+        target, label = (theta_f, f"{seed_name}→frozen-metric→central") if theta_f is not None else (theta_seed, f"{seed_name}→central")
+        # θ(β) = θ_c + β (target − θ_c), β ≤ 0.9 of the way to the constraint boundary, every M_i ≻ 0
+        d = target - theta_c
+        beta = min(1.0, 0.9 * cons.max_step(theta_c, d))
+        line = theta_c
+        while beta > 1e-3:
+            if np.isfinite(_objective(problem, theta_c + beta * d, chunk)):
+                line = theta_c + beta * d
+                break
+            beta *= 0.5
+        # or the target with its blocks' eigenvalues lifted (it keeps the target's well-determined directions,
+        # where the segment toward θ_c can stop far from it): whichever has the smaller f
+        lifted = _central_point(target, cons)
+        f_line = _objective(problem, line, chunk)
+        f_lifted = _objective(problem, lifted, chunk) if cons.margin(lifted) > 0 else np.inf
+        return (lifted, f"{label}→lifted") if f_lifted < f_line else (line, label)
+    theta_c = _central_point(_ols(problem, chunk), cons)
+    # phase I: a small conic problem over the constraints and the samples where M_i(θ_c) is not ≻ 0
+    samples = np.zeros(0, dtype=int)
+    if cons.margin(theta_c) > 0:
+        samples = _not_pd_samples(problem, theta_c, chunk)
+    for _ in range(20):
+        try:
+            theta_c, t = _phase_one(problem, cons, theta_c, samples)
+        except SolverError as exc:
+            raise SolverError(
+                f"dual-metric Newton: phase I failed ({exc}); the constraints may admit no strictly feasible θ",
+                status=exc.status,
+            ) from exc
+        if t <= 1e-9:
+            if len(samples):
+                raise MetricError(
+                    f"dual-metric Newton: no θ satisfying the constraints makes M_i(θ) positive definite at "
+                    f"samples {samples[:10].tolist()} (phase-I margin {t:.3g} ≤ 0); check the metric's "
+                    "constant part and the parameter bounds"
+                )
+            raise SolverError(
+                "dual-metric Newton: the constraints (physical consistency and bounds) admit no strictly "
+                f"feasible θ (phase-I margin {t:.3g} ≤ 0)",
+                status="infeasible",
+            )
+        more = _not_pd_samples(problem, theta_c, chunk)
+        if not len(more):
+            return theta_c, "phase-I"
+        samples = np.union1d(samples, more)
+    raise MetricError("dual-metric Newton: phase I did not find θ with every M_i(θ) positive definite")
