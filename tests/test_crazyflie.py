@@ -143,8 +143,8 @@ def test_controller_tracks_references_and_pendulum_swings(realistic):
         err = np.abs(true_q[:, :3] - ref[:, :3]).max(axis=0)
         assert np.all(err < 0.1), err  # [m]
         yaw = Rotation.from_quat(true_q[:, 3:7]).as_euler("ZYX")[:, 0]
-        assert np.abs(np.angle(np.exp(1j * (yaw - ref[:, 3])))).max() < 0.15  # [rad]
-        assert np.abs(true_q[:, 7:9]).max() > 0.03  # the pendulum moves
+        assert np.abs(np.angle(np.exp(1j * (yaw - ref[:, 3])))).max() < 0.2  # [rad] (25 ms motor lag, pendulum swinging)
+        assert np.abs(true_q[:, 7:9]).max() > 0.08  # the pendulum swings (0.1–0.2 rad peaks)
         assert np.all((run.meta["pwm"] >= 0) & (run.meta["pwm"] <= cfm.PWM_MAX))
         np.testing.assert_array_equal(run.meta["pwm"], np.rint(run.meta["pwm"]))
 

@@ -37,8 +37,9 @@ class Reference:
 
 
 def _random_reference(rng: np.random.Generator, B: int) -> Reference:
-    lo = np.array([0.35, 0.3, 0.15, 0.6, 0.03, 0.03])  # [m, m, m, rad, m, m] (invented)
-    hi = np.array([0.5, 0.45, 0.25, 1.0, 0.05, 0.05])
+    lo = np.array([0.35, 0.3, 0.15, 0.6, 0.08, 0.08])  # [m, m, m, rad, m, m] (invented; the two short
+    # components swing the pendulum by about 5–8° rms, 0.1–0.2 rad at the peaks)
+    hi = np.array([0.5, 0.45, 0.25, 1.0, 0.12, 0.12])
     K = len(REFERENCE_COMPONENTS)
     return Reference(rng.uniform(lo, hi, size=(B, K)), rng.uniform(0, 2 * np.pi, size=(B, K)))
 
