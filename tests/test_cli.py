@@ -31,12 +31,15 @@ def test_unknown_system_is_named():
 
 def test_reproduce_smoke_run_writes_results_table_and_figures(tmp_path):
     out = tmp_path / "study"
-    result = runner.invoke(app, ["reproduce", "pan-tilt", "--size", "small", "--seeds", "2", "--out", str(out)])
+    result = runner.invoke(app, ["reproduce", "pan-tilt", "--size", "small", "--seeds", "2", "--data-seeds", "2",
+                                 "--out", str(out)])
     assert result.exit_code == 0, result.output
     for name in ("results.json", "results.md", "score_bars_low.png", "score_bars_high.png", "trajectory_high.png"):
         assert (out / name).is_file(), name
     doc = json.loads((out / "results.json").read_text())
     assert doc["system"] == "pan-tilt" and set(doc["cases"]) == {"low", "high"}
-    assert "DM" in (out / "results.md").read_text()
+    md = (out / "results.md").read_text()
+    assert "DM" in md and "2 simulated data sets (seeds [0, 1])" in md and "Paired score difference against WLS" in md
+    assert doc["config"]["data_seeds"] == [0, 1] and {f["data_seed"] for f in doc["cases"]["high"]["fits"]} == {0, 1}
     bad = runner.invoke(app, ["reproduce", "pan-tilt", "--case", "medium"])
     assert bad.exit_code == 1 and "--case: expected low, high or both, got 'medium'" in bad.output

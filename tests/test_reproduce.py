@@ -88,7 +88,8 @@ def test_failures_are_reported_not_dropped(system):
     assert s.n_failed == 1 and np.all(np.isnan(s.score_mean))  # not zero-filled
     d = json.loads(study_json(r))  # NaN becomes null: valid JSON
     assert d["cases"]["high"]["summary"]["broken"]["score_mean"] == {"pan": None, "tilt": None}
-    assert d["cases"]["high"]["fits"][1] == {"case": "high", "method": "broken", "seed": None, "n_samples": 600,
+    assert d["cases"]["high"]["fits"][1] == {"case": "high", "method": "broken", "seed": None, "data_seed": 0,
+                                             "n_samples": 600,
                                              "ok": False, "error": failed["broken"].error}
     md = study_markdown(r)
     assert "## Failed fits" in md and "fake solver" in md and "| broken | failed | failed | 1/1 |" in md
@@ -155,3 +156,25 @@ def test_report_files_and_refusal_to_overwrite(study, tmp_path):
         score_bars(study, "medium")
     with pytest.raises(ValueError, match=r"coordinate: expected one of \['pan', 'tilt'\], got 'roll'"):
         trajectory_plot(study, "high", coordinate="roll")
+
+
+def test_pooled_data_sets_and_paired_differences(system):
+    from dataclasses import replace as dc_replace
+
+    from dualid.paper.seeds import paired_difference, pool
+
+    a = run_study(system, case="both", seeds=2, methods=("ols", "wls", "dm"))
+    b = run_study(dc_replace(system, test=system.test[::-1]), case="both", seeds=2, methods=("ols", "wls", "dm"))
+    with pytest.raises(ConfigError, match="the studies differ in methods, cases, coordinates or test runs"):
+        pool([a, b], [0, 1])
+    pooled = pool([a, a], [3, 4])
+    assert pooled.config["data_seeds"] == [3, 4] and {r.data_seed for r in pooled.records} == {3, 4}
+    s1, s2 = a.summary("low", "dm"), pooled.summary("low", "dm")
+    assert s2.n_fits == 2 * s1.n_fits
+    np.testing.assert_allclose(s2.score_mean, s1.score_mean)  # the same data twice: the same means
+    d = paired_difference(pooled, "low", "dm", "wls")
+    dm = np.concatenate([r.scores for r in pooled.records if r.case == "low" and r.method == "dm"])
+    wls = np.concatenate([r.scores for r in pooled.records if r.case == "low" and r.method == "wls"])
+    np.testing.assert_allclose(d.mean, (dm - wls).mean(0))
+    assert d.n_pairs == dm.shape[0] and np.array_equal(d.wins, (dm > wls).sum(0))
+    assert "### Paired score difference against WLS" in study_markdown(pooled)

@@ -16,6 +16,7 @@ def reproduce(
     out: Path = typer.Option(None, "--out", help="output directory (default: results/SYSTEM)"),
     case: str = typer.Option("both", "--case", help="low, high or both"),
     seeds: int = typer.Option(5, "--seeds", help="random low-data subsamples"),
+    data_seeds: int = typer.Option(5, "--data-seeds", help="simulated data sets (seeds 0..N-1), pooled"),
     noise: str = typer.Option("realistic", "--noise", help="realistic, ideal (Gaussian force noise only) or none"),
     size: str = typer.Option("default", "--size", help="default or small (a quick smoke run)"),
     ablation: str = typer.Option(None, "--ablation", help="'units': fit in re-charted coordinates (mm, degrees)"),
@@ -39,7 +40,7 @@ def reproduce(
     try:
         with Progress(*columns, console=console) as progress:
             result = run(system, out, case=case, seeds=seeds, noise=noise, size=size, ablation=ablation,
-                         overwrite=force, progress=progress)
+                         overwrite=force, progress=progress, data_seeds=data_seeds)
     except FileExistsError as exc:
         fail(f"{exc}; pass --force to overwrite it")
     except (DualidError, ValueError) as exc:

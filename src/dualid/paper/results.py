@@ -32,15 +32,18 @@ class FitRecord:
     scores: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (runs, n)
     rmse: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (runs, n) signal units
     metric_rmse: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (runs,)
+    data_seed: int = 0  # the simulated data set's seed
+    info: dict = field(default_factory=dict)  # the fit's scalar diagnostics (solver chain, metric guard, …)
 
     def as_dict(self, runs: Sequence[str], coordinates: Sequence[str]) -> dict:
         d: dict[str, Any] = {"case": self.case, "method": self.method, "seed": self.seed,
-                             "n_samples": self.n_samples, "ok": self.ok}
+                             "data_seed": self.data_seed, "n_samples": self.n_samples, "ok": self.ok}
         if not self.ok:
             d["error"] = self.error
             return d
         d.update(
             theta=list(self.theta), objective=self.objective, solve_time_s=self.solve_time, status=self.status,
+            info=self.info,
             runs={
                 run: {
                     "score": dict(zip(coordinates, self.scores[k].tolist())),
@@ -124,6 +127,7 @@ class StudyResult:
     truth: Summary  # the true θ's prediction: what noise and unmodelled effects allow
     traces: tuple[Trace, ...]
     config: dict  # seeds, max_shift, ablation chart, low-data size, …
+    truth_records: tuple[FitRecord, ...] = ()  # the true θ's record per data set (pooled in ``truth``)
 
     def summary(self, case: str, method: str) -> Summary:
         for s in self.summaries:

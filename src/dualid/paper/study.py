@@ -24,7 +24,7 @@ import math
 import re
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
@@ -150,10 +150,11 @@ def _fit_one(estimator, problem, system, case, method, seed, max_shift, evaluati
     except DualidError as exc:  # SolverError, MetricError, IdentifiabilityError, ConsistencyError, …
         msg = f"{type(exc).__name__} during {stage}: {exc}"
         return FitRecord(case, method, seed, problem.N, False, error=msg), None
+    info = {k: v for k, v in result.info.items() if isinstance(v, (bool, int, float, str))}
     rec = FitRecord(
         case, method, seed, problem.N, True, theta=tuple(float(x) for x in result.theta),
         objective=float(result.objective), solve_time=float(result.solve_time), status=str(result.status),
-        scores=S, rmse=R, metric_rmse=E,
+        scores=S, rmse=R, metric_rmse=E, info=info,
     )
     return rec, P
 
@@ -269,6 +270,7 @@ def run_study(
         records=tuple(records),
         summaries=summaries,
         truth=Summary.of("truth", "truth", [truth_rec], n),
+        truth_records=(truth_rec,),
         traces=tuple(traces),
         config=config,
     )
@@ -284,22 +286,3 @@ class _Fixed:
         from dualid.estimators.result import IdentificationResult
 
         return IdentificationResult("fixed", self.theta, problem.parameters, float("nan"), "given", "none", 0.0)
-
-
-
-
-def simulate_and_run(
-    system_name: str,
-    case: Case = "both",
-    seeds: int = 5,
-    noise: str = "realistic",
-    size: str = "default",
-    ablation: None | str | np.ndarray = None,
-    progress=None,
-) -> StudyResult:
-    """Simulate the named system (data-set seed 0) and run the study on it."""
-    from dualid.systems.base import make_system
-
-    system = make_system(system_name, seed=0, noise=noise, size=size)
-    result = run_study(system, case=case, seeds=seeds, progress=progress, ablation=ablation)
-    return replace(result, config={**result.config, "noise": noise, "size": size, "system_seed": 0})

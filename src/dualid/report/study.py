@@ -20,7 +20,8 @@ from dualid.errors import ConfigError
 from dualid.estimators.methods import color as method_color
 from dualid.estimators.methods import label as method_label
 from dualid.paper.results import StudyResult
-from dualid.paper.study import Case, simulate_and_run
+from dualid.paper.seeds import paired_difference, run_data_seeds
+from dualid.paper.study import Case
 from dualid.report.figures import new_figure, save_figure
 from dualid.report.io import markdown_table, to_json
 from dualid.report.outdir import check_output_dir, write_output
@@ -172,9 +173,11 @@ def _run_score(result: StudyResult, trace, k: int) -> float:
     return float(recs[0].scores[j, k])  # records are in seed order; traces keep the first seed
 
 
-def study_markdown(self: StudyResult) -> str:
-    """The study's tables (scores, RMSEs, the truth row, failed fits) as Markdown."""
+def study_markdown(self: StudyResult, reference: str = "wls") -> str:
+    """The study's tables (scores, RMSEs, paired differences against ``reference``, the truth row,
+    failed fits) as Markdown."""
     c = self.coordinates
+    data_seeds = self.config.get("data_seeds", [self.config.get("system_seed", 0)])
     sym = "a" if self.signal == "acceleration" else "v"
     lines = [
         f"# {self.system}: identification study",
@@ -182,9 +185,13 @@ def study_markdown(self: StudyResult) -> str:
         f"Predicted forward dynamics ({self.signal}s, {self.kind}-dominated) on {len(self.test_runs)} test runs. "
         f"Score: max normalized cross-correlation within ±{self.config.get('max_shift')} samples "
         f"(±T/72 of the slowest period {self.config.get('slowest_period')} s); mean ± std over test runs"
-        + (" and seeds" if "low" in self.cases else "") + ". Shape coordinates: "
+        + (" and low-data subsets" if "low" in self.cases else "")
+        + (f" and {len(data_seeds)} simulated data sets (seeds {data_seeds})" if len(data_seeds) > 1 else "")
+        + ", over the successful fits (the 'failed' column counts the others). Shape coordinates: "
         + ", ".join(self.shape_coordinates) + ".",
     ]
+    for d in self.config.get("descriptions", [])[:1] or [self.config.get("description", "")]:
+        lines += ["", f"System: {d}."] if d else []
     if self.config.get("ablation") is not None:
         lines += ["", f"Ablation: fitted in a re-charted problem, B = diag({self.config['ablation_B_diag']})."]
     for case in self.cases:
@@ -198,6 +205,8 @@ def study_markdown(self: StudyResult) -> str:
         lines += markdown_table(["method"] + [f"{sym}:{x}" for x in c] + ["√(eᵀMe)"],
                         [[method_label(s.method)] + [_pm(m, d, 3, "g") for m, d in zip(s.rmse_mean, s.rmse_std)]
                          + [_pm(s.metric_rmse_mean, s.metric_rmse_std, 3, "g")] for s in self.summaries if s.case == case])
+        if reference in self.methods:
+            lines += _paired_section(self, case, reference, sym)
     t = self.truth
     lines += ["", "## Reference: the true parameters", ""]
     lines += markdown_table(["", *[f"{sym}:{x}" for x in c], "√(eᵀMe)"],
@@ -219,6 +228,22 @@ def _pm(m: float, d: float, digits: int, fmt: str = "f") -> str:
     if not np.isfinite(m):
         return "failed"
     return f"{m:.{digits}{fmt}} ± {d:.{digits}{fmt}}" if fmt == "f" else f"{m:.{digits}g} ± {d:.{digits - 1}g}"
+
+
+def _paired_section(result: StudyResult, case: str, reference: str, sym: str) -> list[str]:
+    rows = []
+    for m in result.methods:
+        if m == reference:
+            continue
+        d = paired_difference(result, case, m, reference)
+        if d.n_pairs == 0:
+            rows.append([method_label(m)] + ["—"] * len(result.coordinates) + ["0"])
+            continue
+        rows.append([method_label(m)] + [f"{mu:+.3f} ± {sd:.3f} ({w}/{d.n_pairs})" for mu, sd, w in
+                                         zip(d.mean, d.std, d.wins)] + [str(d.n_pairs)])
+    return ["", f"### Paired score difference against {method_label(reference)} (method − {method_label(reference)}; "
+                "mean ± std over the same data set, subset and test run; in brackets: how often the method is ahead)",
+            ""] + markdown_table(["method"] + [f"{sym}:{x}" for x in result.coordinates] + ["pairs"], rows)
 
 
 def study_json(result: StudyResult) -> str:
@@ -246,9 +271,11 @@ def write_report(result: StudyResult, out_dir: str | Path, overwrite: bool = Fal
 
 def reproduce(system_name: str, out_dir: str | Path, case: Case = "both", seeds: int = 5, noise: str = "realistic",
               size: str = "default", ablation: None | str | np.ndarray = None, overwrite: bool = False,
-              progress=None) -> StudyResult:
-    """Simulate the named system, run the study and write its report to out_dir."""
+              progress=None, data_seeds: int = 5, **system_options) -> StudyResult:
+    """Simulate the named system on ``data_seeds`` data sets, run the study on each, pool them and
+    write the report to out_dir."""
     check_output_dir(out_dir, overwrite)  # fail before the (long) study, not after
-    result = simulate_and_run(system_name, case, seeds, noise, size, ablation, progress)
+    result = run_data_seeds(system_name, data_seeds, case, seeds, noise, size, ablation, progress=progress,
+                            **system_options)
     write_report(result, out_dir, overwrite=overwrite)
     return result

@@ -1,0 +1,95 @@
+"""The study over several simulated data sets: one data set per seed, every fit pooled, and paired
+differences between methods on the same (data set, subset, test run).
+
+A single simulated data set makes the high-data column one fit; differences between methods of a
+few hundredths can then be luck of that data set. Pooling over data-set seeds and reporting paired
+differences (method − reference on the same fit inputs, with their spread and how often the method
+is ahead) says how much of a difference is the method's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from dualid.errors import ConfigError
+from dualid.paper.results import FitRecord, StudyResult, Summary
+from dualid.paper.study import Case, run_study
+from dualid.systems.base import make_system
+
+
+@dataclass(frozen=True)
+class PairedDifference:
+    """score(method) − score(reference) over the pairs of fits of one case that both succeeded."""
+
+    case: str
+    method: str
+    reference: str
+    n_pairs: int  # (data seed, subset seed, test run) triples
+    mean: np.ndarray  # (n,) per coordinate
+    std: np.ndarray  # (n,)
+    wins: np.ndarray  # (n,) pairs in which the method scored higher
+
+
+def _pairs(records: Sequence[FitRecord], case: str, method: str) -> dict[tuple, FitRecord]:
+    return {(r.data_seed, r.seed): r for r in records if r.case == case and r.method == method and r.ok}
+
+
+def paired_difference(result: StudyResult, case: str, method: str, reference: str) -> PairedDifference:
+    a, b = _pairs(result.records, case, method), _pairs(result.records, case, reference)
+    keys = sorted(set(a) & set(b), key=str)
+    n = len(result.coordinates)
+    if not keys:
+        nan = np.full(n, np.nan)
+        return PairedDifference(case, method, reference, 0, nan, nan, np.zeros(n, int))
+    d = np.concatenate([a[k].scores - b[k].scores for k in keys])  # (pairs × runs, n)
+    return PairedDifference(case, method, reference, d.shape[0], d.mean(0), d.std(0), (d > 0).sum(0))
+
+
+def pool(studies: Sequence[StudyResult], data_seeds: Sequence[int]) -> StudyResult:
+    """One StudyResult whose records are every data set's (tagged with its seed) and whose summaries
+    pool them; traces and the per-run configuration are the first data set's."""
+    if not studies or len(studies) != len(data_seeds):
+        raise ConfigError(f"pool: expected one study per data seed, got {len(studies)} studies for seeds {list(data_seeds)}")
+    first = studies[0]
+    for s in studies[1:]:
+        if (s.methods, s.cases, s.coordinates, s.test_runs) != (first.methods, first.cases, first.coordinates,
+                                                                   first.test_runs):
+            raise ConfigError("pool: the studies differ in methods, cases, coordinates or test runs")
+    records = tuple(replace(r, data_seed=int(seed)) for s, seed in zip(studies, data_seeds) for r in s.records)
+    truth = tuple(replace(r, data_seed=int(seed)) for s, seed in zip(studies, data_seeds) for r in s.truth_records)
+    n = len(first.coordinates)
+    summaries = tuple(Summary.of(c, m, [r for r in records if r.case == c and r.method == m], n)
+                      for c in first.cases for m in first.methods)
+    config = {**first.config, "data_seeds": [int(x) for x in data_seeds],
+              "elapsed_s": float(sum(s.config.get("elapsed_s", 0.0) for s in studies)),
+              "descriptions": [s.config.get("description", "") for s in studies]}
+    return replace(first, records=records, summaries=summaries, truth=Summary.of("truth", "truth", truth, n),
+                   truth_records=truth, config=config)
+
+
+def run_data_seeds(
+    system_name: str,
+    data_seeds: int | Sequence[int] = 5,
+    case: Case = "both",
+    seeds: int = 5,
+    noise: str = "realistic",
+    size: str = "default",
+    ablation=None,
+    methods=None,
+    progress=None,
+    **system_options,
+) -> StudyResult:
+    """Simulate one data set per seed, run the study on each and pool them (see ``pool``)."""
+    data_list = list(range(data_seeds)) if isinstance(data_seeds, (int, np.integer)) else [int(s) for s in data_seeds]
+    if not data_list:
+        raise ConfigError(f"data_seeds: expected at least one data-set seed, got {data_seeds!r}")
+    studies = []
+    for seed in data_list:
+        system = make_system(system_name, seed=seed, noise=noise, size=size, **system_options)
+        kw = {} if methods is None else {"methods": methods}
+        study = run_study(system, case=case, seeds=seeds, progress=progress, ablation=ablation, **kw)
+        studies.append(replace(study, config={**study.config, "noise": noise, "size": size, "system_seed": seed}))
+    return pool(studies, data_list)
