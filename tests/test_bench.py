@@ -21,7 +21,7 @@ from dualid.cli import app
 from dualid.report.bench import to_markdown
 
 ROOT = Path(__file__).resolve().parents[1]
-COMMITTED = ROOT / "benchmarks"
+COMMITTED = ROOT / "benchmarks" / "solvers"
 runner = CliRunner()
 SMALL = ["--max-n", "100", "--problems", "crazyflie"]
 

@@ -111,17 +111,10 @@ def _pinocchio_model(name: str):
     """The Pinocchio model of a benchmark problem (true inertias in the bodies)."""
     import pinocchio as pin
 
-    if name == "crazyflie":
-        m = pin.Model()
-        base = m.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "base")
-        m.appendBodyToJoint(base, pin.Inertia(0.03, np.zeros(3), np.diag([1.6e-5, 1.6e-5, 2.9e-5])), pin.SE3.Identity())
-        a1 = m.addJoint(base, pin.JointModelRX(), pin.SE3(np.eye(3), np.array([0, 0, -0.02])), "a1")
-        m.appendBodyToJoint(a1, pin.Inertia(0.002, np.array([0, 0, -0.005]), np.diag([2e-8, 2e-8, 1e-8])),
-                            pin.SE3.Identity())
-        a2 = m.addJoint(a1, pin.JointModelRY(), pin.SE3.Identity(), "a2")
-        m.appendBodyToJoint(a2, pin.Inertia(0.008, np.array([0, 0, -0.15]), np.diag([6e-5, 6e-5, 1e-7])),
-                            pin.SE3.Identity())
-        return m
+    if name == "crazyflie":  # the study's Crazyflie–pendulum (true inertias)
+        from dualid.systems.crazyflie_model import build_model
+
+        return build_model()
     if name == "arm7":
         m, parent = pin.Model(), 0
         for j in range(7):

@@ -23,6 +23,7 @@ def bench(
     sdp_max_n: int = typer.Option(None, "--sdp-max-n", help="largest N for the SDP solvers (default 10,000)"),
     cap: str = typer.Option("", "--cap", help="per-problem largest N, e.g. arm7=100000"),
     timeout: float = typer.Option(None, "--timeout", help="kill a single run after this many seconds"),
+    budget: float = typer.Option(None, "--budget", help="skip a solver's larger N once one of its runs took longer [s]"),
     force: bool = typer.Option(False, "--force", help="overwrite an existing non-empty output directory"),
 ) -> None:
     """Run every (problem, solver, N) in its own process and write results.json, results.md and
@@ -46,7 +47,7 @@ def bench(
         changes = {
             "problems": parse_list(problems, PROBLEMS, "problem"),
             "solvers": parse_list(solvers, SOLVERS, "solver") if solvers is not None else None,
-            "max_n": max_n, "sdp_max_n": sdp_max_n, "timeout": timeout, "caps": parse_caps(cap),
+            "max_n": max_n, "sdp_max_n": sdp_max_n, "timeout": timeout, "budget": budget, "caps": parse_caps(cap),
         }
         if quick:
             config = BenchConfig.quick(**changes)
