@@ -49,3 +49,8 @@ class MissingFileError(DataError, FileNotFoundError):
 
 class SimulationError(DualidError, RuntimeError):
     """A simulator (the paper's systems) failed: an integrator diverged or the state left its range."""
+
+
+class DualidWarning(UserWarning):
+    """Something in the input that is probably wrong but not certainly (e.g. a logged velocity far
+    from dq/dt, the same log for training and testing); the fit goes on and the report records it."""

@@ -166,6 +166,8 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str]) -> dict:
             "validation": None if f.validation is None else f.validation.as_dict(),
         }
     return jsonable({
+        "complete": outcome.complete,  # False when a requested method failed (its entry has "error")
+        "warnings": list(outcome.warnings),
         "model": {"urdf": outcome.config.model.urdf, "floating_base": outcome.config.model.floating_base,
                   "gravity": list(outcome.rigid.gravity)},
         "data": {"train": list(outcome.config.train), "test": list(outcome.config.test),
@@ -235,9 +237,12 @@ def _write_fit(outcome: FitOutcome, out: Path) -> dict[str, Path]:
 
 def _report_md(outcome: FitOutcome, validations, urdfs, figures) -> str:
     cfg = outcome.config
-    lines = [
-        f"# Identification of {cfg.model.urdf.name}",
-        "",
+    failed = [m for m, f in outcome.fits.items() if not f.ok]
+    lines = [f"# Identification of {cfg.model.urdf.name}", ""]
+    if failed:
+        lines += [f"**Incomplete: {len(failed)} of {len(outcome.fits)} requested methods failed "
+                  f"({', '.join(failed)}); see Fits.**", ""]
+    lines += [
         f"- training runs: {', '.join(p.name for p in cfg.train)}",
         f"- held-out runs: {', '.join(p.name for p in cfg.test) or '(none: no validation)'}",
         f"- samples after preprocessing: {outcome.problem.N} × {outcome.problem.n} joints; parameters: {outcome.problem.p}",
@@ -245,6 +250,10 @@ def _report_md(outcome: FitOutcome, validations, urdfs, figures) -> str:
         f"- joint terms: viscous={cfg.joint_terms.viscous}, coulomb={cfg.joint_terms.coulomb} "
         f"(v_c = {cfg.joint_terms.coulomb_velocity} rad/s), armature={cfg.joint_terms.armature}",
         "",
+    ]
+    if outcome.warnings:
+        lines += ["## Warnings", ""] + [f"- {w}" for w in outcome.warnings] + [""]
+    lines += [
         "## Identifiability",
         "",
         "```",

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,7 +32,7 @@ import numpy as np
 from dualid.data.io import ColumnMap, load_log, read_table
 from dualid.data.preprocessing import preprocess
 from dualid.data.trajectory import Trajectory
-from dualid.errors import DataError, DualidError, MissingFileError
+from dualid.errors import DataError, DualidError, DualidWarning, MissingFileError
 from dualid.estimators import OLS, IdentificationResult
 from dualid.estimators.least_squares import covariance_weight, energy_statistics, statistics
 from dualid.estimators.methods import make_estimator
@@ -246,6 +247,12 @@ class FitOutcome:
     fits: dict[str, MethodFit]
     references: dict[str, tuple[np.ndarray, Validation | None]] = field(default_factory=dict)
     prior: str = ""  # where θ₀ of the regularized methods came from
+    warnings: tuple[str, ...] = ()  # the DualidWarnings raised while loading, checking and fitting
+
+    @property
+    def complete(self) -> bool:
+        """True when every requested method succeeded."""
+        return all(f.ok for f in self.fits.values())
 
     @property
     def steps(self) -> list:
@@ -276,7 +283,18 @@ def _say(progress: Progress | None, message: str) -> None:
 
 
 def fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome:
-    """Run the whole workflow (see the module docstring); progress(message) is called between stages."""
+    """Run the whole workflow (see the module docstring); progress(message) is called between stages.
+    Every DualidWarning raised on the way is recorded in the outcome (and re-issued to the caller)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", DualidWarning)
+        outcome = _fit_robot(config, progress)
+    ours = [w for w in caught if issubclass(w.category, DualidWarning)]
+    for w in caught:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return dataclasses.replace(outcome, warnings=tuple(dict.fromkeys(str(w.message) for w in ours)))
+
+
+def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome:
     from dualid.robot.dfki import reference_theta
 
     _say(progress, f"building the model from {config.model.urdf}")
