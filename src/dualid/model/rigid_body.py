@@ -25,6 +25,7 @@ import pinocchio as pin
 from dualid.errors import DataError, MissingFileError, ModelError
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.parameters import ParameterSpace, rigid_body_space
+from dualid.model.urdf_check import read_urdf
 
 FREE_FLYER_COORDINATES = ("vx", "vy", "vz", "wx", "wy", "wz")
 
@@ -73,7 +74,7 @@ def _with_implicit_world(path: Path) -> str | None:
     they never declare; urdfdom (hence Pinocchio) rejects that. Declaring the empty link is exactly
     what those files mean. Returns None when the file needs no change.
     """
-    root = ET.parse(path).getroot()
+    root = read_urdf(path)  # values checked before Pinocchio (dualid.model.urdf_check)
     links = {link.get("name") for link in root.findall("link")}
     parents = {p.get("link") for joint in root.findall("joint") for p in joint.findall("parent")}
     if "world" in links or "world" not in parents:
@@ -143,12 +144,15 @@ class RigidBodyModel:
             raise MissingFileError(f"RigidBodyModel.from_urdf: no URDF file at {path}")
         root_joint = (pin.JointModelFreeFlyer(),) if floating_base else ()
         xml = _with_implicit_world(path)
-        if xml is None:
-            model = pin.buildModelFromUrdf(str(path), *root_joint)
-        elif floating_base:
-            model = pin.buildModelFromXML(xml, pin.JointModelFreeFlyer())
-        else:
-            model = pin.buildModelFromXML(xml)
+        try:
+            if xml is None:
+                model = pin.buildModelFromUrdf(str(path), *root_joint)
+            elif floating_base:
+                model = pin.buildModelFromXML(xml, pin.JointModelFreeFlyer())
+            else:
+                model = pin.buildModelFromXML(xml)
+        except (RuntimeError, ValueError) as exc:  # urdfdom / Pinocchio refuse what read_urdf let through
+            raise ModelError(f"{path}: Pinocchio could not build a model from this URDF: {exc}") from None
         return cls(model, gravity)
 
     def with_gravity(self, gravity) -> "RigidBodyModel":

@@ -27,7 +27,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from dualid.errors import ConfigError, MissingFileError
+from dualid.errors import ConfigError
 from dualid.estimators.methods import METHODS  # the one list of method names
 
 DEFAULT_PREPROCESSING = (
@@ -73,6 +73,15 @@ def _paths(x, base: Path | None, where: str) -> tuple[Path, ...]:
     if not isinstance(x, (list, tuple)):
         raise ConfigError(f"{where}: expected a list of file paths, got {x!r}")
     return tuple(_path(p, base, where) for p in x)
+
+
+def _float(x, where: str) -> float:
+    if isinstance(x, bool) or not isinstance(x, (int, float, str)):
+        raise ConfigError(f"{where}: expected a number, got {x!r}")
+    try:
+        return float(x)
+    except ValueError:
+        raise ConfigError(f"{where}: expected a number, got {x!r}") from None
 
 
 def _bool(x, where: str) -> bool:
@@ -132,6 +141,9 @@ class FitConfig:
             object.__setattr__(self, "methods", tuple(dict.fromkeys(self.methods)))
         if not (np.isfinite(self.xcorr_window) and self.xcorr_window >= 0):
             raise ConfigError(f"validation.xcorr_window: expected seconds ≥ 0, got {self.xcorr_window!r}")
+        if not (np.isfinite(self.joint_terms.coulomb_velocity) and self.joint_terms.coulomb_velocity > 0):
+            raise ConfigError(
+                f"joint_terms.coulomb_velocity: expected a velocity > 0 [rad/s], got {self.joint_terms.coulomb_velocity!r}")
         if not (np.isfinite(self.prior.gamma) and self.prior.gamma >= 0):
             raise ConfigError(f"prior.gamma: expected a number ≥ 0, got {self.prior.gamma!r}")
         for name, lo, hi in self.bounds:
@@ -156,8 +168,8 @@ class FitConfig:
         gravity = m.get("gravity")
         if gravity is not None:
             try:
-                gravity = tuple(float(x) for x in gravity)
-            except (TypeError, ValueError):
+                gravity = tuple(_float(x, "model.gravity") for x in gravity)
+            except (TypeError, ConfigError):
                 gravity = ()
             if len(gravity) != 3:
                 raise ConfigError(f"model.gravity: expected 3 numbers [m/s²], got {m.get('gravity')!r}")
@@ -170,7 +182,7 @@ class FitConfig:
         joint_terms = JointTermsConfig(
             viscous=_bool(jt.get("viscous", True), "joint_terms.viscous"),
             coulomb=_bool(jt.get("coulomb", True), "joint_terms.coulomb"),
-            coulomb_velocity=float(jt.get("coulomb_velocity", 0.01)),
+            coulomb_velocity=_float(jt.get("coulomb_velocity", 0.01), "joint_terms.coulomb_velocity"),
             armature=_bool(jt.get("armature", True), "joint_terms.armature"),
             joints=joints,
         )
@@ -181,7 +193,7 @@ class FitConfig:
         source = str(pr.get("source", "urdf"))
         if source != "urdf":
             source = str(_path(source, base, "prior.source"))
-        prior = PriorConfig(source, float(pr.get("gamma", 1.0)))
+        prior = PriorConfig(source, _float(pr.get("gamma", 1.0), "prior.gamma"))
 
         bounds_in = d.get("bounds") or {}
         if not isinstance(bounds_in, Mapping):
@@ -190,7 +202,8 @@ class FitConfig:
         for name, pair in bounds_in.items():
             if not isinstance(pair, (list, tuple)) or len(pair) != 2:
                 raise ConfigError(f"bounds: {name!r} must be [lower, upper] (use null for none), got {pair!r}")
-            lo, hi = (-np.inf if pair[0] is None else float(pair[0]), np.inf if pair[1] is None else float(pair[1]))
+            lo = -np.inf if pair[0] is None else _float(pair[0], f"bounds.{name}[0]")
+            hi = np.inf if pair[1] is None else _float(pair[1], f"bounds.{name}[1]")
             bounds.append((str(name), lo, hi))
 
         methods = d.get("methods", ("ols", "dm"))
@@ -215,7 +228,7 @@ class FitConfig:
             bounds=tuple(bounds),
             methods=methods,
             prior=prior,
-            xcorr_window=float(val.get("xcorr_window", 0.02)),
+            xcorr_window=_float(val.get("xcorr_window", 0.02), "validation.xcorr_window"),
             references=tuple((str(k), _path(v, base, f"references.{k}")) for k, v in refs.items()),
             out=None if d.get("out") is None else _path(d["out"], base, "out"),
         )
@@ -223,13 +236,10 @@ class FitConfig:
     @staticmethod
     def from_yaml(path: str | Path) -> "FitConfig":
         """Read a YAML config; relative paths in it are relative to its folder."""
-        import yaml
+        from dualid.robot.files import read_mapping
 
         path = Path(path)
-        if not path.is_file():
-            raise MissingFileError(f"config file not found: {path}")
-        with open(path) as f:
-            d = yaml.safe_load(f) or {}
+        d = read_mapping(path, "config file")
         return FitConfig.from_dict(d, base_dir=path.resolve().parent)
 
     def with_overrides(self, **changes) -> "FitConfig":
