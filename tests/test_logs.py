@@ -142,7 +142,7 @@ def test_load_errors(tmp_path):
         load_log(write(df, tmp_path / "cols.csv"), cmap)
     df = frame()
     df.loc[7, "time"] = df.loc[6, "time"]
-    with pytest.raises(DataError, match=r"time column 'time' must be strictly increasing; row 6 has 0.06 and row 7 has 0.06"):
+    with pytest.raises(DataError, match=r"time column 'time' repeats a time stamp: rows 6 and 7 both have 0.06"):
         load_log(write(df, tmp_path / "mono.csv"), cmap)
     df = frame()
     df.loc[12, "pos_meas2"] = np.nan

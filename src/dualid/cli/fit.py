@@ -55,10 +55,13 @@ def fit(
         task = bar.add_task("starting", total=None)
         with warnings.catch_warnings(record=True) as caught:  # recorded in the outcome by fit_robot
             warnings.simplefilter("always")
-            outcome = fit_robot(cfg, progress=lambda msg: bar.update(task, description=msg))
-            bar.update(task, description=f"writing {cfg.out}")
-            write_fit(outcome, cfg.out, force)
-    show_warnings(caught)
+            try:
+                outcome = fit_robot(cfg, progress=lambda msg: bar.update(task, description=msg))
+                bar.update(task, description=f"writing {cfg.out}")
+                write_fit(outcome, cfg.out, force)
+            finally:  # also when an error follows: a warning may explain it
+                bar.stop()
+                show_warnings(caught)
     console.print(outcome.identifiability.describe(max_items=0), markup=False)
     for m, f in outcome.fits.items():
         if f.ok:
@@ -101,11 +104,13 @@ def validate(
                   floating_base=cfg.model.floating_base)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        with console.status(f"validating {model.name} on {len(data)} runs"):
-            _, _, val = validate_urdf(model, data, **kw)
-        if out is not None:
-            write_validation(val, out, {"model": str(model), "data": [str(p) for p in data]}, force)
-    show_warnings(caught)
+        try:
+            with console.status(f"validating {model.name} on {len(data)} runs"):
+                _, _, val = validate_urdf(model, data, **kw)
+            if out is not None:
+                write_validation(val, out, {"model": str(model), "data": [str(p) for p in data]}, force)
+        finally:
+            show_warnings(caught)
     typer.echo(score_table({val.label: val}))
     if out is not None:
         console.print(f"wrote validation.json, report.md and figures to {out}", markup=False)

@@ -16,12 +16,14 @@ Rows are counted from 0 (the first data row, after any header) in error messages
 
 from __future__ import annotations
 
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
+from dualid.data.checks import check_time, check_velocity, csv_header
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError, MissingFileError
 
@@ -159,9 +161,14 @@ class ColumnMap:
 def read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
     """All columns of the file as float arrays (name -> (T,)) and the column order."""
     ext = path.suffix.lower()
+    if ext not in FORMATS:
+        raise DataError(f"{path}: unknown log format {path.suffix!r}; expected one of {', '.join(FORMATS)}")
     if ext == ".npz":
-        with np.load(path, allow_pickle=False) as z:
-            data = {k: np.asarray(z[k]) for k in z.files}
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                data = {k: np.asarray(z[k]) for k in z.files}
+        except (ValueError, EOFError, zipfile.BadZipFile) as exc:  # not an npz, truncated, pickled objects
+            raise DataError(f"{path}: cannot read it as .npz ({type(exc).__name__}: {exc})") from None
         if not data:
             raise DataError(f"{path}: log is empty (no rows)")
         bad = {k: v.shape for k, v in data.items() if v.ndim != 1}
@@ -175,11 +182,22 @@ def read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
 
     if ext == ".csv":
         try:
+            csv_header(path)
+        except UnicodeDecodeError as exc:
+            raise DataError(f"{path}: cannot read it as CSV text ({exc})") from None  # duplicated names: pandas would rename them silently
+        try:
             df = pd.read_csv(path)
         except pd.errors.EmptyDataError:
             raise DataError(f"{path}: log is empty (no rows)") from None
+        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+            raise DataError(f"{path}: cannot read it as CSV ({type(exc).__name__}: {exc})") from None
     else:
-        df = pd.read_parquet(path)
+        try:
+            df = pd.read_parquet(path)
+        except (ValueError, OSError) as exc:  # pyarrow's ArrowInvalid is a ValueError
+            if isinstance(exc, (PermissionError, IsADirectoryError)):
+                raise
+            raise DataError(f"{path}: cannot read it as Parquet ({type(exc).__name__}: {exc})") from None
     return {str(c): df[c].to_numpy() for c in df.columns}, [str(c) for c in df.columns]
 
 
@@ -261,13 +279,7 @@ def load_log(
     for c in dict.fromkeys(needed):
         column(c)  # check every mapped column before converting
     t = column(cmap.time) * UNITS["time"][cmap.unit("time")]
-    dt = np.diff(t)
-    if np.any(dt <= 0):
-        k = int(np.argmax(dt <= 0))
-        raise DataError(
-            f"{path}: time column {cmap.time!r} must be strictly increasing; "
-            f"row {k} has {data[cmap.time][k]} and row {k + 1} has {data[cmap.time][k + 1]}"
-        )
+    check_time(path, data[cmap.time], t, cmap.time)
 
     def stack(key: str, quantity: str):
         return np.stack([column(getattr(j, key)) for j in jcols], axis=1) * UNITS[quantity][cmap.unit(quantity)]
@@ -277,6 +289,7 @@ def load_log(
     a = stack("acceleration", "acceleration") if all(has_a) else None
     if velocity == "logged":
         v = stack("velocity", "velocity")
+        check_velocity(path, t, q, v, joints)
     else:
         v = np.gradient(q, t, axis=0, edge_order=2)
     logged = ["q", "tau"] + (["v"] if velocity == "logged" else []) + (["a"] if a is not None else [])

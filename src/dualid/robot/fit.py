@@ -20,13 +20,12 @@ regularized (logdet, pullback) and dual-metric (dm) estimators.
 from __future__ import annotations
 
 import dataclasses
-import json
 import warnings
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+import cvxpy as cp
 import numpy as np
 
 from dualid.data.io import ColumnMap, load_log, read_table
@@ -41,8 +40,10 @@ from dualid.evaluation.validation import Validation, validate
 from dualid.linalg import pinv_psd
 from dualid.model.joint_terms import JointTermsModel, with_joint_terms
 from dualid.model.rigid_body import RigidBodyModel
+from dualid.model.urdf_check import read_urdf
 from dualid.problem import Identifiability, IdentificationProblem, build_problem
 from dualid.robot.config import FitConfig
+from dualid.robot.files import read_mapping
 
 NOT_IDENTIFIABLE = "not identifiable"
 
@@ -81,6 +82,29 @@ def load_runs(paths, cmap: ColumnMap, joints: tuple[str, ...], steps) -> list[Tr
             )
         runs.append(traj)
     return runs
+
+
+def check_runs_differ(train, test) -> None:
+    """DualidWarning when a log is used twice in training, or a held-out log is also a training log
+    (same file, or a file with the same bytes): the held-out scores would not be held out."""
+    import hashlib
+
+    def key(p: Path) -> str:
+        p = Path(p)
+        return hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else str(p.resolve())
+
+    seen: dict[str, Path] = {}
+    for p in train:
+        k = key(p)
+        if k in seen:
+            warnings.warn(f"training logs {seen[k]} and {p} are the same data; it is counted twice", DualidWarning,
+                          stacklevel=3)
+        seen.setdefault(k, p)
+    for p in test:
+        k = key(p)
+        if k in seen:
+            warnings.warn(f"held-out log {p} is the same data as training log {seen[k]}; its scores are not "
+                          "held-out scores", DualidWarning, stacklevel=3)
 
 
 # --- model ------------------------------------------------------------------------------------
@@ -130,7 +154,7 @@ def armature_of(model, theta: np.ndarray) -> dict[str, float]:
 
 def urdf_joint_terms(urdf: Path, joints: tuple[str, ...]) -> dict[str, dict[str, float]]:
     """{joint: {damping, friction, armature}} from the <dynamics> of the URDF's moving joints (0 if absent)."""
-    root = ET.parse(urdf).getroot()
+    root = read_urdf(urdf)  # <dynamics> values checked finite and ≥ 0
     out = {}
     for joint in root.findall("joint"):
         name = joint.get("name")
@@ -157,21 +181,17 @@ def prior_theta(config: FitConfig, rigid: RigidBodyModel, model, ols_theta: np.n
     else:
         source, _, pick = config.prior.source.partition("#")
         path = Path(source)
-        if not path.is_file():
-            raise MissingFileError(f"prior.source: no parameters file at {path}")
-        if path.suffix == ".json":
-            d = json.loads(path.read_text())
-        else:
-            import yaml
-
-            d = yaml.safe_load(path.read_text())
-        d = d or {}
+        d = read_mapping(path, "prior.source parameters file")
         if "methods" in d:  # a parameters.yaml/json of a previous fit: "file#method" or its first fitted method
             fitted = [m for m, e in d["methods"].items() if "parameters" in e]
             if not fitted or (pick and pick not in fitted):
                 raise DataError(f"prior.source {path}: no fitted method {pick or ''!r}; fitted methods: {fitted}")
             d = d["methods"][pick or fitted[0]]
-        values = {e["name"]: float(e["value"]) for e in d.get("parameters", [])}
+        try:
+            values = {str(e["name"]): float(e["value"]) for e in d.get("parameters", [])}
+        except (KeyError, TypeError, ValueError) as exc:
+            raise DataError(f"prior.source {path}: 'parameters' must be a list of {{name, value}} with numeric "
+                            f"values; {type(exc).__name__}: {exc}") from None
         missing = [n for n in rigid.parameters.names if n not in values]
         if missing:
             raise DataError(f"prior.source {path}: no values for parameters {missing}")
@@ -285,12 +305,14 @@ def _say(progress: Progress | None, message: str) -> None:
 def fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome:
     """Run the whole workflow (see the module docstring); progress(message) is called between stages.
     Every DualidWarning raised on the way is recorded in the outcome (and re-issued to the caller)."""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", DualidWarning)
-        outcome = _fit_robot(config, progress)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", DualidWarning)
+            outcome = _fit_robot(config, progress)
+    finally:  # re-issued also when an error follows: a warning may explain it
+        for w in caught:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     ours = [w for w in caught if issubclass(w.category, DualidWarning)]
-    for w in caught:
-        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return dataclasses.replace(outcome, warnings=tuple(dict.fromkeys(str(w.message) for w in ours)))
 
 
@@ -301,6 +323,9 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
     rigid, model = build_model(config)
     joints = tuple(rigid.coordinates)
     cmap = column_map(config.columns, joints, config.train[0])
+    check_runs_differ(config.train, config.test)
+    if config.prior.source != "urdf" and {"logdet", "pullback"} & set(config.methods):
+        read_mapping(config.prior.source.partition("#")[0], "prior.source parameters file")  # bad input: before fitting
     _say(progress, f"loading {len(config.train)} training and {len(config.test)} test logs")
     train = load_runs(config.train, cmap, joints, config.preprocessing)
     test = load_runs(config.test, cmap, joints, config.preprocessing)
@@ -319,7 +344,8 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
                     ols_theta = estimator("ols").fit(problem).theta
                 theta0, prior_text = prior_theta(config, rigid, model, ols_theta)
             result = estimator(method, theta0, config.prior.gamma).fit(problem)
-        except (DualidError, ValueError, np.linalg.LinAlgError) as exc:  # recorded in the report: one
+        except (DualidError, ValueError, np.linalg.LinAlgError, cp.error.DCPError, cp.error.SolverError) as exc:
+            # recorded in the report (cvxpy's DCPError: e.g. data so large the problem loses convexity): one
             # method's failure must not lose the others; anything else is a bug and propagates
             fits[method] = MethodFit(method, None, error=f"{type(exc).__name__}: {exc}")
             continue
