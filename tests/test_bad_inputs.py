@@ -430,6 +430,8 @@ LOG_CASES = [
     ("garbage-npz", _text_file("not npz", "run.npz"), "run.npz: cannot read it as .npz"),
     ("npz-lengths", _npz_lengths, "npz channels have different lengths"),
     ("short", _with(lambda df: df.iloc[:10]), "Savitzky–Golay window of 25 samples is longer than the signal (10 samples)"),
+    ("tau-1e300", _with(lambda df: df.assign(tau_meas1=df["tau_meas1"] * 1e300)),
+     "column 'tau_meas1' reaches 2.91e+300 in SI units; more than 1e+12 is not a robot measurement"),
     ("ragged-csv", _text_file("time,pos_meas1\n0,1,2,3\n", "ragged.csv"), "ragged.csv lacks the default DFKI columns"),
 ]
 for _id, _make, _msg in LOG_CASES:

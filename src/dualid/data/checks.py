@@ -22,6 +22,7 @@ from dualid.errors import DataError, DualidWarning
 MAX_GAP_STEPS = 20.0  # a step longer than this many median steps is a gap (resample refuses to bridge it)
 MAX_UPSAMPLING = 20.0  # resample refuses rates that invent more than this many samples per logged one
 SLOW_LOG_STEP = 0.1  # [s] a median step longer than this is unusual for a robot log (time in ms?)
+MAX_MAGNITUDE = 1e12  # no robot logs a position, velocity or effort beyond this in SI units
 VELOCITY_RATIO = 3.0  # warn when RMS(logged v) / RMS(dq/dt) is beyond [1/3, 3] for a joint
 
 
@@ -100,3 +101,12 @@ def check_upsampling(t: np.ndarray, rate: float) -> None:
             f"{rate:g} Hz: {factor:.0f} samples would be invented per logged one. Is time logged in ms? set the "
             "column map's units: {time: ms}; otherwise resample at a rate near the log's own"
         )
+
+
+def check_magnitude(path, name: str, x: np.ndarray) -> None:
+    """DataError when a channel (in SI units) exceeds MAX_MAGNITUDE: a unit or scaling error, and
+    numbers that large overflow the squares of a least-squares fit."""
+    peak = float(np.max(np.abs(x))) if x.size else 0.0
+    if peak > MAX_MAGNITUDE:
+        raise DataError(f"{path}: column {name!r} reaches {peak:.3g} in SI units; more than {MAX_MAGNITUDE:.0e} is not a "
+                        "robot measurement (check its unit and scaling)")

@@ -23,7 +23,7 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-from dualid.data.checks import check_time, check_velocity, csv_header
+from dualid.data.checks import check_magnitude, check_time, check_velocity, csv_header
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError, MissingFileError
 
@@ -282,7 +282,10 @@ def load_log(
     check_time(path, data[cmap.time], t, cmap.time)
 
     def stack(key: str, quantity: str):
-        return np.stack([column(getattr(j, key)) for j in jcols], axis=1) * UNITS[quantity][cmap.unit(quantity)]
+        scale = UNITS[quantity][cmap.unit(quantity)]
+        for j in jcols:
+            check_magnitude(path, getattr(j, key), column(getattr(j, key)) * scale)
+        return np.stack([column(getattr(j, key)) for j in jcols], axis=1) * scale
 
     q = stack("position", "position")
     tau = stack("effort", "effort")
