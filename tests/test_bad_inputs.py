@@ -266,7 +266,7 @@ for _id, _extra, _msg in [
      "column map: joint 'Joint1' needs columns for ['effort']"),
     ("columns-unit", {"columns": {"joints": {"Joint1": {"position": "pos_meas1", "effort": "tau_meas1", "velocity": "vel_meas1"},
                                             "Joint2": {"position": "pos_meas2", "effort": "tau_meas2", "velocity": "vel_meas2"}},
-                                 "units": {"effort": "kNm"}}}, "column map: unknown effort unit 'kNm'; allowed:"),
+                                 "units": {"effort": "kNm"}}}, "column map: units.effort: unknown effort unit 'kNm'; allowed: ['N m', 'N mm', 'N']"),
     ("columns-extra-joint", {"columns": {"joints": {"Joint1": {"position": "pos_meas1", "effort": "tau_meas1"},
                                                    "Joint2": {"position": "pos_meas2", "effort": "tau_meas2"},
                                                    "Joint3": {"position": "pos_meas2", "effort": "tau_meas2"}}}},
@@ -544,9 +544,16 @@ def test_no_case_raises_anything_but_a_dualid_error(c: Case, tmp_path):
 # --- library calls ------------------------------------------------------------------------------
 def _lib_cases():
     from dualid.data.io import ColumnMap, load_log
-    from dualid.data.preprocessing import differentiate, downsample, filter_lowpass, preprocess, resample, trim
+    from dualid.data.preprocessing import (
+        differentiate,
+        downsample,
+        filter_lowpass,
+        preprocess,
+        resample,
+        trim,
+    )
     from dualid.data.trajectory import Trajectory
-    from dualid.errors import ConfigError, DataError, ModelError
+    from dualid.errors import ConfigError, DataError
     from dualid.model.urdf_check import read_urdf
     from dualid.robot.config import FitConfig
 

@@ -30,12 +30,23 @@ from dualid.errors import DataError, MissingFileError
 # unit -> factor to SI, per quantity
 UNITS: dict[str, dict[str, float]] = {
     "time": {"s": 1.0, "ms": 1e-3, "us": 1e-6},
-    "position": {"rad": 1.0, "deg": np.pi / 180},
-    "velocity": {"rad/s": 1.0, "deg/s": np.pi / 180},
-    "acceleration": {"rad/s^2": 1.0, "deg/s^2": np.pi / 180},
-    "effort": {"N m": 1.0, "N mm": 1e-3},
+    "position": {"rad": 1.0, "deg": np.pi / 180, "m": 1.0, "mm": 1e-3},  # m, mm: prismatic joints
+    "velocity": {"rad/s": 1.0, "deg/s": np.pi / 180, "m/s": 1.0, "mm/s": 1e-3},
+    "acceleration": {"rad/s^2": 1.0, "deg/s^2": np.pi / 180, "m/s^2": 1.0, "mm/s^2": 1e-3},
+    "effort": {"N m": 1.0, "N mm": 1e-3, "N": 1.0},  # N: prismatic joints
 }
 SI_UNITS = {q: next(iter(u)) for q, u in UNITS.items()}  # the first unit of each quantity is SI
+LINEAR_UNITS = frozenset({"m", "mm", "m/s", "mm/s", "m/s^2", "mm/s^2", "N"})  # of prismatic joints
+
+
+def normalize_unit(unit) -> str:
+    """The spelling used in UNITS: "Nm", "N·m", "N*m", "N.m" → "N m"; "Nmm" → "N mm"; "s²" → "s^2"; "µs" → "us"."""
+    u = " ".join(str(unit).split()).replace("²", "^2").replace("µ", "u").replace("μ", "u")
+    for sep in ("·", "*", "."):
+        u = u.replace(f"N{sep}m", "N m")
+    if u in ("Nm", "Nmm"):
+        u = "N " + u[1:]
+    return u
 FORMATS = (".csv", ".parquet", ".npz")
 _JOINT_KEYS = ("position", "velocity", "acceleration", "effort")
 
@@ -58,6 +69,7 @@ class ColumnMap:
     time: str
     joints: tuple[JointColumns, ...]
     units: tuple[tuple[str, str], ...] = ()  # (quantity, unit) pairs; missing quantities are SI
+    joint_units: tuple[tuple[str, str, str], ...] = ()  # (joint, quantity, unit): overrides ``units`` per joint
 
     def __post_init__(self) -> None:
         joints = tuple(self.joints)
@@ -68,16 +80,30 @@ class ColumnMap:
         if dup:
             raise DataError(f"column map: joints named more than once: {dup}")
         units = dict(self.units.items() if isinstance(self.units, Mapping) else self.units)
-        for quantity, unit in units.items():
+        per_joint = list(self.joint_units)
+        for quantity, unit in list(units.items()):
             if quantity not in UNITS:
                 raise DataError(f"column map: unknown quantity {quantity!r} in units; allowed: {list(UNITS)}")
-            if unit not in UNITS[quantity]:
-                raise DataError(
-                    f"column map: unknown {quantity} unit {unit!r}; allowed: {list(UNITS[quantity])}"
-                )
+            if isinstance(unit, Mapping):  # {Joint1: deg, Joint2: mm}: per joint
+                unknown = [j for j in unit if j not in names]
+                if unknown:
+                    raise DataError(f"column map: units.{quantity} names joints {unknown} that are not mapped; joints: {names}")
+                per_joint += [(str(j), quantity, u) for j, u in unit.items()]
+                del units[quantity]
+        checked = []
+        for where, quantity, unit in [(f"units.{q}", q, u) for q, u in units.items()] + \
+                [(f"units.{q}.{j}", q, u) for j, q, u in per_joint]:
+            u = normalize_unit(unit)
+            if u not in UNITS[quantity]:
+                raise DataError(f"column map: {where}: unknown {quantity} unit {unit!r}; allowed: {list(UNITS[quantity])}")
+            checked.append(u)
+        units = {q: checked[k] for k, q in enumerate(units)}
+        per_joint = tuple((j, q, checked[len(units) + k]) for k, (j, q, _) in enumerate(per_joint))
         full = {q: units.get(q, SI_UNITS[q]) for q in UNITS}
+        per_joint = tuple(sorted({(j, q, u) for j, q, u in per_joint if u != full[q]}))  # one canonical form
         object.__setattr__(self, "joints", joints)
         object.__setattr__(self, "units", tuple(full.items()))
+        object.__setattr__(self, "joint_units", per_joint)
 
     # -- constructors ------------------------------------------------------------------------------
     @staticmethod
@@ -117,11 +143,12 @@ class ColumnMap:
         time: str = "time",
         units: Mapping[str, str] | None = None,
     ) -> "ColumnMap":
-        """Columns named by patterns: {i} = 1-based joint index, {name} = joint name (defaults follow the
+        """Columns named by patterns: {i} = 1-based joint index, {k} = 0-based (e.g. "q[{k}]" for a (T, n)
+        array q), {name} = joint name (defaults follow the
         DFKI double-pendulum logs). Pass velocity=None when no velocity is logged."""
 
         def fmt(pat, i, name):
-            return None if pat is None else pat.format(i=i, name=name)
+            return None if pat is None else pat.format(i=i, k=i - 1, name=name)
 
         cols = tuple(
             JointColumns(
@@ -140,7 +167,11 @@ class ColumnMap:
     def joint_names(self) -> tuple[str, ...]:
         return tuple(j.name for j in self.joints)
 
-    def unit(self, quantity: str) -> str:
+    def unit(self, quantity: str, joint: str | None = None) -> str:
+        """The unit of ``quantity`` (of ``joint``, when it has its own)."""
+        for j, q, u in self.joint_units:
+            if j == joint and q == quantity:
+                return u
         return dict(self.units)[quantity]
 
     def columns(self) -> list[str]:
@@ -155,7 +186,12 @@ class ColumnMap:
         joints = {
             j.name: {k: getattr(j, k) for k in _JOINT_KEYS if getattr(j, k) is not None} for j in self.joints
         }
-        return {"time": self.time, "joints": joints, "units": dict(self.units)}
+        units: dict = dict(self.units)
+        for j, q, u in self.joint_units:
+            if not isinstance(units[q], dict):
+                units[q] = {n: units[q] for n in self.joint_names}
+            units[q][j] = u
+        return {"time": self.time, "joints": joints, "units": units}
 
 
 def read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
@@ -171,10 +207,8 @@ def read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
             raise DataError(f"{path}: cannot read it as .npz ({type(exc).__name__}: {exc})") from None
         if not data:
             raise DataError(f"{path}: log is empty (no rows)")
-        bad = {k: v.shape for k, v in data.items() if v.ndim != 1}
-        if bad:
-            raise DataError(f"{path}: npz arrays must be 1-D named channels; got shapes {bad}")
-        lengths = {k: v.size for k, v in data.items()}
+        data = _split_arrays(path, data)
+        lengths = {k: v.shape[0] for k, v in data.items()}
         if len(set(lengths.values())) > 1:
             raise DataError(f"{path}: npz channels have different lengths {lengths}")
         return data, list(data)
@@ -198,7 +232,28 @@ def read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
             if isinstance(exc, (PermissionError, IsADirectoryError)):
                 raise
             raise DataError(f"{path}: cannot read it as Parquet ({type(exc).__name__}: {exc})") from None
-    return {str(c): df[c].to_numpy() for c in df.columns}, [str(c) for c in df.columns]
+    data = {str(c): df[c].to_numpy() for c in df.columns}
+    for c, x in list(data.items()):  # Parquet list columns (one array per row) -> (T, n)
+        if x.dtype == object and len(x) and isinstance(x[0], (list, tuple, np.ndarray)):
+            try:
+                data[c] = np.stack([np.asarray(r, dtype=float) for r in x])
+            except (ValueError, TypeError):
+                raise DataError(f"{path}: list column {c!r} has rows of different lengths or non-numbers") from None
+    data = _split_arrays(path, data)
+    return data, list(data)
+
+
+def _split_arrays(path: Path, data: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """2-D arrays (T, n) become channels 'name[0]' … 'name[n-1]' (addressed so in a column map)."""
+    out: dict[str, np.ndarray] = {}
+    for k, x in data.items():
+        if x.ndim == 1:
+            out[k] = x
+        elif x.ndim == 2:
+            out.update({f"{k}[{i}]": x[:, i] for i in range(x.shape[1])})
+        else:
+            raise DataError(f"{path}: array {k!r} has shape {x.shape}; expected (T,) channels or (T, n) arrays")
+    return out
 
 
 def load_log(
@@ -210,7 +265,9 @@ def load_log(
 ) -> Trajectory:
     """One log file as a Trajectory in SI units.
 
-    path: .csv (pandas), .parquet (pyarrow via pandas) or .npz (numpy, one named 1-D array per channel).
+    path: .csv (pandas), .parquet (pyarrow via pandas) or .npz (numpy). NPZ arrays may be 1-D channels
+    or 2-D (T, n) arrays, Parquet columns may hold one list per row: column k of an array "q" is the
+    channel "q[k]" (0-based) in the column map.
     columns: a ColumnMap or its dict form. joints: the model's joint names; the trajectory's
     coordinates follow this order and every model joint must be mapped (default: the map's order).
     velocity: "logged" (the map must name velocity columns) or "gradient" (see the module docstring).
@@ -282,10 +339,12 @@ def load_log(
     check_time(path, data[cmap.time], t, cmap.time)
 
     def stack(key: str, quantity: str):
-        scale = UNITS[quantity][cmap.unit(quantity)]
+        cols = []
         for j in jcols:
-            check_magnitude(path, getattr(j, key), column(getattr(j, key)) * scale)
-        return np.stack([column(getattr(j, key)) for j in jcols], axis=1) * scale
+            x = column(getattr(j, key)) * UNITS[quantity][cmap.unit(quantity, j.name)]
+            check_magnitude(path, getattr(j, key), x)
+            cols.append(x)
+        return np.stack(cols, axis=1)
 
     q = stack("position", "position")
     tau = stack("effort", "effort")
@@ -299,7 +358,7 @@ def load_log(
     meta = {
         "source": str(path),
         "columns": cmap.to_dict(),
-        "units": dict(cmap.units),
+        "units": cmap.to_dict()["units"],
         "logged": logged,
     }
     if velocity == "gradient":

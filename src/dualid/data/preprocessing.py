@@ -13,8 +13,8 @@ from dataclasses import replace
 import numpy as np
 from scipy import interpolate, signal
 
-from dualid.data.trajectory import Trajectory
 from dualid.data.checks import check_gaps, check_upsampling
+from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError, DualidWarning
 
 

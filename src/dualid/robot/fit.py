@@ -44,6 +44,7 @@ from dualid.model.urdf_check import read_urdf
 from dualid.problem import Identifiability, IdentificationProblem, build_problem
 from dualid.robot.config import FitConfig
 from dualid.robot.files import read_mapping
+from dualid.robot.inputs import array_column_map, check_runs_differ, check_units
 
 NOT_IDENTIFIABLE = "not identifiable"
 
@@ -61,6 +62,9 @@ def column_map(config_columns, joints: tuple[str, ...], first_log: Path) -> Colu
         raise MissingFileError(f"log file not found: {first_log}")
     _, available = read_table(Path(first_log))
     missing = [c for c in cmap.columns() if c not in available]
+    arrays = array_column_map(joints, available)
+    if missing and arrays is not None:
+        return arrays
     if missing:
         raise DataError(
             f"no column map given and {first_log} lacks the default DFKI columns {missing} "
@@ -84,30 +88,6 @@ def load_runs(paths, cmap: ColumnMap, joints: tuple[str, ...], steps) -> list[Tr
     return runs
 
 
-def check_runs_differ(train, test) -> None:
-    """DualidWarning when a log is used twice in training, or a held-out log is also a training log
-    (same file, or a file with the same bytes): the held-out scores would not be held out."""
-    import hashlib
-
-    def key(p: Path) -> str:
-        p = Path(p)
-        return hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else str(p.resolve())
-
-    seen: dict[str, Path] = {}
-    for p in train:
-        k = key(p)
-        if k in seen:
-            warnings.warn(f"training logs {seen[k]} and {p} are the same data; it is counted twice", DualidWarning,
-                          stacklevel=3)
-        seen.setdefault(k, p)
-    for p in test:
-        k = key(p)
-        if k in seen:
-            warnings.warn(f"held-out log {p} is the same data as training log {seen[k]}; its scores are not "
-                          "held-out scores", DualidWarning, stacklevel=3)
-
-
-# --- model ------------------------------------------------------------------------------------
 def build_model(config: FitConfig) -> tuple[RigidBodyModel, JointTermsModel | RigidBodyModel]:
     """The URDF's rigid-body model and it with the configured joint terms."""
     rigid = RigidBodyModel.from_urdf(config.model.urdf, config.model.floating_base, config.model.gravity)
@@ -323,6 +303,7 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
     rigid, model = build_model(config)
     joints = tuple(rigid.coordinates)
     cmap = column_map(config.columns, joints, config.train[0])
+    check_units(rigid, cmap)
     check_runs_differ(config.train, config.test)
     if config.prior.source != "urdf" and {"logdet", "pullback"} & set(config.methods):
         read_mapping(config.prior.source.partition("#")[0], "prior.source parameters file")  # bad input: before fitting
