@@ -420,7 +420,7 @@ LOG_CASES = [
     ("repeated-time", _with(_repeat), "time column 'time' repeats a time stamp: rows 40 and 41 both have 0.08"),
     ("time-goes-back", _with(_back), "time column 'time' must be strictly increasing; row 299 has 0.598 and row 300 has 0.2 (time goes back)"),
     ("gap", _with(_gap), "a gap of 1000 s"),
-    ("time-in-ms", _with(_ms), "1000 samples would be invented per logged one. Is time logged in ms? set the column map's units: {time: ms}"),
+    ("time-in-ms", _with(_ms), "bad: the log's rate is 0.5 Hz (median step 2 s), too slow to derive default preprocessing"),
     ("time-in-ms-warns", _with(_ms), "bad.csv: the median time step is 2 s (0.5 Hz), slow for a robot log"),
     ("unknown-format", _text_file("time\n0\n1\n", "run.txt"), "run.txt: unknown log format '.txt'; expected one of .csv, .parquet, .npz"),
     ("missing", lambda tmp: tmp / "nowhere.csv", "log file not found:"),
@@ -429,15 +429,36 @@ LOG_CASES = [
     ("garbage-parquet", _text_file("not parquet", "run.parquet"), "run.parquet: cannot read it as Parquet"),
     ("garbage-npz", _text_file("not npz", "run.npz"), "run.npz: cannot read it as .npz"),
     ("npz-lengths", _npz_lengths, "npz channels have different lengths"),
-    ("short", _with(lambda df: df.iloc[:10]), "Savitzky–Golay window of 25 samples is longer than the signal (10 samples)"),
+    ("short", _with(lambda df: df.iloc[:10]), "bad: 10 samples are too few to derive default preprocessing (need 100)"),
     ("tau-1e300", _with(lambda df: df.assign(tau_meas1=df["tau_meas1"] * 1e300)),
      "column 'tau_meas1' reaches 2.91e+300 in SI units; more than 1e+12 is not a robot measurement"),
     ("ragged-csv", _text_file("time,pos_meas1\n0,1,2,3\n", "ragged.csv"), "ragged.csv lacks the default DFKI columns"),
 ]
 for _id, _make, _msg in LOG_CASES:
     _log_case(_id, _make, _msg)
-for _id, _make, _msg in LOG_CASES[6:13]:
+for _id, _make, _msg in LOG_CASES[6:12]:
     _log_case(_id, _make, _msg, test=True)
+_log_case("time-in-ms", _with(_ms), "1000 samples would be invented per logged one. Is time logged in ms? set the "
+          "column map's units: {time: ms}", test=True)
+
+
+@case("config-time-in-ms-with-a-stated-rate", 2, "the log's median step is 2 s (0.5 Hz), 1000 × the step at 500 Hz")
+def _(tmp):
+    ms = write_log(tmp, _ms(GOOD.copy()), "ms.csv")
+    return ["fit", "--config", str(write_config(tmp, {"train": [str(ms)], "preprocessing": [{"resample": {"rate": 500}}, DIFF]})),
+            "--out", str(tmp / "out")]
+
+
+@case("config-cutoff-below-motion", 0, "filter_lowpass cutoff 0.8 Hz is below the motion band")
+def _(tmp):
+    return ["fit", "--config", str(write_config(tmp, {"preprocessing": [DIFF, {"filter_lowpass": {"cutoff": 0.8}}]})),
+            "--out", str(tmp / "out")]
+
+
+@case("config-window-beyond-period", 0, "a differentiate window of 1.5 s is longer than the period")
+def _(tmp):
+    return ["fit", "--config", str(write_config(tmp, {"preprocessing": [{"differentiate": {"window": 1.5}}]})),
+            "--out", str(tmp / "out")]
 
 # warnings: the fit goes on (exit 0) and says what it saw
 _log_case("velocity-in-deg", _with(lambda df: df.assign(vel_meas1=df["vel_meas1"] * 180 / np.pi)),
@@ -548,6 +569,7 @@ def _lib_cases():
         differentiate,
         downsample,
         filter_lowpass,
+        lowpass,
         preprocess,
         resample,
         trim,
@@ -582,6 +604,8 @@ def _lib_cases():
         ("preprocess-not-list-item", lambda: preprocess(traj, ["resample"]), DataError, "must be a one-key mapping"),
         ("config-not-mapping", lambda: FitConfig.from_dict([1]), ConfigError, "config: expected a mapping"),
         ("config-no-train", lambda: FitConfig.from_dict({"model": "r.urdf", "train": []}), ConfigError, "missing required keys ['train']"),
+        ("lowpass-too-short", lambda: lowpass(np.zeros(10), 100.0, 5.0), DataError,
+         "low-pass: a signal of 10 samples is too short for an order-4 zero-phase filter (needs more than 15)"),
         ("read-urdf-missing", lambda: read_urdf("/nonexistent/robot.urdf"), DataError, "no URDF file at /nonexistent/robot.urdf"),
     ]
 

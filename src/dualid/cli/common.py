@@ -53,8 +53,8 @@ def fail(message: str, code: int = EXIT_BAD_INPUT) -> None:
 
 
 def show_warnings(caught: list[warnings.WarningMessage]) -> None:
-    for w in caught:
-        print_warning(str(w.message))
+    for message in dict.fromkeys(str(w.message) for w in caught):  # each once, in order
+        print_warning(message)
 
 
 def output_dir(path: Path, force: bool) -> Path:

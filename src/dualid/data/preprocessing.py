@@ -38,6 +38,10 @@ def lowpass(x: np.ndarray, fs: float, cutoff: float, order: int = 4) -> np.ndarr
     if not 0 < cutoff < fs / 2:
         raise DataError(f"low-pass cutoff must be in (0, {fs / 2:.4g}) Hz (Nyquist at fs={fs:.4g} Hz), got {cutoff}")
     sos = signal.butter(order, cutoff, btype="low", fs=fs, output="sos")
+    padlen = 3 * (2 * len(sos) + 1)  # scipy's default for sosfiltfilt
+    if np.shape(x)[0] <= padlen:
+        raise DataError(f"low-pass: a signal of {np.shape(x)[0]} samples is too short for an order-{order} zero-phase "
+                        f"filter (needs more than {padlen})")
     return signal.sosfiltfilt(sos, np.asarray(x, dtype=float), axis=0)
 
 

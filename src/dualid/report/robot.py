@@ -247,6 +247,8 @@ def _report_md(outcome: FitOutcome, validations, urdfs, figures) -> str:
         f"- held-out runs: {', '.join(p.name for p in cfg.test) or '(none: no validation)'}",
         f"- samples after preprocessing: {outcome.problem.N} × {outcome.problem.n} joints; parameters: {outcome.problem.p}",
         f"- preprocessing: `{to_json(outcome.steps, indent=None)}`",
+        *([f"- preprocessing {outcome.preprocessing_note} (no 'preprocessing' in the config)"]
+          if outcome.preprocessing_note else []),
         f"- joint terms: viscous={cfg.joint_terms.viscous}, coulomb={cfg.joint_terms.coulomb} "
         f"(v_c = {cfg.joint_terms.coulomb_velocity} rad/s), armature={cfg.joint_terms.armature}",
         "",

@@ -30,13 +30,6 @@ import numpy as np
 from dualid.errors import ConfigError
 from dualid.estimators.methods import METHODS  # the one list of method names
 
-DEFAULT_PREPROCESSING = (
-    {"resample": {"rate": 500.0}},
-    {"differentiate": {"method": "savgol", "window": 0.05}},
-    {"filter_lowpass": {"cutoff": 20.0, "fields": ["tau"]}},
-    {"downsample": {"factor": 5}},
-)
-
 _TOP_KEYS = (
     "model", "columns", "train", "test", "preprocessing", "joint_terms", "bounds", "methods", "prior",
     "validation", "references", "out",
@@ -120,7 +113,7 @@ class FitConfig:
     train: tuple[Path, ...]
     test: tuple[Path, ...] = ()
     columns: Mapping | None = None  # ColumnMap dict form; None: DFKI default if the logs have those columns
-    preprocessing: tuple[dict, ...] = DEFAULT_PREPROCESSING
+    preprocessing: tuple[dict, ...] | None = None  # None: derived from the first log (dualid.robot.defaults)
     joint_terms: JointTermsConfig = field(default_factory=JointTermsConfig)
     bounds: tuple[tuple[str, float, float], ...] = ()  # (name, lo, hi)
     methods: tuple[str, ...] = ("ols", "dm")
@@ -208,8 +201,8 @@ class FitConfig:
 
         methods = d.get("methods", ("ols", "dm"))
         methods = (methods,) if isinstance(methods, str) else tuple(str(x) for x in methods)
-        steps = d.get("preprocessing", DEFAULT_PREPROCESSING)
-        if not isinstance(steps, (list, tuple)):
+        steps = d.get("preprocessing")
+        if steps is not None and not isinstance(steps, (list, tuple)):
             raise ConfigError(f"preprocessing: expected a list of steps {{name: parameters}}, got {steps!r}")
         val = _check_keys(d.get("validation"), _VALIDATION_KEYS, "validation")
         refs = d.get("references") or {}
@@ -223,7 +216,7 @@ class FitConfig:
             train=_paths(d["train"], base, "train"),
             test=_paths(d.get("test"), base, "test"),
             columns=columns,
-            preprocessing=tuple(steps),
+            preprocessing=None if steps is None else tuple(steps),
             joint_terms=joint_terms,
             bounds=tuple(bounds),
             methods=methods,
@@ -258,7 +251,7 @@ class FitConfig:
             "columns": None if self.columns is None else dict(self.columns),
             "train": [str(p) for p in self.train],
             "test": [str(p) for p in self.test],
-            "preprocessing": [dict(s) for s in self.preprocessing],
+            "preprocessing": None if self.preprocessing is None else [dict(s) for s in self.preprocessing],
             "joint_terms": {"viscous": self.joint_terms.viscous, "coulomb": self.joint_terms.coulomb,
                             "coulomb_velocity": self.joint_terms.coulomb_velocity,
                             "armature": self.joint_terms.armature,

@@ -43,6 +43,7 @@ from dualid.model.rigid_body import RigidBodyModel
 from dualid.model.urdf_check import read_urdf
 from dualid.problem import Identifiability, IdentificationProblem, build_problem
 from dualid.robot.config import FitConfig
+from dualid.robot.defaults import adaptive_preprocessing, warn_far_from_data
 from dualid.robot.files import read_mapping
 from dualid.robot.inputs import array_column_map, check_runs_differ, check_units
 
@@ -71,6 +72,17 @@ def column_map(config_columns, joints: tuple[str, ...], first_log: Path) -> Colu
             f"(available: {available}); give a 'columns' map in a --config file"
         )
     return cmap
+
+
+def choose_preprocessing(steps, first_log: Path, cmap: ColumnMap, joints: tuple[str, ...]) -> tuple[tuple, str]:
+    """The configured steps (with warnings when far from the data) or, when none are configured, steps
+    derived from the first log's rate and motion band, and a sentence saying how (dualid.robot.defaults)."""
+    velocity = "logged" if all(j.velocity for j in cmap.joints) else "gradient"
+    raw = load_log(first_log, cmap, joints, velocity=velocity)
+    if steps is not None:
+        warn_far_from_data(raw, steps)
+        return tuple(steps), ""
+    return adaptive_preprocessing(raw)
 
 
 def load_runs(paths, cmap: ColumnMap, joints: tuple[str, ...], steps) -> list[Trajectory]:
@@ -248,6 +260,7 @@ class FitOutcome:
     references: dict[str, tuple[np.ndarray, Validation | None]] = field(default_factory=dict)
     prior: str = ""  # where θ₀ of the regularized methods came from
     warnings: tuple[str, ...] = ()  # the DualidWarnings raised while loading, checking and fitting
+    preprocessing_note: str = ""  # how the default preprocessing was derived from the data ("" if configured)
 
     @property
     def complete(self) -> bool:
@@ -308,8 +321,9 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
     if config.prior.source != "urdf" and {"logdet", "pullback"} & set(config.methods):
         read_mapping(config.prior.source.partition("#")[0], "prior.source parameters file")  # bad input: before fitting
     _say(progress, f"loading {len(config.train)} training and {len(config.test)} test logs")
-    train = load_runs(config.train, cmap, joints, config.preprocessing)
-    test = load_runs(config.test, cmap, joints, config.preprocessing)
+    steps, steps_note = choose_preprocessing(config.preprocessing, config.train[0], cmap, joints)
+    train = load_runs(config.train, cmap, joints, steps)
+    test = load_runs(config.test, cmap, joints, steps)
     _say(progress, "building regressors")
     problem = with_bounds(build_problem(model, train), config.bounds)
     ident = problem.identifiability()
@@ -344,4 +358,5 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
         _say(progress, f"validating the reference parameters {label}")
         theta_ref = reference_theta(path, model)
         references[label] = (theta_ref, validate(model, theta_ref, test, label, config.xcorr_window) if test else None)
-    return FitOutcome(config, rigid, model, cmap, tuple(train), tuple(test), problem, ident, fits, references, prior_text)
+    return FitOutcome(config, rigid, model, cmap, tuple(train), tuple(test), problem, ident, fits, references, prior_text,
+                      preprocessing_note=steps_note)

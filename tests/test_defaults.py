@@ -1,0 +1,56 @@
+"""Default preprocessing derived from a log's rate and motion band (dualid.robot.defaults)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dualid.data.trajectory import Trajectory
+from dualid.errors import DataError
+from dualid.robot.defaults import adaptive_preprocessing, log_rate_and_band
+
+DFKI = Path(__file__).resolve().parents[2] / "shared" / "datasets" / "dfki-double-pendulum"
+
+
+def sines(freq: float, rate: float, seconds: float = 20.0) -> Trajectory:
+    t = np.arange(int(seconds * rate)) / rate
+    q = np.stack([np.sin(2 * np.pi * freq * t), 0.5 * np.sin(2 * np.pi * 0.5 * freq * t)], axis=1)
+    return Trajectory(t=t, q=q, v=np.gradient(q, t, axis=0), tau=q.copy(), coordinates=("a", "b"), name="sines")
+
+
+@pytest.mark.parametrize("freq,rate", [(2.0, 500.0), (0.5, 200.0), (8.0, 1000.0)])
+def test_rate_and_band_of_known_sines(freq, rate):
+    fs, band = log_rate_and_band(sines(freq, rate))
+    assert fs == pytest.approx(rate)
+    assert band == pytest.approx(freq, rel=0.15)  # (Welch resolution) the fastest sine holds the top 1 % of q's power
+
+
+def test_steps_scale_with_the_band_and_the_rate():
+    steps, note = adaptive_preprocessing(sines(2.0, 500.0))
+    (r,), (d,), (f,), (ds,) = (s.values() for s in steps)
+    assert r == {"rate": 500.0} and d["window"] == pytest.approx(0.1, rel=0.1) and d["velocity"] is True
+    assert f["cutoff"] == pytest.approx(10.0, rel=0.1) and ds == {"factor": 5}
+    assert "rate 500 Hz, motion band 2" in note
+    faster, _ = adaptive_preprocessing(sines(8.0, 1000.0))
+    assert faster[2]["filter_lowpass"]["cutoff"] == pytest.approx(40.0, rel=0.1)
+
+
+def test_a_slow_or_still_log_gets_no_defaults():
+    with pytest.raises(DataError, match=r"the log's rate is 0.5 Hz \(median step 2 s\), too slow"):
+        adaptive_preprocessing(sines(0.01, 0.5, seconds=1000.0))
+    still = sines(1.0, 100.0)
+    still = Trajectory(t=still.t, q=np.zeros_like(still.q), v=still.v, tau=still.tau, coordinates=("a", "b"), name="still")
+    with pytest.raises(DataError, match="the joints do not move"):
+        adaptive_preprocessing(still)
+
+
+@pytest.mark.skipif(not DFKI.is_dir(), reason="shared DFKI data set not available")
+def test_dfki_defaults_are_near_the_example_config():
+    from dualid.data.io import ColumnMap, load_log
+
+    steps, _ = adaptive_preprocessing(load_log(DFKI / "trajectory_00.csv", ColumnMap.pattern(["Joint1", "Joint2"])))
+    assert steps[0]["resample"]["rate"] == 500.0 and steps[3]["downsample"]["factor"] == 5
+    assert 0.08 <= steps[1]["differentiate"]["window"] <= 0.15  # the example: 0.1 s
+    assert 7 <= steps[2]["filter_lowpass"]["cutoff"] <= 12  # the example: 10 Hz
