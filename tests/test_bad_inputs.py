@@ -231,6 +231,7 @@ for _id, _extra, _msg in [
     ("gamma-word", {"prior": {"gamma": "big"}}, "prior.gamma: expected a number, got 'big'"),
     ("gamma-negative", {"prior": {"gamma": -1}}, "prior.gamma: expected a number ≥ 0, got -1.0"),
     ("gamma-dict", {"prior": {"gamma": {"per_equation": 1}}}, "prior.gamma: expected a number, got {'per_equation': 1}"),
+    ("per-equation-word", {"prior": {"per_equation": "yes"}}, "prior.per_equation: expected true or false, got 'yes'"),
     ("bounds-reversed", {"bounds": {"Joint1.m": [2, 1]}}, "bounds: 'Joint1.m' has lower 2.0 > upper 1.0"),
     ("bounds-not-pair", {"bounds": {"Joint1.m": 3}}, "bounds: 'Joint1.m' must be [lower, upper] (use null for none), got 3"),
     ("bounds-word", {"bounds": {"Joint1.m": ["a", 1]}}, "bounds.Joint1.m[0]: expected a number, got 'a'"),

@@ -80,3 +80,14 @@ def test_a_linear_unit_on_a_revolute_joint_is_refused(tmp_path):
     result = runner.invoke(app, ["fit", "--config", str(path), "--out", str(tmp_path / "o")])
     assert result.exit_code == 2
     assert "column map: joint 'Joint2' is revolute but its position unit is 'mm' (linear)" in _text(result)
+
+
+def test_the_prior_weight_is_per_equation_by_default(tmp_path):
+    from dualid.robot.config import FitConfig
+    from dualid.robot.fit import estimator
+
+    cfg = FitConfig.from_dict({"model": "r.urdf", "train": ["a.csv"]})
+    assert (cfg.prior.gamma, cfg.prior.per_equation) == (0.1, True)
+    assert FitConfig.from_dict({"model": "r.urdf", "train": ["a.csv"], "prior": {"per_equation": False}}).prior.per_equation is False
+    est = estimator("logdet", np.ones(3), cfg.prior.gamma, cfg.prior.per_equation)
+    assert est.per_equation is True and est.gamma == 0.1

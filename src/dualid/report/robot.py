@@ -176,7 +176,8 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str]) -> dict:
         "identifiability": {"rank": ident.rank, "n_params": ident.n_params,
                             "condition_number": ident.condition_number,
                             "not_identifiable": list(ident.unidentifiable)},
-        "prior": {"source": outcome.config.prior.source, "gamma": outcome.config.prior.gamma, "theta0": outcome.prior},
+        "prior": {"source": outcome.config.prior.source, "gamma": outcome.config.prior.gamma,
+                  "per_equation": outcome.config.prior.per_equation, "theta0": outcome.prior},
         "uncertainty_note": UNCERTAINTY_NOTE,
         "methods": methods,
         "references": {
@@ -288,7 +289,8 @@ def _report_md(outcome: FitOutcome, validations, urdfs, figures) -> str:
         ]
         lines += [f"![{f}]({f})" for f in figures]
     if outcome.prior:
-        lines += ["", f"Prior of logdet/pullback (γ = {cfg.prior.gamma}): {outcome.prior}."]
+        weight = f"γ = {cfg.prior.gamma} per equation (γ·N·n)" if cfg.prior.per_equation else f"γ = {cfg.prior.gamma}"
+        lines += ["", f"Prior of logdet/pullback ({weight}): {outcome.prior}."]
     lines += ["", "## Parameters", "", "(n.i.: not identifiable on its own; ± standard error, see parameters.yaml)", "",
               _param_table(outcome), ""]
     return "\n".join(lines)

@@ -10,7 +10,7 @@ YAML form (relative paths are relative to the YAML file's folder)::
     joint_terms: {viscous: true, coulomb: true, coulomb_velocity: 0.01, armature: true, joints: [Joint1]}
     bounds: {Joint1.b: [0, 1]}
     methods: [ols, wls, energy, logdet, pullback, dm]
-    prior: {source: urdf, gamma: 1.0}
+    prior: {source: urdf, gamma: 0.1, per_equation: true}
     validation: {xcorr_window: 0.02}
     references: {lab: lab_parameters.yml}
     out: results/robot
@@ -36,7 +36,7 @@ _TOP_KEYS = (
 )
 _MODEL_KEYS = ("urdf", "floating_base", "gravity")
 _JOINT_TERM_KEYS = ("viscous", "coulomb", "coulomb_velocity", "armature", "joints")
-_PRIOR_KEYS = ("source", "gamma")
+_PRIOR_KEYS = ("source", "gamma", "per_equation")
 _VALIDATION_KEYS = ("xcorr_window",)
 
 
@@ -102,7 +102,8 @@ class JointTermsConfig:
 @dataclass(frozen=True)
 class PriorConfig:
     source: str = "urdf"  # "urdf" (the URDF's inertials) or a parameters.yaml/json file (from a previous fit)
-    gamma: float = 1.0  # weight of the prior, in units of the data objective
+    gamma: float = 0.1  # weight of the prior: per equation (γ·N·n, the study's convention) or absolute
+    per_equation: bool = True
 
 
 @dataclass(frozen=True)
@@ -186,7 +187,8 @@ class FitConfig:
         source = str(pr.get("source", "urdf"))
         if source != "urdf":
             source = str(_path(source, base, "prior.source"))
-        prior = PriorConfig(source, _float(pr.get("gamma", 1.0), "prior.gamma"))
+        prior = PriorConfig(source, _float(pr.get("gamma", 0.1), "prior.gamma"),
+                            _bool(pr.get("per_equation", True), "prior.per_equation"))
 
         bounds_in = d.get("bounds") or {}
         if not isinstance(bounds_in, Mapping):
@@ -258,7 +260,7 @@ class FitConfig:
                             "joints": None if self.joint_terms.joints is None else list(self.joint_terms.joints)},
             "bounds": {n: [lo, hi] for n, lo, hi in self.bounds},
             "methods": list(self.methods),
-            "prior": {"source": self.prior.source, "gamma": self.prior.gamma},
+            "prior": {"source": self.prior.source, "gamma": self.prior.gamma, "per_equation": self.prior.per_equation},
             "validation": {"xcorr_window": self.xcorr_window},
             "references": {k: str(v) for k, v in self.references},
             "out": None if self.out is None else str(self.out),

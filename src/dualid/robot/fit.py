@@ -201,9 +201,10 @@ def prior_theta(config: FitConfig, rigid: RigidBodyModel, model, ols_theta: np.n
 
 
 # --- estimators -------------------------------------------------------------------------------
-def estimator(method: str, theta0: np.ndarray | None = None, gamma: float = 1.0):
-    """Constrained estimators that accept a URDF chain's null space (never fully identifiable)."""
-    return make_estimator(method, theta0=theta0, gamma=gamma, allow_unidentifiable=True)
+def estimator(method: str, theta0: np.ndarray | None = None, gamma: float = 0.1, per_equation: bool = True):
+    """Constrained estimators that accept a URDF chain's null space (never fully identifiable); the prior
+    weight γ of logdet/pullback is per equation by default (γ·N·n, as in the paper's study)."""
+    return make_estimator(method, theta0=theta0, gamma=gamma, per_equation=per_equation, allow_unidentifiable=True)
 
 
 def standard_errors(method: str, problem: IdentificationProblem, result: IdentificationResult,
@@ -338,7 +339,7 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
                 if ols_theta is None and model is not rigid:
                     ols_theta = estimator("ols").fit(problem).theta
                 theta0, prior_text = prior_theta(config, rigid, model, ols_theta)
-            result = estimator(method, theta0, config.prior.gamma).fit(problem)
+            result = estimator(method, theta0, config.prior.gamma, config.prior.per_equation).fit(problem)
         except (DualidError, ValueError, np.linalg.LinAlgError, cp.error.DCPError, cp.error.SolverError) as exc:
             # recorded in the report (cvxpy's DCPError: e.g. data so large the problem loses convexity): one
             # method's failure must not lose the others; anything else is a bug and propagates
