@@ -347,3 +347,21 @@ def test_three_dimensional_npz_arrays_are_refused(tmp_path):
     with pytest.raises(DataError, match=r"array 'q' has shape \(5, 2, 2\); expected \(T,\) channels or \(T, n\) arrays"):
         load_log(path, ColumnMap.pattern(JOINTS, position="q[{k}]", effort="q[{k}]", velocity=None, time="t"),
                  velocity="gradient")
+
+
+def test_motor_current_times_torque_constant_gear_ratio_and_efficiency(tmp_path):
+    df = frame()
+    kt, gear, eta = 0.08, 6.0, 0.9
+    df["I1"] = df["tau_meas1"] / (kt * gear * eta)
+    joints = ColumnMap.pattern(JOINTS).to_dict()["joints"]
+    joints["Joint1"]["effort"] = {"current": "I1", "torque_constant": kt, "gear_ratio": gear, "efficiency": eta}
+    cmap = ColumnMap.from_dict({"joints": joints})
+    traj = load_log(write(df, tmp_path / "run.csv"), cmap)
+    np.testing.assert_allclose(traj.tau, frame()[["tau_meas1", "tau_meas2"]].to_numpy(), atol=1e-12)
+    assert ColumnMap.from_dict(cmap.to_dict()) == cmap
+    joints["Joint1"]["effort"] = {"current": "I1", "torque_constant": kt, "efficiency": 1.5}
+    with pytest.raises(DataError, match=r"joint 'Joint1' effort.efficiency: expected a number in \(0, 1\], got 1.5"):
+        ColumnMap.from_dict({"joints": joints})
+    joints["Joint1"]["effort"] = {"current": "I1"}
+    with pytest.raises(DataError, match=r"joint 'Joint1' effort: a motor current needs \['torque_constant'\]"):
+        ColumnMap.from_dict({"joints": joints})

@@ -16,14 +16,14 @@ Rows are counted from 0 (the first data row, after any header) in error messages
 
 from __future__ import annotations
 
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-from dualid.data.checks import check_magnitude, check_time, check_velocity, csv_header
+from dualid.data.checks import check_magnitude, check_time, check_velocity
+from dualid.data.tables import FORMATS, read_table
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError, MissingFileError
 
@@ -47,8 +47,31 @@ def normalize_unit(unit) -> str:
     if u in ("Nm", "Nmm"):
         u = "N " + u[1:]
     return u
-FORMATS = (".csv", ".parquet", ".npz")
 _JOINT_KEYS = ("position", "velocity", "acceleration", "effort")
+
+
+_MOTOR_KEYS = {"current": None, "torque_constant": None, "gear_ratio": 1.0, "efficiency": 1.0}
+
+
+def _motor(joint, spec: Mapping) -> tuple[tuple[str, float], ...]:
+    """(torque_constant, gear_ratio, efficiency) of an effort given as {current: COLUMN, torque_constant: kt
+    [N m/A], gear_ratio: N (default 1), efficiency: η in (0, 1] (default 1)}: τ = I·kt·N·η at the joint."""
+    where = f"column map: joint {joint!r} effort"
+    bad = sorted(set(spec) - set(_MOTOR_KEYS))
+    if bad:
+        raise DataError(f"{where}: unknown keys {bad}; allowed: {list(_MOTOR_KEYS)}")
+    missing = [k for k in ("current", "torque_constant") if spec.get(k) is None]
+    if missing:
+        raise DataError(f"{where}: a motor current needs {missing}")
+    out = []
+    for key in ("torque_constant", "gear_ratio", "efficiency"):
+        x = spec.get(key, _MOTOR_KEYS[key])
+        ok = isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) and x > 0
+        if not ok or (key == "efficiency" and x > 1):
+            expected = "a number in (0, 1]" if key == "efficiency" else "a finite number > 0"
+            raise DataError(f"{where}.{key}: expected {expected}, got {x!r}")
+        out.append((key, float(x)))
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -57,9 +80,15 @@ class JointColumns:
 
     name: str
     position: str
-    effort: str
+    effort: str  # the effort column, or the motor-current column when ``motor`` is given
     velocity: str | None = None
     acceleration: str | None = None
+    motor: tuple[tuple[str, float], ...] = ()  # (torque_constant [N m/A], gear_ratio, efficiency): τ = I·kt·N·η
+
+    @property
+    def effort_scale(self) -> float | None:
+        """kt·N·η [N m/A] for a motor current, None for an effort column."""
+        return float(np.prod([v for _, v in self.motor])) if self.motor else None
 
 
 @dataclass(frozen=True)
@@ -127,7 +156,12 @@ class ColumnMap:
             missing = [k for k in ("position", "effort") if not cols.get(k)]
             if missing:
                 raise DataError(f"column map: joint {name!r} needs columns for {missing}")
-            joints.append(JointColumns(str(name), **{k: (None if v is None else str(v)) for k, v in cols.items()}))
+            cols = dict(cols)
+            motor = _motor(name, cols["effort"]) if isinstance(cols["effort"], Mapping) else ()
+            if motor:
+                cols["effort"] = cols["effort"]["current"]
+            joints.append(JointColumns(str(name), **{k: (None if v is None else str(v)) for k, v in cols.items()},
+                                       motor=motor))
         units = d.get("units") or {}
         if not isinstance(units, Mapping):
             raise DataError(f"column map: 'units' must be a mapping quantity -> unit, got {units!r}")
@@ -186,74 +220,15 @@ class ColumnMap:
         joints = {
             j.name: {k: getattr(j, k) for k in _JOINT_KEYS if getattr(j, k) is not None} for j in self.joints
         }
+        for j in self.joints:
+            if j.motor:
+                joints[j.name]["effort"] = {"current": j.effort, **dict(j.motor)}
         units: dict = dict(self.units)
         for j, q, u in self.joint_units:
             if not isinstance(units[q], dict):
                 units[q] = {n: units[q] for n in self.joint_names}
             units[q][j] = u
         return {"time": self.time, "joints": joints, "units": units}
-
-
-def read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
-    """All columns of the file as float arrays (name -> (T,)) and the column order."""
-    ext = path.suffix.lower()
-    if ext not in FORMATS:
-        raise DataError(f"{path}: unknown log format {path.suffix!r}; expected one of {', '.join(FORMATS)}")
-    if ext == ".npz":
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                data = {k: np.asarray(z[k]) for k in z.files}
-        except (ValueError, EOFError, zipfile.BadZipFile) as exc:  # not an npz, truncated, pickled objects
-            raise DataError(f"{path}: cannot read it as .npz ({type(exc).__name__}: {exc})") from None
-        if not data:
-            raise DataError(f"{path}: log is empty (no rows)")
-        data = _split_arrays(path, data)
-        lengths = {k: v.shape[0] for k, v in data.items()}
-        if len(set(lengths.values())) > 1:
-            raise DataError(f"{path}: npz channels have different lengths {lengths}")
-        return data, list(data)
-    import pandas as pd
-
-    if ext == ".csv":
-        try:
-            csv_header(path)
-        except UnicodeDecodeError as exc:
-            raise DataError(f"{path}: cannot read it as CSV text ({exc})") from None  # duplicated names: pandas would rename them silently
-        try:
-            df = pd.read_csv(path)
-        except pd.errors.EmptyDataError:
-            raise DataError(f"{path}: log is empty (no rows)") from None
-        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-            raise DataError(f"{path}: cannot read it as CSV ({type(exc).__name__}: {exc})") from None
-    else:
-        try:
-            df = pd.read_parquet(path)
-        except (ValueError, OSError) as exc:  # pyarrow's ArrowInvalid is a ValueError
-            if isinstance(exc, (PermissionError, IsADirectoryError)):
-                raise
-            raise DataError(f"{path}: cannot read it as Parquet ({type(exc).__name__}: {exc})") from None
-    data = {str(c): df[c].to_numpy() for c in df.columns}
-    for c, x in list(data.items()):  # Parquet list columns (one array per row) -> (T, n)
-        if x.dtype == object and len(x) and isinstance(x[0], (list, tuple, np.ndarray)):
-            try:
-                data[c] = np.stack([np.asarray(r, dtype=float) for r in x])
-            except (ValueError, TypeError):
-                raise DataError(f"{path}: list column {c!r} has rows of different lengths or non-numbers") from None
-    data = _split_arrays(path, data)
-    return data, list(data)
-
-
-def _split_arrays(path: Path, data: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """2-D arrays (T, n) become channels 'name[0]' … 'name[n-1]' (addressed so in a column map)."""
-    out: dict[str, np.ndarray] = {}
-    for k, x in data.items():
-        if x.ndim == 1:
-            out[k] = x
-        elif x.ndim == 2:
-            out.update({f"{k}[{i}]": x[:, i] for i in range(x.shape[1])})
-        else:
-            raise DataError(f"{path}: array {k!r} has shape {x.shape}; expected (T,) channels or (T, n) arrays")
-    return out
 
 
 def load_log(
@@ -341,7 +316,8 @@ def load_log(
     def stack(key: str, quantity: str):
         cols = []
         for j in jcols:
-            x = column(getattr(j, key)) * UNITS[quantity][cmap.unit(quantity, j.name)]
+            scale = j.effort_scale if key == "effort" and j.motor else UNITS[quantity][cmap.unit(quantity, j.name)]
+            x = column(getattr(j, key)) * scale
             check_magnitude(path, getattr(j, key), x)
             cols.append(x)
         return np.stack(cols, axis=1)
