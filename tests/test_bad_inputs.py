@@ -243,7 +243,7 @@ for _id, _extra, _msg in [
     ("step-unknown", {"preprocessing": [{"smooth": {}}]}, "unknown preprocessing step 'smooth' (step 0); known steps:"),
     ("step-two-keys", {"preprocessing": [{"resample": {}, "trim": {}}]}, "preprocessing step 0 must be a one-key mapping {name: parameters}"),
     ("step-bad-parameter", {"preprocessing": [{"resample": {"hz": 5}}]}, "preprocessing step 0 (resample): bad parameters {'hz': 5}"),
-    ("step-parameters-list", {"preprocessing": [{"resample": [500]}]}, "preprocessing step 0 (resample): parameters must be a mapping, got [500]"),
+    ("step-parameters-list", {"preprocessing": [{"resample": [500]}]}, "preprocessing.0.resample: Input should be a valid dictionary (got [500])"),
     ("window-negative", {"preprocessing": [{"differentiate": {"window": -0.1}}]}, "differentiate: window must be a positive number of seconds, got -0.1"),
     ("window-zero", {"preprocessing": [{"differentiate": {"window": 0}}]}, "differentiate: window must be a positive number of seconds, got 0"),
     ("window-long", {"preprocessing": [{"differentiate": {"window": 100}}]}, "Savitzky–Golay window of 50001 samples is longer than the signal (1000 samples)"),
@@ -262,9 +262,9 @@ for _id, _extra, _msg in [
     ("trim-outside", {"preprocessing": [{"trim": {"start": 50, "stop": 60}}, DIFF]}, "trim: [50, 60] s keeps 0 samples"),
     ("no-differentiate", {"preprocessing": [{"resample": {"rate": 500}}]}, "no accelerations after preprocessing; add a 'differentiate' step"),
     ("columns-list", {"columns": ["time"]}, "columns: expected a column map (time, joints, units), got ['time']"),
-    ("columns-unknown-key", {"columns": {"time": "time", "joint": {}}}, "column map: unknown keys ['joint']"),
+    ("columns-unknown-key", {"columns": {"time": "time", "joint": {}}}, "columns.joint: Extra inputs are not permitted (got {})"),
     ("columns-no-effort", {"columns": {"joints": {"Joint1": {"position": "pos_meas1"}, "Joint2": {"position": "pos_meas2"}}}},
-     "column map: joint 'Joint1' needs columns for ['effort']"),
+     "columns.joints.Joint1.effort: Field required (got {'position': 'pos_meas1'})"),
     ("columns-unit", {"columns": {"joints": {"Joint1": {"position": "pos_meas1", "effort": "tau_meas1", "velocity": "vel_meas1"},
                                             "Joint2": {"position": "pos_meas2", "effort": "tau_meas2", "velocity": "vel_meas2"}},
                                  "units": {"effort": "kNm"}}}, "column map: units.effort: unknown effort unit 'kNm'; allowed: ['N m', 'N mm', 'N']"),
@@ -299,6 +299,11 @@ def _raw_config(id: str, text: str, message: str) -> None:
     CASES.append(Case(f"config-{id}", args, 2, message))
 
 
+_config_case("schema-references-list-value", {"references": {"lab": [1]}}, "references.lab: expected a file path, got [1]")
+_config_case("schema-time-list", {"columns": {"time": ["t"], "joints": {}}}, "columns.time: Input should be a valid string (got ['t'])")
+_config_case("schema-motor-no-kt", {"columns": {"joints": {"Joint1": {"position": "pos_meas1", "effort": {"current": "I1"}}}}},
+             "columns.joints.Joint1.effort.torque_constant: Field required (got {'current': 'I1'})")
+_config_case("schema-out-list", {"out": ["a", "b"]}, "out: expected a file path, got ['a', 'b']")
 _raw_config("yaml-unclosed", "model: [robot.urdf\ntrain: a.csv\n", "YAML syntax error at line 2")
 _raw_config("yaml-tab", "model:\n\turdf: robot.urdf\n", "YAML syntax error at line 2, column 1")
 _raw_config("yaml-bad-indent", "model:\n  urdf: r.urdf\n   floating_base: true\n", "YAML syntax error at line 3")

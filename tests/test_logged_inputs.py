@@ -91,3 +91,31 @@ def test_the_prior_weight_is_per_equation_by_default(tmp_path):
     assert FitConfig.from_dict({"model": "r.urdf", "train": ["a.csv"], "prior": {"per_equation": False}}).prior.per_equation is False
     est = estimator("logdet", np.ones(3), cfg.prior.gamma, cfg.prior.per_equation)
     assert est.per_equation is True and est.gamma == 0.1
+
+
+def test_the_json_schema_in_docs_is_current_and_accepts_the_example():
+    import json
+    from pathlib import Path
+
+    from dualid.robot.config import _TOP_KEYS, FitConfig
+    from dualid.robot.schema import FitConfigSchema, check_shape, json_schema
+
+    root = Path(__file__).resolve().parents[1]
+    assert json.loads((root / "docs" / "fit-config.schema.json").read_text()) == json_schema(), \
+        "regenerate: dualid schema > docs/fit-config.schema.json"
+    assert tuple(FitConfigSchema.model_fields) == _TOP_KEYS  # the schema and FitConfig know the same keys
+    example = root / "examples" / "dfki" / "fit.yaml"
+    check_shape(yaml.safe_load(example.read_text()))
+    if (root.parent / "shared" / "datasets" / "dfki-double-pendulum").is_dir():
+        FitConfig.from_yaml(example)
+
+
+def test_schema_errors_name_the_key_path():
+    from dualid.errors import ConfigError
+    from dualid.robot.schema import check_shape
+
+    with pytest.raises(ConfigError, match=r"config: joint_terms.coulomb_velocity: Input should be a valid number"):
+        check_shape({"model": "r.urdf", "train": "a.csv", "joint_terms": {"coulomb_velocity": "fast"}})
+    with pytest.raises(ConfigError, match=r"model.gravity: List should have at least 3 items after validation, not 2 "
+                                          r"\(got \[0, 1\]\)$"):  # the union's other member (a string) is not reported
+        check_shape({"model": {"urdf": "r", "gravity": [0, 1]}, "train": ["a"]})

@@ -55,5 +55,16 @@ def main(
 
 
 # importing the command modules registers their commands on ``app``
+@app.command()
+def schema() -> None:
+    """Print the JSON Schema of a fit config (docs/fit-config.schema.json; point your editor's YAML
+    support at it for completion and checking)."""
+    import json
+
+    from dualid.robot.schema import json_schema
+
+    typer.echo(json.dumps(json_schema(), indent=2, ensure_ascii=False))
+
+
 for _module in ("simulate", "reproduce", "fit", "bench"):
     importlib.import_module(f"dualid.cli.{_module}")

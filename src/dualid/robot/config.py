@@ -234,8 +234,12 @@ class FitConfig:
         from dualid.robot.files import read_mapping
 
         path = Path(path)
+        from dualid.robot.schema import check_shape
+
         d = read_mapping(path, "config file")
-        return FitConfig.from_dict(d, base_dir=path.resolve().parent)
+        config = FitConfig.from_dict(d, base_dir=path.resolve().parent)  # its messages first: they are the most specific
+        check_shape(d, f"config file {path}")  # then what only the schema sees (e.g. a list where a name belongs)
+        return config
 
     def with_overrides(self, **changes) -> "FitConfig":
         """A copy with the given fields replaced (None values are ignored), e.g. from CLI flags."""
