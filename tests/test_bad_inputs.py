@@ -476,6 +476,12 @@ def _(tmp):
     return fit(tmp, None, None, "--test", str(write_log(tmp, GOOD, "copy.csv")))
 
 
+@case("log-test-overlaps-train", 0, "shares 50% of its rows with training log")
+def _(tmp):
+    later = good_frame(500, seed=2).assign(time=lambda d: d["time"] + 2.0)  # new data after the shared half
+    return fit(tmp, None, None, "--test", str(write_log(tmp, pd.concat([GOOD.iloc[500:], later]), "half.csv")))
+
+
 @case("log-train-twice", 0, "are the same data; it is counted twice")
 def _(tmp):
     p = write_log(tmp)

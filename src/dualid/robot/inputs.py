@@ -6,8 +6,11 @@ from __future__ import annotations
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 from dualid.data.io import LINEAR_UNITS, SI_UNITS, ColumnMap
-from dualid.errors import DataError, DualidWarning
+from dualid.data.tables import read_table
+from dualid.errors import DataError, DualidError, DualidWarning
 from dualid.model.rigid_body import RigidBodyModel
 
 
@@ -60,6 +63,27 @@ def check_runs_differ(train, test) -> None:
         if k in seen:
             warnings.warn(f"held-out log {p} is the same data as training log {seen[k]}; its scores are not "
                           "held-out scores", DualidWarning, stacklevel=3)
+            continue
+        test_rows = _rows(p)
+        for q in dict.fromkeys(seen.values()):
+            shared = len(test_rows & _rows(q)) / max(len(test_rows), 1)
+            if shared >= OVERLAP:
+                warnings.warn(f"held-out log {p} shares {shared:.0%} of its rows with training log {q}; its scores are "
+                              "not fully held-out scores", DualidWarning, stacklevel=3)
+
+
+OVERLAP = 0.1  # warn when this fraction of a held-out log's rows also appear in a training log
+
+
+def _rows(path) -> set[bytes]:
+    """The numeric rows of a log file (every column, as logged), for overlap tests; empty if unreadable."""
+    try:
+        data, columns = read_table(Path(path))
+        cols = [np.asarray(data[c], dtype=float) for c in columns]
+    except (DualidError, OSError, ValueError, TypeError):
+        return set()  # loading reports the problem with its own message
+    table = np.ascontiguousarray(np.column_stack(cols))
+    return {row.tobytes() for row in table}
 
 
 # --- model ------------------------------------------------------------------------------------
