@@ -54,3 +54,33 @@ def test_dfki_defaults_are_near_the_example_config():
     assert steps[0]["resample"]["rate"] == 500.0 and steps[3]["downsample"]["factor"] == 5
     assert 0.08 <= steps[1]["differentiate"]["window"] <= 0.15  # the example: 0.1 s
     assert 7 <= steps[2]["filter_lowpass"]["cutoff"] <= 12  # the example: 10 Hz
+
+
+@pytest.mark.skipif(not DFKI.is_dir(), reason="shared DFKI data set not available")
+def test_dfki_fit_from_flags_alone_is_within_10_percent_of_the_example_config(tmp_path):
+    """Issue 13's target, on one training and one held-out run (ols), both scored with the example's
+    preprocessing (dualid validate --config), so the measured torques compared against are the same."""
+    import yaml
+    from typer.testing import CliRunner
+
+    from dualid.cli import app
+
+    runner = CliRunner()
+    example = Path(__file__).resolve().parents[1] / "examples" / "dfki" / "fit.yaml"
+    cfg = yaml.safe_load(example.read_text())
+    cfg.update(model={"urdf": str(DFKI / "pendubot_model_2.1.urdf")}, train=[str(DFKI / "trajectory_00.csv")],
+               test=[], references={}, methods=["ols"])
+    (tmp_path / "fit.yaml").write_text(yaml.safe_dump(cfg))
+    data = ["--data", str(DFKI / "trajectory_00.csv"), "--method", "ols"]
+    flags = runner.invoke(app, ["fit", "--model", str(DFKI / "pendubot_model_2.1.urdf"), *data, "--out", str(tmp_path / "f")])
+    config = runner.invoke(app, ["fit", "--config", str(tmp_path / "fit.yaml"), "--out", str(tmp_path / "c")])
+    assert flags.exit_code == 0 and config.exit_code == 0, flags.output + config.output
+    ncc = {}
+    for name in ("f", "c"):
+        out = tmp_path / f"val_{name}"
+        result = runner.invoke(app, ["validate", "--model", str(tmp_path / name / "ols.urdf"), "--data",
+                                     str(DFKI / "trajectory_04.csv"), "--config", str(tmp_path / "fit.yaml"), "--out", str(out)])
+        assert result.exit_code == 0, result.output
+        ncc[name] = yaml.safe_load((out / "validation.json").read_text())["validation"]["mean"]["tau_ncc"]
+    for joint in ("Joint1", "Joint2"):
+        assert ncc["f"][joint] >= 0.9 * ncc["c"][joint], ncc
