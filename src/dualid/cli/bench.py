@@ -55,7 +55,7 @@ def bench(
     except ValueError as exc:
         fail(str(exc))
     out = output_dir(out, force)
-    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    columns = (TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     with Progress(*columns, console=console) as progress:
         task = progress.add_task("benchmark runs", total=len(config.planned()))
 

@@ -51,7 +51,7 @@ def fit(
     if cfg.out is None:
         fail("no output directory: pass --out DIR (or set 'out' in the config)")
     output_dir(cfg.out, force)
-    with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), console=console) as bar:
+    with Progress(SpinnerColumn(), TextColumn("{task.description}", markup=False), TimeElapsedColumn(), console=console) as bar:
         task = bar.add_task("starting", total=None)
         with warnings.catch_warnings(record=True) as caught:  # recorded in the outcome by fit_robot
             warnings.simplefilter("always")

@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from dualid.cli.app import FLAG, app
-from dualid.cli.common import console, fail
+from dualid.cli.common import console, fail, output_dir
 
 
 @app.command()
@@ -44,7 +44,8 @@ def reproduce(
     if seeds < 1:
         fail(f"--seeds: expected a positive number of seeds, got {seeds}")
     out = out or Path("results") / system
-    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    output_dir(out, force)  # before the study, not after it
+    columns = (TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     try:
         with Progress(*columns, console=console) as progress:
             result = run(system, out, case=case, seeds=seeds, noise=noise, size=size, ablation=ablation,

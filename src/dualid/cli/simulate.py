@@ -37,7 +37,7 @@ def simulate(
         if value not in allowed:
             fail(f"{flag}: expected one of {', '.join(allowed)}, got {value!r}")
     output_dir(out, force)
-    with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), console=console) as bar:
+    with Progress(SpinnerColumn(), TextColumn("{task.description}", markup=False), TimeElapsedColumn(), console=console) as bar:
         task = bar.add_task(f"simulating {system} (seed {seed}, noise {noise})", total=None)
         data = make_system(system, seed=seed, noise=noise, size=size)
         bar.update(task, description=f"writing {out}")
