@@ -119,3 +119,23 @@ def test_schema_errors_name_the_key_path():
     with pytest.raises(ConfigError, match=r"model.gravity: List should have at least 3 items after validation, not 2 "
                                           r"\(got \[0, 1\]\)$"):  # the union's other member (a string) is not reported
         check_shape({"model": {"urdf": "r", "gravity": [0, 1]}, "train": ["a"]})
+
+
+def test_fit_robot_records_each_warning_once(tmp_path):
+    import warnings
+
+    from dualid.errors import DualidWarning
+    from dualid.robot.config import FitConfig
+    from dualid.robot.fit import fit_robot
+
+    deg = GOOD.assign(vel_meas1=GOOD["vel_meas1"] * 180 / np.pi)
+    log = write_log(tmp_path, deg, "deg.csv")
+    cfg = FitConfig.from_dict({"model": str(write_urdf(tmp_path)), "train": [str(log)], "test": [str(log)],
+                               "methods": ["ols"]})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        outcome = fit_robot(cfg)
+    ours = [str(w.message) for w in caught if issubclass(w.category, DualidWarning)]
+    assert len(ours) == len(set(ours)) == len(outcome.warnings) == 2
+    assert "the logged velocity is 57.3 × dq/dt" in outcome.warnings[0] or "57.3" in outcome.warnings[1]
+    assert any("is the same data as training log" in w for w in outcome.warnings)

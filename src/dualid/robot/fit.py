@@ -303,8 +303,8 @@ def fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", DualidWarning)
             outcome = _fit_robot(config, progress)
-    finally:  # re-issued also when an error follows: a warning may explain it
-        for w in caught:
+    finally:  # re-issued (each once) also when an error follows: a warning may explain it
+        for w in {(str(w.message), w.category): w for w in caught}.values():
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     ours = [w for w in caught if issubclass(w.category, DualidWarning)]
     return dataclasses.replace(outcome, warnings=tuple(dict.fromkeys(str(w.message) for w in ours)))
