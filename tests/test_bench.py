@@ -58,7 +58,7 @@ def test_bench_writes_json_markdown_and_plot(bench_dir):
 def test_bench_refuses_a_non_empty_directory_without_force(bench_dir):
     before = (bench_dir / "results.json").read_text()
     result = runner.invoke(app, ["bench", "--out", str(bench_dir), *SMALL, "--solvers", "newton"])
-    assert result.exit_code == 1
+    assert result.exit_code == 2
     assert "exists and is not empty; choose another or pass --force" in _out(result)
     assert (bench_dir / "results.json").read_text() == before
 
@@ -82,7 +82,7 @@ def test_bench_force_overwrites(tmp_path):
 )
 def test_bench_bad_options(tmp_path, args, message):
     result = runner.invoke(app, ["bench", "--out", str(tmp_path / "out"), *args])
-    assert result.exit_code == 1
+    assert result.exit_code == 2
     assert message in _out(result)
     assert not (tmp_path / "out").exists()
 

@@ -17,7 +17,7 @@ def test_simulate_writes_a_data_set_and_refuses_to_overwrite(tmp_path):
     assert index["info"]["system"] == "pan-tilt" and index["info"]["seed"] == 3
     assert len(index["splits"]["train"]) == 1 and len(index["splits"]["test"]) == 2
     again = runner.invoke(app, ["simulate", "pan-tilt", "--out", str(out), "--size", "small"])
-    assert again.exit_code == 1
+    assert again.exit_code == 2
     assert f"output directory {out}: exists and is not empty; choose another or pass --force" in again.output
     forced = runner.invoke(app, ["simulate", "pan-tilt", "--out", str(out), "--size", "small", "--force"])
     assert forced.exit_code == 0, forced.output
@@ -25,7 +25,7 @@ def test_simulate_writes_a_data_set_and_refuses_to_overwrite(tmp_path):
 
 def test_unknown_system_is_named():
     result = runner.invoke(app, ["simulate", "segway", "--out", "unused"])
-    assert result.exit_code == 1
+    assert result.exit_code == 2
     assert "unknown system 'segway'; expected one of pan-tilt, crazyflie, landsalp" in result.output
 
 
@@ -42,4 +42,4 @@ def test_reproduce_smoke_run_writes_results_table_and_figures(tmp_path):
     assert "DM" in md and "2 simulated data sets (seeds [0, 1])" in md and "Paired score difference against WLS" in md
     assert doc["config"]["data_seeds"] == [0, 1] and {f["data_seed"] for f in doc["cases"]["high"]["fits"]} == {0, 1}
     bad = runner.invoke(app, ["reproduce", "pan-tilt", "--case", "medium"])
-    assert bad.exit_code == 1 and "--case: expected low, high or both, got 'medium'" in bad.output
+    assert bad.exit_code == 2 and "--case: expected one of low, high, both, got 'medium'" in bad.output

@@ -52,21 +52,21 @@ def test_fit_and_validate_end_to_end(tmp_path):
 
     # an existing non-empty output directory is refused without --force
     result = runner.invoke(app, ["fit", "--config", str(cfg), "--method", "ols", "--out", str(out)])
-    assert result.exit_code == 1
+    assert result.exit_code == 2
     assert f"output directory {out}: exists and is not empty; choose another or pass --force" in _out(result)
 
 
 def test_unknown_method(tmp_path):
     result = runner.invoke(app, ["fit", "--model", str(URDF), "--data", str(DFKI / "trajectory_00.csv"),
                                  "--method", "lasso", "--out", str(tmp_path / "o")])
-    assert result.exit_code == 1
+    assert result.exit_code == 2
     assert "unknown method 'lasso'; known methods: ols, ols_unconstrained, wls, energy, logdet, pullback, dm" in _out(result)
 
 
 def test_unknown_config_key(tmp_path):
     cfg = _config(tmp_path, method=["ols"])
     result = runner.invoke(app, ["fit", "--config", str(cfg), "--out", str(tmp_path / "o")])
-    assert result.exit_code == 1
+    assert result.exit_code == 2
     assert "config: unknown keys ['method']; known keys: ['model', 'columns', 'train'" in _out(result)
 
 
@@ -77,7 +77,7 @@ def test_missing_column_without_map_asks_for_config(tmp_path):
     log = tmp_path / "run.csv"
     df.to_csv(log, index=False)
     result = runner.invoke(app, ["fit", "--model", str(URDF), "--data", str(log), "--out", str(tmp_path / "o")])
-    assert result.exit_code == 1
+    assert result.exit_code == 2
     text = _out(result)
     assert "no column map given and" in text and "lacks the default DFKI columns ['tau_meas1']" in text
     assert "give a 'columns' map in a --config file" in text
@@ -85,5 +85,5 @@ def test_missing_column_without_map_asks_for_config(tmp_path):
 
 def test_fit_needs_model_and_data(tmp_path):
     result = runner.invoke(app, ["fit", "--out", str(tmp_path / "o")])
-    assert result.exit_code == 1
+    assert result.exit_code == 2
     assert "give --model ROBOT.urdf and at least one --data RUN.csv, or a --config file" in _out(result)

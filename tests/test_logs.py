@@ -60,12 +60,12 @@ def test_column_map_from_dict_equals_pattern():
 
 
 def test_column_map_errors():
-    with pytest.raises(DataError, match=r"column map: unknown position unit 'grad'; allowed: \['rad', 'deg'\]"):
+    with pytest.raises(DataError, match=r"column map: units.position: unknown position unit 'grad'; allowed: \['rad', 'deg', 'm', 'mm'\]"):
         ColumnMap.pattern(JOINTS, units={"position": "grad"})
-    with pytest.raises(DataError, match=r"column map: unknown time unit 'min'; allowed: \['s', 'ms', 'us'\]"):
+    with pytest.raises(DataError, match=r"column map: units.time: unknown time unit 'min'; allowed: \['s', 'ms', 'us'\]"):
         ColumnMap.pattern(JOINTS, units={"time": "min"})
-    with pytest.raises(DataError, match=r"column map: unknown effort unit 'Nm'; allowed: \['N m', 'N mm'\]"):
-        ColumnMap.from_dict({"time": "t", "joints": {"j": {"position": "p", "effort": "e"}}, "units": {"effort": "Nm"}})
+    with pytest.raises(DataError, match=r"column map: units.effort: unknown effort unit 'kN m'; allowed: \['N m', 'N mm', 'N'\]"):
+        ColumnMap.from_dict({"time": "t", "joints": {"j": {"position": "p", "effort": "e"}}, "units": {"effort": "kN m"}})
     with pytest.raises(DataError, match=r"column map: unknown quantity 'angle' in units"):
         ColumnMap.pattern(JOINTS, units={"angle": "rad"})
     with pytest.raises(DataError, match=r"column map: joint 'j' needs columns for \['effort'\]"):
@@ -141,7 +141,7 @@ def test_load_errors(tmp_path):
         load_log(write(df, tmp_path / "cols.csv"), cmap)
     df = frame()
     df.loc[7, "time"] = df.loc[6, "time"]
-    with pytest.raises(DataError, match=r"time column 'time' must be strictly increasing; row 6 has 0.06 and row 7 has 0.06"):
+    with pytest.raises(DataError, match=r"time column 'time' repeats a time stamp: rows 6 and 7 both have 0.06"):
         load_log(write(df, tmp_path / "mono.csv"), cmap)
     df = frame()
     df.loc[12, "pos_meas2"] = np.nan
@@ -283,3 +283,83 @@ def test_array_meta_goes_to_a_side_file_and_comes_back(tmp_path):
     meta = runs["train"][0].meta
     np.testing.assert_array_equal(meta["true"]["q"], truth["q"])
     assert meta["true"]["note"] == "exact" and meta["k"] == 3
+
+
+# --- inputs people log (issue 13) ---------------------------------------------------------------
+@pytest.mark.parametrize("spelling", ["N m", "Nm", "N·m", "N*m", "N.m", " N  m "])
+def test_torque_unit_spellings_are_one_unit(spelling):
+    cmap = ColumnMap.pattern(JOINTS, units={"effort": spelling})
+    assert cmap.unit("effort") == "N m"
+
+
+def test_per_joint_units_convert_each_joint(tmp_path):
+    df = frame()
+    df["pos_meas2"] = np.degrees(df["pos_meas2"])
+    df["vel_meas2"] = np.degrees(df["vel_meas2"])
+    df["tau_meas1"] = 1000 * df["tau_meas1"]
+    cmap = ColumnMap.from_dict({"joints": ColumnMap.pattern(JOINTS).to_dict()["joints"],
+                                "units": {"position": {"Joint2": "deg"}, "velocity": {"Joint2": "deg/s"},
+                                          "effort": {"Joint1": "N mm", "Joint2": "Nm"}}})
+    traj = load_log(write(df, tmp_path / "run.csv"), cmap)
+    ref = frame()
+    np.testing.assert_allclose(traj.q, ref[["pos_meas1", "pos_meas2"]].to_numpy(), atol=1e-12)
+    np.testing.assert_allclose(traj.v, ref[["vel_meas1", "vel_meas2"]].to_numpy(), atol=1e-12)
+    np.testing.assert_allclose(traj.tau, ref[["tau_meas1", "tau_meas2"]].to_numpy(), atol=1e-12)
+    assert cmap.unit("position", "Joint2") == "deg" and cmap.unit("position", "Joint1") == "rad"
+    assert ColumnMap.from_dict(cmap.to_dict()) == cmap  # the per-joint form round-trips
+
+
+def test_linear_units_of_prismatic_joints():
+    cmap = ColumnMap.pattern(JOINTS, units={"position": "mm", "velocity": "mm/s", "effort": "N"})
+    assert cmap.unit("position") == "mm" and cmap.unit("effort") == "N"
+
+
+def test_per_joint_units_must_name_mapped_joints():
+    with pytest.raises(DataError, match=r"units.position names joints \['Joint9'\] that are not mapped"):
+        ColumnMap.pattern(JOINTS, units={"position": {"Joint9": "deg"}})
+
+
+@pytest.mark.parametrize("suffix", [".npz", ".parquet"])
+def test_two_dimensional_arrays_are_addressed_by_name_and_index(tmp_path, suffix):
+    df = frame()
+    q = df[["pos_meas1", "pos_meas2"]].to_numpy()
+    v = df[["vel_meas1", "vel_meas2"]].to_numpy()
+    tau = df[["tau_meas1", "tau_meas2"]].to_numpy()
+    path = tmp_path / f"run{suffix}"
+    if suffix == ".npz":
+        np.savez(path, t=df["time"].to_numpy(), q=q, v=v, tau=tau)
+    else:
+        pd.DataFrame({"t": df["time"], "q": list(q), "v": list(v), "tau": list(tau)}).to_parquet(path)
+    cmap = ColumnMap.pattern(JOINTS, position="q[{k}]", velocity="v[{k}]", effort="tau[{k}]", time="t")
+    traj = load_log(path, cmap)
+    np.testing.assert_array_equal(traj.q, q)
+    np.testing.assert_array_equal(traj.v, v)
+    np.testing.assert_array_equal(traj.tau, tau)
+    reordered = load_log(path, cmap, joints=["Joint2", "Joint1"])  # coordinates follow the model's order
+    np.testing.assert_array_equal(reordered.q, q[:, ::-1])
+
+
+def test_three_dimensional_npz_arrays_are_refused(tmp_path):
+    path = tmp_path / "run.npz"
+    np.savez(path, t=np.arange(5.0), q=np.zeros((5, 2, 2)))
+    with pytest.raises(DataError, match=r"array 'q' has shape \(5, 2, 2\); expected \(T,\) channels or \(T, n\) arrays"):
+        load_log(path, ColumnMap.pattern(JOINTS, position="q[{k}]", effort="q[{k}]", velocity=None, time="t"),
+                 velocity="gradient")
+
+
+def test_motor_current_times_torque_constant_gear_ratio_and_efficiency(tmp_path):
+    df = frame()
+    kt, gear, eta = 0.08, 6.0, 0.9
+    df["I1"] = df["tau_meas1"] / (kt * gear * eta)
+    joints = ColumnMap.pattern(JOINTS).to_dict()["joints"]
+    joints["Joint1"]["effort"] = {"current": "I1", "torque_constant": kt, "gear_ratio": gear, "efficiency": eta}
+    cmap = ColumnMap.from_dict({"joints": joints})
+    traj = load_log(write(df, tmp_path / "run.csv"), cmap)
+    np.testing.assert_allclose(traj.tau, frame()[["tau_meas1", "tau_meas2"]].to_numpy(), atol=1e-12)
+    assert ColumnMap.from_dict(cmap.to_dict()) == cmap
+    joints["Joint1"]["effort"] = {"current": "I1", "torque_constant": kt, "efficiency": 1.5}
+    with pytest.raises(DataError, match=r"joint 'Joint1' effort.efficiency: expected a number in \(0, 1\], got 1.5"):
+        ColumnMap.from_dict({"joints": joints})
+    joints["Joint1"]["effort"] = {"current": "I1"}
+    with pytest.raises(DataError, match=r"joint 'Joint1' effort: a motor current needs \['torque_constant'\]"):
+        ColumnMap.from_dict({"joints": joints})

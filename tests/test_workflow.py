@@ -180,7 +180,7 @@ def test_non_monotonic_time_and_nan_are_refused(tmp_path):
     def swap(df):
         df.loc[10, "time"] = df.loc[9, "time"]
 
-    with pytest.raises(DataError, match=r"time column 'time' must be strictly increasing; row 9 has"):
+    with pytest.raises(DataError, match=r"time column 'time' repeats a time stamp: rows 9 and 10 both have"):
         fit_robot(FitConfig.from_dict(small_config(train=[str(_broken_log(tmp_path, swap))], test=[])))
 
     def nan(df):

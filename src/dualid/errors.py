@@ -53,3 +53,8 @@ class SimulationError(DualidError, RuntimeError):
 
 class SolverOptionError(ConfigError):
     """An estimator's solver, tolerance, iteration limit or fallback chain is not one it accepts."""
+
+
+class DualidWarning(UserWarning):
+    """Something in the input that is probably wrong but not certainly (e.g. a logged velocity far
+    from dq/dt, the same log for training and testing); the fit goes on and the report records it."""

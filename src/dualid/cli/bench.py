@@ -6,14 +6,14 @@ from pathlib import Path
 
 import typer
 
-from dualid.cli.app import app
+from dualid.cli.app import FLAG, app
 from dualid.cli.common import console, fail, output_dir
 
 
 @app.command()
 def bench(
     out: Path = typer.Option(Path("benchmarks/latest"), "--out", help="output directory"),
-    quick: bool = typer.Option(False, "--quick", help="smoke run: N ≤ 1,000 with the SDP (about a minute)"),
+    quick: bool = typer.Option(False, "--quick", metavar=FLAG, help="smoke run: N ≤ 1,000 with the SDP (about a minute)"),
     max_n: int = typer.Option(None, "--max-n", help="largest N (default 1,000,000; 1,000 with --quick)"),
     problems: str = typer.Option("crazyflie,arm7", "--problems", help="comma-separated: crazyflie, arm7"),
     solvers: str = typer.Option(
@@ -24,7 +24,7 @@ def bench(
     cap: str = typer.Option("", "--cap", help="per-problem largest N, e.g. arm7=100000"),
     timeout: float = typer.Option(None, "--timeout", help="kill a single run after this many seconds"),
     budget: float = typer.Option(None, "--budget", help="skip a solver's larger N once one of its runs took longer [s]"),
-    force: bool = typer.Option(False, "--force", help="overwrite an existing non-empty output directory"),
+    force: bool = typer.Option(False, "--force", metavar=FLAG, help="overwrite an existing non-empty output directory"),
 ) -> None:
     """Run every (problem, solver, N) in its own process and write results.json, results.md and
     scaling.png (log-log wall time and peak memory vs N) into the output directory."""
@@ -56,7 +56,7 @@ def bench(
     except ValueError as exc:
         fail(str(exc))
     out = output_dir(out, force)
-    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    columns = (TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     with Progress(*columns, console=console) as progress:
         task = progress.add_task("benchmark runs", total=len(config.planned()))
 
@@ -77,4 +77,4 @@ def bench(
     typer.echo(to_markdown(result))
     for (problem, N), ratio in sorted(time_ratios(result, "newton", "sdp_clarabel").items()):
         typer.echo(f"{problem} N={N:,}: SDP (Clarabel) / Newton wall time = {ratio:.1f}×")
-    console.print(f"[green]wrote[/] {json_path}, {md_path} and {png}")
+    console.print(f"wrote {json_path}, {md_path} and {png}", markup=False)

@@ -1,28 +1,65 @@
-"""Helpers shared by the command modules: printing errors and preparing output folders."""
+"""Helpers shared by the command modules: printing errors, exit codes and output folders."""
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import typer
 from rich.console import Console
+from rich.text import Text
 
 console = Console(stderr=True, soft_wrap=True)  # never hard-wrap messages: users grep them
 
+EXIT_OK = 0
+EXIT_FAILED = 1  # a requested computation (e.g. one fit method) failed; other outputs were written
+EXIT_BAD_INPUT = 2  # usage, files, config, logs, model or output directory (typer's code for usage errors)
 
-def fail(message: str, code: int = 1) -> None:
-    """Print an error in red and exit with ``code``."""
-    console.print(f"[bold red]error:[/] {message}")
+
+def error_exit_code(exc: BaseException) -> int:
+    """EXIT_BAD_INPUT for errors in what the user gave (data, config, model, files); EXIT_FAILED for a
+    computation that failed on valid input (solver, identifiability, metric, simulation)."""
+    from dualid.errors import ConfigError, ConsistencyError, DataError, ModelError
+
+    if isinstance(exc, (DataError, ConfigError, ModelError, ConsistencyError, OSError)):
+        return EXIT_BAD_INPUT
+    return EXIT_FAILED
+
+
+def error_message(exc: BaseException) -> str:
+    """The user-facing text of an error; a bare OSError as 'FILE: reason'."""
+    from dualid.errors import DualidError
+
+    if isinstance(exc, OSError) and not isinstance(exc, DualidError) and exc.strerror:
+        where = f"{exc.filename}: " if exc.filename is not None else ""
+        return f"{where}{exc.strerror}"
+    return str(exc)
+
+
+def print_error(exc_or_message) -> None:
+    """'error: …' on stderr; the message is plain text (no rich markup: '[m/s²]' and 'q1[rad]' survive)."""
+    message = exc_or_message if isinstance(exc_or_message, str) else error_message(exc_or_message)
+    console.print(Text("error: ", style="bold red") + Text(message), highlight=False)
+
+
+def print_warning(message: str) -> None:
+    console.print(Text("warning: ", style="yellow") + Text(message), highlight=False)
+
+
+def fail(message: str, code: int = EXIT_BAD_INPUT) -> None:
+    """Print an error (plain text) and exit with ``code`` (default: bad input)."""
+    print_error(message)
     raise typer.Exit(code)
 
 
+def show_warnings(caught: list[warnings.WarningMessage]) -> None:
+    for message in dict.fromkeys(str(w.message) for w in caught):  # each once, in order
+        print_warning(message)
+
+
 def output_dir(path: Path, force: bool) -> Path:
-    """Check --out against the output-directory policy before any work (dualid.report.outdir)."""
-    from dualid.errors import OutputError
+    """Check --out against the output-directory policy before any work (dualid.report.outdir);
+    an OutputError propagates to the app's handler (exit 2)."""
     from dualid.report.outdir import check_output_dir
 
-    try:
-        return check_output_dir(path, force)
-    except OutputError as exc:
-        fail(str(exc))
-        raise  # unreachable: fail exits
+    return check_output_dir(path, force)

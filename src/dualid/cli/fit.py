@@ -7,10 +7,8 @@ from typing import List, Optional
 
 import typer
 
-from dualid.cli.app import app
-from dualid.cli.common import console, fail, output_dir
-
-_USER_ERRORS = (ValueError, FileNotFoundError, KeyError, TypeError)  # DataError and ConfigError are ValueErrors
+from dualid.cli.app import FLAG, app
+from dualid.cli.common import EXIT_FAILED, console, fail, output_dir, print_error, show_warnings
 
 
 def _config(config: Optional[Path], model: Optional[Path], data: List[Path]):
@@ -31,9 +29,10 @@ def fit(
     method: List[str] = typer.Option([], "--method", help="ols, wls, energy, logdet, pullback or dm; repeatable"),
     config: Optional[Path] = typer.Option(None, "--config", help="fit.yaml (columns, preprocessing, ...); flags override it"),
     out: Optional[Path] = typer.Option(None, "--out", help="output directory"),
-    force: bool = typer.Option(False, "--force", help="write into an existing non-empty output directory"),
+    force: bool = typer.Option(False, "--force", metavar=FLAG, help="write into an existing non-empty output directory"),
 ) -> None:
     """Identify a robot's inertial parameters, joint friction and armature from a URDF and logs."""
+    import warnings
     from dataclasses import replace
 
     from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
@@ -41,40 +40,43 @@ def fit(
     from dualid.report.robot import score_table, write_fit
     from dualid.robot.fit import fit_robot
 
-    try:
-        cfg = _config(config, model, data)
-        cfg = cfg.with_overrides(
-            model=replace(cfg.model, urdf=model) if model is not None and config is not None else None,
-            train=tuple(data) if data and config is not None else None,
-            test=tuple(test) or None,
-            methods=tuple(method) or None,
-            out=out,
-        )
-    except _USER_ERRORS as exc:
-        fail(str(exc))
+    cfg = _config(config, model, data)
+    cfg = cfg.with_overrides(
+        model=replace(cfg.model, urdf=model) if model is not None and config is not None else None,
+        train=tuple(data) if data and config is not None else None,
+        test=tuple(test) or None,
+        methods=tuple(method) or None,
+        out=out,
+    )
     if cfg.out is None:
         fail("no output directory: pass --out DIR (or set 'out' in the config)")
     output_dir(cfg.out, force)
-    with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), console=console) as bar:
+    with Progress(SpinnerColumn(), TextColumn("{task.description}", markup=False), TimeElapsedColumn(), console=console) as bar:
         task = bar.add_task("starting", total=None)
-        try:
-            outcome = fit_robot(cfg, progress=lambda msg: bar.update(task, description=msg))
-            bar.update(task, description=f"writing {cfg.out}")
-            write_fit(outcome, cfg.out, force)
-        except _USER_ERRORS as exc:
-            bar.stop()
-            fail(str(exc))
-    console.print(outcome.identifiability.describe(max_items=0))
+        with warnings.catch_warnings(record=True) as caught:  # recorded in the outcome by fit_robot
+            warnings.simplefilter("always")
+            try:
+                outcome = fit_robot(cfg, progress=lambda msg: bar.update(task, description=msg))
+                bar.update(task, description=f"writing {cfg.out}")
+                write_fit(outcome, cfg.out, force)
+            finally:  # also when an error follows: a warning may explain it
+                bar.stop()
+                show_warnings(caught)
+    console.print(outcome.identifiability.describe(max_items=0), markup=False)
     for m, f in outcome.fits.items():
         if f.ok:
-            console.print(f"{m}: {f.result.status} in {f.result.solve_time:.2f} s ({f.result.solver})")
-        else:
-            console.print(f"[yellow]{m}: failed[/] {f.error}")
+            console.print(f"{m}: {f.result.status} in {f.result.solve_time:.2f} s ({f.result.solver})", markup=False)
     validations = {m: f.validation for m, f in outcome.fits.items() if f.validation is not None}
     validations.update({k: v for k, (_, v) in outcome.references.items() if v is not None})
     if validations:
         typer.echo(score_table(validations))
-    console.print(f"wrote parameters, URDFs and report.md to {cfg.out}")
+    failed = [m for m, f in outcome.fits.items() if not f.ok]
+    console.print(f"wrote parameters, URDFs and report.md to {cfg.out}"
+                  + (" (incomplete: see report.md)" if failed else ""), markup=False)
+    for m in failed:
+        print_error(f"{m}: failed: {outcome.fits[m].error}")
+    if failed:
+        raise typer.Exit(EXIT_FAILED)
 
 
 @app.command()
@@ -83,7 +85,7 @@ def validate(
     data: List[Path] = typer.Option(..., "--data", help="log to validate on; repeatable"),
     config: Optional[Path] = typer.Option(None, "--config", help="fit.yaml for columns, preprocessing, gravity"),
     out: Optional[Path] = typer.Option(None, "--out", help="write validation.json, report.md and PNGs here"),
-    force: bool = typer.Option(False, "--force", help="write into an existing non-empty output directory"),
+    force: bool = typer.Option(False, "--force", metavar=FLAG, help="write into an existing non-empty output directory"),
 ) -> None:
     """Predicted vs measured effort (inverse dynamics) and acceleration (forward dynamics) of a URDF on logs."""
     from dualid.report.robot import score_table, write_validation
@@ -92,19 +94,23 @@ def validate(
 
     if out is not None:
         output_dir(out, force)
-    try:
-        kw = {}
-        if config is not None:
-            cfg = FitConfig.from_yaml(config)
-            kw = dict(columns=cfg.columns, preprocessing=cfg.preprocessing, xcorr_window=cfg.xcorr_window,
-                      coulomb_velocity=cfg.joint_terms.coulomb_velocity, gravity=cfg.model.gravity,
-                      floating_base=cfg.model.floating_base)
-        with console.status(f"validating {model.name} on {len(data)} runs"):
-            _, _, val = validate_urdf(model, data, **kw)
-        if out is not None:
-            write_validation(val, out, {"model": str(model), "data": [str(p) for p in data]}, force)
-    except _USER_ERRORS as exc:
-        fail(str(exc))
+    import warnings
+
+    kw = {}
+    if config is not None:
+        cfg = FitConfig.from_yaml(config)
+        kw = dict(columns=cfg.columns, preprocessing=cfg.preprocessing, xcorr_window=cfg.xcorr_window,
+                  coulomb_velocity=cfg.joint_terms.coulomb_velocity, gravity=cfg.model.gravity,
+                  floating_base=cfg.model.floating_base)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            with console.status(f"validating {model.name} on {len(data)} runs"):
+                _, _, val = validate_urdf(model, data, **kw)
+            if out is not None:
+                write_validation(val, out, {"model": str(model), "data": [str(p) for p in data]}, force)
+        finally:
+            show_warnings(caught)
     typer.echo(score_table({val.label: val}))
     if out is not None:
-        console.print(f"wrote validation.json, report.md and figures to {out}")
+        console.print(f"wrote validation.json, report.md and figures to {out}", markup=False)

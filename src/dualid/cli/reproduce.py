@@ -6,8 +6,8 @@ from pathlib import Path
 
 import typer
 
-from dualid.cli.app import app
-from dualid.cli.common import console, fail
+from dualid.cli.app import FLAG, app
+from dualid.cli.common import console, fail, output_dir
 
 
 @app.command()
@@ -20,30 +20,38 @@ def reproduce(
     noise: str = typer.Option("realistic", "--noise", help="realistic, ideal (Gaussian force noise only) or none"),
     size: str = typer.Option("default", "--size", help="default or small (a quick smoke run)"),
     ablation: str = typer.Option(None, "--ablation", help="'units': fit in re-charted coordinates (mm, degrees)"),
-    force: bool = typer.Option(False, "--force", help="overwrite an existing output directory"),
+    force: bool = typer.Option(False, "--force", metavar=FLAG, help="overwrite an existing output directory"),
 ) -> None:
     """Simulate SYSTEM, fit every estimator in the low- and high-data cases and write
     results.json, results.md and the score and trajectory figures."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from dualid.errors import DualidError
     from dualid.report.study import reproduce as run
     from dualid.report.study import study_markdown
     from dualid.systems.base import system_names
 
     if system not in system_names():
         fail(f"unknown system {system!r}; expected one of {', '.join(system_names())}")
-    if case not in ("low", "high", "both"):
-        fail(f"--case: expected low, high or both, got {case!r}")
+    from typing import get_args
+
+    from dualid.systems.base import Noise, Size
+
+    for flag, value, allowed in (("--case", case, ("low", "high", "both")), ("--noise", noise, get_args(Noise)),
+                                 ("--size", size, get_args(Size))):
+        if value not in allowed:
+            fail(f"{flag}: expected one of {', '.join(allowed)}, got {value!r}")
+    if ablation is not None and ablation != "units":
+        fail(f"--ablation: expected units, got {ablation!r}")
+    if seeds < 1:
+        fail(f"--seeds: expected a positive number of seeds, got {seeds}")
     out = out or Path("results") / system
-    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    output_dir(out, force)  # before the study, not after it
+    columns = (TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     try:
         with Progress(*columns, console=console) as progress:
             result = run(system, out, case=case, seeds=seeds, noise=noise, size=size, ablation=ablation,
                          overwrite=force, progress=progress, data_seeds=data_seeds)
     except FileExistsError as exc:
         fail(f"{exc}; pass --force to overwrite it")
-    except (DualidError, ValueError) as exc:
-        fail(str(exc))
     console.print(study_markdown(result), markup=False)
-    console.print(f"[green]wrote[/] {out}/results.json, results.md and figures")
+    console.print(f"wrote {out}/results.json, results.md and figures", markup=False)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from dualid.cli.app import app
+from dualid.cli.app import FLAG, app
 from dualid.cli.common import console, fail, output_dir
 
 
@@ -18,7 +18,7 @@ def simulate(
     noise: str = typer.Option("realistic", "--noise", help="realistic, ideal or none"),
     size: str = typer.Option("default", "--size", help="default or small"),
     fmt: str = typer.Option("parquet", "--format", help="parquet or npz"),
-    force: bool = typer.Option(False, "--force", help="overwrite an existing output directory"),
+    force: bool = typer.Option(False, "--force", metavar=FLAG, help="overwrite an existing output directory"),
 ) -> None:
     """Simulate a system's training and test runs and save them with a dataset.json manifest."""
     from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
@@ -28,13 +28,18 @@ def simulate(
 
     if system not in system_names():
         fail(f"unknown system {system!r}; expected one of {', '.join(system_names())}")
+    from typing import get_args
+
+    from dualid.systems.base import Noise, Size
+
+    for flag, value, allowed in (("--noise", noise, get_args(Noise)), ("--size", size, get_args(Size)),
+                                 ("--format", fmt, ("parquet", "npz"))):
+        if value not in allowed:
+            fail(f"{flag}: expected one of {', '.join(allowed)}, got {value!r}")
     output_dir(out, force)
-    with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), console=console) as bar:
+    with Progress(SpinnerColumn(), TextColumn("{task.description}", markup=False), TimeElapsedColumn(), console=console) as bar:
         task = bar.add_task(f"simulating {system} (seed {seed}, noise {noise})", total=None)
-        try:
-            data = make_system(system, seed=seed, noise=noise, size=size)
-        except ValueError as exc:
-            fail(str(exc))
+        data = make_system(system, seed=seed, noise=noise, size=size)
         bar.update(task, description=f"writing {out}")
         info = {
             "system": data.name,
@@ -49,4 +54,5 @@ def simulate(
         }
         save_dataset(out, {"train": list(data.train), "test": list(data.test)}, info, fmt=fmt, overwrite=force)
     n_samples = sum(t.T for t in data.train + data.test)
-    console.print(f"wrote {len(data.train)} training and {len(data.test)} test runs ({n_samples} samples) to {out}")
+    console.print(f"wrote {len(data.train)} training and {len(data.test)} test runs ({n_samples} samples) to {out}",
+                  markup=False)

@@ -22,20 +22,56 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
+from dualid.data.checks import check_magnitude, check_time, check_velocity
+from dualid.data.tables import FORMATS, read_table
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError, MissingFileError
 
 # unit -> factor to SI, per quantity
 UNITS: dict[str, dict[str, float]] = {
     "time": {"s": 1.0, "ms": 1e-3, "us": 1e-6},
-    "position": {"rad": 1.0, "deg": np.pi / 180},
-    "velocity": {"rad/s": 1.0, "deg/s": np.pi / 180},
-    "acceleration": {"rad/s^2": 1.0, "deg/s^2": np.pi / 180},
-    "effort": {"N m": 1.0, "N mm": 1e-3},
+    "position": {"rad": 1.0, "deg": np.pi / 180, "m": 1.0, "mm": 1e-3},  # m, mm: prismatic joints
+    "velocity": {"rad/s": 1.0, "deg/s": np.pi / 180, "m/s": 1.0, "mm/s": 1e-3},
+    "acceleration": {"rad/s^2": 1.0, "deg/s^2": np.pi / 180, "m/s^2": 1.0, "mm/s^2": 1e-3},
+    "effort": {"N m": 1.0, "N mm": 1e-3, "N": 1.0},  # N: prismatic joints
 }
 SI_UNITS = {q: next(iter(u)) for q, u in UNITS.items()}  # the first unit of each quantity is SI
-FORMATS = (".csv", ".parquet", ".npz")
+LINEAR_UNITS = frozenset({"m", "mm", "m/s", "mm/s", "m/s^2", "mm/s^2", "N"})  # of prismatic joints
+
+
+def normalize_unit(unit) -> str:
+    """The spelling used in UNITS: "Nm", "N·m", "N*m", "N.m" → "N m"; "Nmm" → "N mm"; "s²" → "s^2"; "µs" → "us"."""
+    u = " ".join(str(unit).split()).replace("²", "^2").replace("µ", "u").replace("μ", "u")
+    for sep in ("·", "*", "."):
+        u = u.replace(f"N{sep}m", "N m")
+    if u in ("Nm", "Nmm"):
+        u = "N " + u[1:]
+    return u
 _JOINT_KEYS = ("position", "velocity", "acceleration", "effort")
+
+
+_MOTOR_KEYS = {"current": None, "torque_constant": None, "gear_ratio": 1.0, "efficiency": 1.0}
+
+
+def _motor(joint, spec: Mapping) -> tuple[tuple[str, float], ...]:
+    """(torque_constant, gear_ratio, efficiency) of an effort given as {current: COLUMN, torque_constant: kt
+    [N m/A], gear_ratio: N (default 1), efficiency: η in (0, 1] (default 1)}: τ = I·kt·N·η at the joint."""
+    where = f"column map: joint {joint!r} effort"
+    bad = sorted(set(spec) - set(_MOTOR_KEYS))
+    if bad:
+        raise DataError(f"{where}: unknown keys {bad}; allowed: {list(_MOTOR_KEYS)}")
+    missing = [k for k in ("current", "torque_constant") if spec.get(k) is None]
+    if missing:
+        raise DataError(f"{where}: a motor current needs {missing}")
+    out = []
+    for key in ("torque_constant", "gear_ratio", "efficiency"):
+        x = spec.get(key, _MOTOR_KEYS[key])
+        ok = isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) and x > 0
+        if not ok or (key == "efficiency" and x > 1):
+            expected = "a number in (0, 1]" if key == "efficiency" else "a finite number > 0"
+            raise DataError(f"{where}.{key}: expected {expected}, got {x!r}")
+        out.append((key, float(x)))
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -44,9 +80,15 @@ class JointColumns:
 
     name: str
     position: str
-    effort: str
+    effort: str  # the effort column, or the motor-current column when ``motor`` is given
     velocity: str | None = None
     acceleration: str | None = None
+    motor: tuple[tuple[str, float], ...] = ()  # (torque_constant [N m/A], gear_ratio, efficiency): τ = I·kt·N·η
+
+    @property
+    def effort_scale(self) -> float | None:
+        """kt·N·η [N m/A] for a motor current, None for an effort column."""
+        return float(np.prod([v for _, v in self.motor])) if self.motor else None
 
 
 @dataclass(frozen=True)
@@ -56,6 +98,7 @@ class ColumnMap:
     time: str
     joints: tuple[JointColumns, ...]
     units: tuple[tuple[str, str], ...] = ()  # (quantity, unit) pairs; missing quantities are SI
+    joint_units: tuple[tuple[str, str, str], ...] = ()  # (joint, quantity, unit): overrides ``units`` per joint
 
     def __post_init__(self) -> None:
         joints = tuple(self.joints)
@@ -66,16 +109,30 @@ class ColumnMap:
         if dup:
             raise DataError(f"column map: joints named more than once: {dup}")
         units = dict(self.units.items() if isinstance(self.units, Mapping) else self.units)
-        for quantity, unit in units.items():
+        per_joint = list(self.joint_units)
+        for quantity, unit in list(units.items()):
             if quantity not in UNITS:
                 raise DataError(f"column map: unknown quantity {quantity!r} in units; allowed: {list(UNITS)}")
-            if unit not in UNITS[quantity]:
-                raise DataError(
-                    f"column map: unknown {quantity} unit {unit!r}; allowed: {list(UNITS[quantity])}"
-                )
+            if isinstance(unit, Mapping):  # {Joint1: deg, Joint2: mm}: per joint
+                unknown = [j for j in unit if j not in names]
+                if unknown:
+                    raise DataError(f"column map: units.{quantity} names joints {unknown} that are not mapped; joints: {names}")
+                per_joint += [(str(j), quantity, u) for j, u in unit.items()]
+                del units[quantity]
+        checked = []
+        for where, quantity, unit in [(f"units.{q}", q, u) for q, u in units.items()] + \
+                [(f"units.{q}.{j}", q, u) for j, q, u in per_joint]:
+            u = normalize_unit(unit)
+            if u not in UNITS[quantity]:
+                raise DataError(f"column map: {where}: unknown {quantity} unit {unit!r}; allowed: {list(UNITS[quantity])}")
+            checked.append(u)
+        units = {q: checked[k] for k, q in enumerate(units)}
+        per_joint = tuple((j, q, checked[len(units) + k]) for k, (j, q, _) in enumerate(per_joint))
         full = {q: units.get(q, SI_UNITS[q]) for q in UNITS}
+        per_joint = tuple(sorted({(j, q, u) for j, q, u in per_joint if u != full[q]}))  # one canonical form
         object.__setattr__(self, "joints", joints)
         object.__setattr__(self, "units", tuple(full.items()))
+        object.__setattr__(self, "joint_units", per_joint)
 
     # -- constructors ------------------------------------------------------------------------------
     @staticmethod
@@ -99,7 +156,12 @@ class ColumnMap:
             missing = [k for k in ("position", "effort") if not cols.get(k)]
             if missing:
                 raise DataError(f"column map: joint {name!r} needs columns for {missing}")
-            joints.append(JointColumns(str(name), **{k: (None if v is None else str(v)) for k, v in cols.items()}))
+            cols = dict(cols)
+            motor = _motor(name, cols["effort"]) if isinstance(cols["effort"], Mapping) else ()
+            if motor:
+                cols["effort"] = cols["effort"]["current"]
+            joints.append(JointColumns(str(name), **{k: (None if v is None else str(v)) for k, v in cols.items()},
+                                       motor=motor))
         units = d.get("units") or {}
         if not isinstance(units, Mapping):
             raise DataError(f"column map: 'units' must be a mapping quantity -> unit, got {units!r}")
@@ -115,11 +177,12 @@ class ColumnMap:
         time: str = "time",
         units: Mapping[str, str] | None = None,
     ) -> "ColumnMap":
-        """Columns named by patterns: {i} = 1-based joint index, {name} = joint name (defaults follow the
+        """Columns named by patterns: {i} = 1-based joint index, {k} = 0-based (e.g. "q[{k}]" for a (T, n)
+        array q), {name} = joint name (defaults follow the
         DFKI double-pendulum logs). Pass velocity=None when no velocity is logged."""
 
         def fmt(pat, i, name):
-            return None if pat is None else pat.format(i=i, name=name)
+            return None if pat is None else pat.format(i=i, k=i - 1, name=name)
 
         cols = tuple(
             JointColumns(
@@ -138,7 +201,11 @@ class ColumnMap:
     def joint_names(self) -> tuple[str, ...]:
         return tuple(j.name for j in self.joints)
 
-    def unit(self, quantity: str) -> str:
+    def unit(self, quantity: str, joint: str | None = None) -> str:
+        """The unit of ``quantity`` (of ``joint``, when it has its own)."""
+        for j, q, u in self.joint_units:
+            if j == joint and q == quantity:
+                return u
         return dict(self.units)[quantity]
 
     def columns(self) -> list[str]:
@@ -153,34 +220,15 @@ class ColumnMap:
         joints = {
             j.name: {k: getattr(j, k) for k in _JOINT_KEYS if getattr(j, k) is not None} for j in self.joints
         }
-        return {"time": self.time, "joints": joints, "units": dict(self.units)}
-
-
-def read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
-    """All columns of the file as float arrays (name -> (T,)) and the column order."""
-    ext = path.suffix.lower()
-    if ext == ".npz":
-        with np.load(path, allow_pickle=False) as z:
-            data = {k: np.asarray(z[k]) for k in z.files}
-        if not data:
-            raise DataError(f"{path}: log is empty (no rows)")
-        bad = {k: v.shape for k, v in data.items() if v.ndim != 1}
-        if bad:
-            raise DataError(f"{path}: npz arrays must be 1-D named channels; got shapes {bad}")
-        lengths = {k: v.size for k, v in data.items()}
-        if len(set(lengths.values())) > 1:
-            raise DataError(f"{path}: npz channels have different lengths {lengths}")
-        return data, list(data)
-    import pandas as pd
-
-    if ext == ".csv":
-        try:
-            df = pd.read_csv(path)
-        except pd.errors.EmptyDataError:
-            raise DataError(f"{path}: log is empty (no rows)") from None
-    else:
-        df = pd.read_parquet(path)
-    return {str(c): df[c].to_numpy() for c in df.columns}, [str(c) for c in df.columns]
+        for j in self.joints:
+            if j.motor:
+                joints[j.name]["effort"] = {"current": j.effort, **dict(j.motor)}
+        units: dict = dict(self.units)
+        for j, q, u in self.joint_units:
+            if not isinstance(units[q], dict):
+                units[q] = {n: units[q] for n in self.joint_names}
+            units[q][j] = u
+        return {"time": self.time, "joints": joints, "units": units}
 
 
 def load_log(
@@ -192,7 +240,9 @@ def load_log(
 ) -> Trajectory:
     """One log file as a Trajectory in SI units.
 
-    path: .csv (pandas), .parquet (pyarrow via pandas) or .npz (numpy, one named 1-D array per channel).
+    path: .csv (pandas), .parquet (pyarrow via pandas) or .npz (numpy). NPZ arrays may be 1-D channels
+    or 2-D (T, n) arrays, Parquet columns may hold one list per row: column k of an array "q" is the
+    channel "q[k]" (0-based) in the column map.
     columns: a ColumnMap or its dict form. joints: the model's joint names; the trajectory's
     coordinates follow this order and every model joint must be mapped (default: the map's order).
     velocity: "logged" (the map must name velocity columns) or "gradient" (see the module docstring).
@@ -261,29 +311,30 @@ def load_log(
     for c in dict.fromkeys(needed):
         column(c)  # check every mapped column before converting
     t = column(cmap.time) * UNITS["time"][cmap.unit("time")]
-    dt = np.diff(t)
-    if np.any(dt <= 0):
-        k = int(np.argmax(dt <= 0))
-        raise DataError(
-            f"{path}: time column {cmap.time!r} must be strictly increasing; "
-            f"row {k} has {data[cmap.time][k]} and row {k + 1} has {data[cmap.time][k + 1]}"
-        )
+    check_time(path, data[cmap.time], t, cmap.time)
 
     def stack(key: str, quantity: str):
-        return np.stack([column(getattr(j, key)) for j in jcols], axis=1) * UNITS[quantity][cmap.unit(quantity)]
+        cols = []
+        for j in jcols:
+            scale = j.effort_scale if key == "effort" and j.motor else UNITS[quantity][cmap.unit(quantity, j.name)]
+            x = column(getattr(j, key)) * scale
+            check_magnitude(path, getattr(j, key), x)
+            cols.append(x)
+        return np.stack(cols, axis=1)
 
     q = stack("position", "position")
     tau = stack("effort", "effort")
     a = stack("acceleration", "acceleration") if all(has_a) else None
     if velocity == "logged":
         v = stack("velocity", "velocity")
+        check_velocity(path, t, q, v, joints)
     else:
         v = np.gradient(q, t, axis=0, edge_order=2)
     logged = ["q", "tau"] + (["v"] if velocity == "logged" else []) + (["a"] if a is not None else [])
     meta = {
         "source": str(path),
         "columns": cmap.to_dict(),
-        "units": dict(cmap.units),
+        "units": cmap.to_dict()["units"],
         "logged": logged,
     }
     if velocity == "gradient":

@@ -7,13 +7,15 @@ a fit records how its data were made.
 from __future__ import annotations
 
 import inspect
+import warnings
 from dataclasses import replace
 
 import numpy as np
 from scipy import interpolate, signal
 
+from dualid.data.checks import check_gaps, check_upsampling
 from dualid.data.trajectory import Trajectory
-from dualid.errors import DataError
+from dualid.errors import DataError, DualidWarning
 
 
 def sample_rate(t: np.ndarray, rtol: float = 0.05) -> float:
@@ -36,13 +38,22 @@ def lowpass(x: np.ndarray, fs: float, cutoff: float, order: int = 4) -> np.ndarr
     if not 0 < cutoff < fs / 2:
         raise DataError(f"low-pass cutoff must be in (0, {fs / 2:.4g}) Hz (Nyquist at fs={fs:.4g} Hz), got {cutoff}")
     sos = signal.butter(order, cutoff, btype="low", fs=fs, output="sos")
+    padlen = 3 * (2 * len(sos) + 1)  # scipy's default for sosfiltfilt
+    if np.shape(x)[0] <= padlen:
+        raise DataError(f"low-pass: a signal of {np.shape(x)[0]} samples is too short for an order-{order} zero-phase "
+                        f"filter (needs more than {padlen})")
     return signal.sosfiltfilt(sos, np.asarray(x, dtype=float), axis=0)
+
+
+def _savgol_samples(window: float, fs: float, polyorder: int) -> int:
+    """The odd number of samples of a Savitzky–Golay window of ``window`` s (at least polyorder + 2)."""
+    n = int(round(window * fs)) | 1
+    return max(n, polyorder + 2 + (polyorder % 2 == 0))
 
 
 def savgol_derivatives(x: np.ndarray, fs: float, window: float, polyorder: int = 3):
     """Smoothed x and its first two time derivatives by a Savitzky–Golay fit over ``window`` seconds."""
-    n = int(round(window * fs)) | 1  # odd number of samples
-    n = max(n, polyorder + 2 + (polyorder % 2 == 0))
+    n = _savgol_samples(window, fs, polyorder)
     if n > x.shape[0]:
         raise DataError(f"Savitzky–Golay window of {n} samples is longer than the signal ({x.shape[0]} samples)")
     dt = 1.0 / fs
@@ -91,6 +102,8 @@ def resample(traj: Trajectory, rate: float, method: str = "linear") -> Trajector
             "configuration with SE(3) interpolation (e.g. pinocchio.interpolate) before building the Trajectory"
         )
     t = traj.t
+    check_gaps(t)
+    check_upsampling(t, rate)
     T_new = int(np.floor((t[-1] - t[0]) * rate * (1 + 1e-12))) + 1
     if T_new < 2:
         raise DataError(f"resample: a {t[-1] - t[0]:.4g} s run gives fewer than 2 samples at {rate} Hz")
@@ -152,7 +165,15 @@ def differentiate(
             f"differentiate: q has {traj.q.shape[1]} columns for {traj.n} velocity coordinates (a floating "
             "base with a quaternion); differentiate its configuration on the Lie group (pinocchio.difference)"
         )
+    if method == "savgol" and not (np.isfinite(window) and window > 0):
+        raise DataError(f"differentiate: window must be a positive number of seconds, got {window!r}")
+    if isinstance(polyorder, bool) or not isinstance(polyorder, (int, np.integer)) or polyorder < 2:
+        raise DataError(f"differentiate: polyorder must be an integer ≥ 2 (accelerations need it), got {polyorder!r}")
     fs = sample_rate(traj.t)
+    if method == "savgol" and window * fs < polyorder + 1:
+        warnings.warn(f"differentiate: a {window:g} s window is {window * fs:.2g} samples at {fs:.4g} Hz, fewer than "
+                      f"polyorder + 1 = {polyorder + 1}; it was widened to {_savgol_samples(window, fs, polyorder)} samples",
+                      DualidWarning, stacklevel=2)
     q = traj.q if cutoff is None else lowpass(traj.q, fs, cutoff)
     if method == "savgol":
         _, dq, ddq = savgol_derivatives(q, fs, window, polyorder)
@@ -172,6 +193,9 @@ def differentiate(
 
 def trim(traj: Trajectory, start: float | None = None, stop: float | None = None) -> Trajectory:
     """The samples with start ≤ t ≤ stop (times in seconds on the trajectory's own clock, traj.t)."""
+    for name, x in (("start", start), ("stop", stop)):
+        if x is not None and (isinstance(x, bool) or not isinstance(x, (int, float)) or not np.isfinite(x)):
+            raise DataError(f"trim: {name} must be a number of seconds or null, got {x!r}")
     lo = -np.inf if start is None else float(start)
     hi = np.inf if stop is None else float(stop)
     if lo >= hi:
@@ -198,6 +222,8 @@ def downsample(traj: Trajectory, factor: int, cutoff: float | None = None, order
     fs = sample_rate(traj.t)
     if cutoff is None:
         cutoff = 0.4 * fs / factor
+    if not (np.isfinite(cutoff) and cutoff > 0):
+        raise DataError(f"downsample: cutoff must be a positive number of Hz, got {cutoff!r}")
     if factor > 1 and cutoff >= fs / (2 * factor):
         raise DataError(
             f"downsample: cutoff {cutoff} Hz is not below the new Nyquist frequency {fs / (2 * factor):.4g} Hz "

@@ -27,6 +27,7 @@ from dualid.errors import DataError, MissingFileError, ModelError
 from dualid.model.base import Kind
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.parameters import ParameterSpace, rigid_body_space
+from dualid.model.urdf_check import read_urdf
 
 FREE_FLYER_COORDINATES = ("vx", "vy", "vz", "wx", "wy", "wz")
 
@@ -75,7 +76,7 @@ def _with_implicit_world(path: Path) -> str | None:
     they never declare; urdfdom (hence Pinocchio) rejects that. Declaring the empty link is exactly
     what those files mean. Returns None when the file needs no change.
     """
-    root = ET.parse(path).getroot()
+    root = read_urdf(path)  # values checked before Pinocchio (dualid.model.urdf_check)
     links = {link.get("name") for link in root.findall("link")}
     parents = {p.get("link") for joint in root.findall("joint") for p in joint.findall("parent")}
     if "world" in links or "world" not in parents:
@@ -145,12 +146,15 @@ class RigidBodyModel:
             raise MissingFileError(f"RigidBodyModel.from_urdf: no URDF file at {path}")
         root_joint = (pin.JointModelFreeFlyer(),) if floating_base else ()
         xml = _with_implicit_world(path)
-        if xml is None:
-            model = pin.buildModelFromUrdf(str(path), *root_joint)
-        elif floating_base:
-            model = pin.buildModelFromXML(xml, pin.JointModelFreeFlyer())
-        else:
-            model = pin.buildModelFromXML(xml)
+        try:
+            if xml is None:
+                model = pin.buildModelFromUrdf(str(path), *root_joint)
+            elif floating_base:
+                model = pin.buildModelFromXML(xml, pin.JointModelFreeFlyer())
+            else:
+                model = pin.buildModelFromXML(xml)
+        except (RuntimeError, ValueError) as exc:  # urdfdom / Pinocchio refuse what read_urdf let through
+            raise ModelError(f"{path}: Pinocchio could not build a model from this URDF: {exc}") from None
         return cls(model, gravity)
 
     def with_gravity(self, gravity) -> "RigidBodyModel":
@@ -166,6 +170,35 @@ class RigidBodyModel:
     def nv(self) -> int:
         return self.model.nv
 
+    def configuration(self, q) -> np.ndarray:
+        """Pinocchio's configuration (T, nq) from q as logged: either already (T, nq), or the angle form
+        (T, nq − k) with one angle [rad] per continuous joint (Pinocchio stores those k joints as
+        (cos, sin) pairs, so nq = nv + k without a free flyer)."""
+        q = np.asarray(q, dtype=float)
+        unbounded = [j for j in range(1, self.model.njoints) if "RUB" in self.model.joints[j].shortname()
+                     or "RevoluteUnbounded" in self.model.joints[j].shortname()]
+        width = q.shape[-1] if q.ndim in (1, 2) else None
+        if not unbounded or width == self.nq:
+            return _as_samples(q, self.nq, "q")
+        angle_width = self.nq - len(unbounded)
+        if width != angle_width:
+            raise DataError(
+                f"q: expected shape (T, {self.nq}) (Pinocchio's configuration) or (T, {angle_width}) (one angle per "
+                f"continuous joint), got {np.shape(q)}")
+        q = _as_samples(q, angle_width, "q")
+        out = np.empty((q.shape[0], self.nq))
+        src = 0
+        for j in range(1, self.model.njoints):
+            joint = self.model.joints[j]
+            if j in unbounded:
+                out[:, joint.idx_q] = np.cos(q[:, src])
+                out[:, joint.idx_q + 1] = np.sin(q[:, src])
+                src += 1
+            else:
+                out[:, joint.idx_q:joint.idx_q + joint.nq] = q[:, src:src + joint.nq]
+                src += joint.nq
+        return out
+
     @property
     def nominal(self) -> np.ndarray:
         """θ (10·nbodies,) from the model's inertias (e.g. the URDF's)."""
@@ -180,7 +213,7 @@ class RigidBodyModel:
             raise DataError(
                 "RigidBodyModel.regressor: accelerations a are required (use bias_regressor for a = 0)"
             )
-        q = _as_samples(q, self.nq, "q")
+        q = self.configuration(q)
         v = _as_samples(v, self.nv, "v")
         a = _as_samples(a, self.nv, "a")
         if not q.shape[0] == v.shape[0] == a.shape[0]:
@@ -198,7 +231,7 @@ class RigidBodyModel:
 
     def jacobians(self, q: np.ndarray) -> np.ndarray:
         """J (T, nbodies, 6, nv): each body's Jacobian in its own frame (LOCAL), [linear; angular]."""
-        q = _as_samples(q, self.nq, "q")
+        q = self.configuration(q)
         model, data = self.model, self._data
         nb = model.njoints - 1
         J = np.empty((q.shape[0], nb, 6, self.nv))

@@ -43,6 +43,9 @@ def _manifest(directory: Path) -> list[str]:
 def check_output_dir(out: str | Path, force: bool) -> Path:
     """Fail early (before a long computation) if ``out`` cannot be written under the policy."""
     out = Path(out)
+    above = next((p for p in out.parents if p.exists()), None)
+    if above is not None and not above.is_dir():
+        raise OutputError(f"output directory {out}: {above} is a file, so no directory can be made below it")
     if out.exists() and not out.is_dir():
         raise OutputError(f"output directory {out}: exists and is a file, expected a directory")
     if out.is_dir() and any(out.iterdir()) and not force:

@@ -175,6 +175,8 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str]) -> dict:
             "validation": None if f.validation is None else f.validation.as_dict(),
         }
     return jsonable({
+        "complete": outcome.complete,  # False when a requested method failed (its entry has "error")
+        "warnings": list(outcome.warnings),
         "model": {"urdf": outcome.config.model.urdf, "floating_base": outcome.config.model.floating_base,
                   "gravity": list(outcome.rigid.gravity)},
         "data": {"train": list(outcome.config.train), "test": list(outcome.config.test),
@@ -183,7 +185,8 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str]) -> dict:
         "identifiability": {"rank": ident.rank, "n_params": ident.n_params,
                             "condition_number": ident.condition_number,
                             "not_identifiable": list(ident.unidentifiable)},
-        "prior": {"source": outcome.config.prior.source, "gamma": outcome.config.prior.gamma, "theta0": outcome.prior},
+        "prior": {"source": outcome.config.prior.source, "gamma": outcome.config.prior.gamma,
+                  "per_equation": outcome.config.prior.per_equation, "theta0": outcome.prior},
         "uncertainty_note": UNCERTAINTY_NOTE,
         "methods": methods,
         "references": {
@@ -244,16 +247,25 @@ def _write_fit(outcome: FitOutcome, out: Path) -> dict[str, Path]:
 
 def _report_md(outcome: FitOutcome, validations, urdfs, figures) -> str:
     cfg = outcome.config
-    lines = [
-        f"# Identification of {cfg.model.urdf.name}",
-        "",
+    failed = [m for m, f in outcome.fits.items() if not f.ok]
+    lines = [f"# Identification of {cfg.model.urdf.name}", ""]
+    if failed:
+        lines += [f"**Incomplete: {len(failed)} of {len(outcome.fits)} requested methods failed "
+                  f"({', '.join(failed)}); see Fits.**", ""]
+    lines += [
         f"- training runs: {', '.join(p.name for p in cfg.train)}",
         f"- held-out runs: {', '.join(p.name for p in cfg.test) or '(none: no validation)'}",
         f"- samples after preprocessing: {outcome.problem.N} × {outcome.problem.n} joints; parameters: {outcome.problem.p}",
         f"- preprocessing: `{to_json(outcome.steps, indent=None)}`",
+        *([f"- preprocessing {outcome.preprocessing_note} (no 'preprocessing' in the config)"]
+          if outcome.preprocessing_note else []),
         f"- joint terms: viscous={cfg.joint_terms.viscous}, coulomb={cfg.joint_terms.coulomb} "
         f"(v_c = {cfg.joint_terms.coulomb_velocity} rad/s), armature={cfg.joint_terms.armature}",
         "",
+    ]
+    if outcome.warnings:
+        lines += ["## Warnings", ""] + [f"- {w}" for w in outcome.warnings] + [""]
+    lines += [
         "## Identifiability",
         "",
         "```",
@@ -286,7 +298,8 @@ def _report_md(outcome: FitOutcome, validations, urdfs, figures) -> str:
         ]
         lines += [f"![{f}]({f})" for f in figures]
     if outcome.prior:
-        lines += ["", f"Prior of logdet/pullback (γ = {cfg.prior.gamma}): {outcome.prior}."]
+        weight = f"γ = {cfg.prior.gamma} per equation (γ·N·n)" if cfg.prior.per_equation else f"γ = {cfg.prior.gamma}"
+        lines += ["", f"Prior of logdet/pullback ({weight}): {outcome.prior}."]
     lines += ["", "## Parameters", "", "(n.i.: not identifiable on its own; ± standard error, see parameters.yaml)", "",
               _param_table(outcome), ""]
     return "\n".join(lines)

@@ -10,7 +10,7 @@ YAML form (relative paths are relative to the YAML file's folder)::
     joint_terms: {viscous: true, coulomb: true, coulomb_velocity: 0.01, armature: true, joints: [Joint1]}
     bounds: {Joint1.b: [0, 1]}
     methods: [ols, wls, energy, logdet, pullback, dm]
-    prior: {source: urdf, gamma: 1.0}
+    prior: {source: urdf, gamma: 0.1, per_equation: true}
     validation: {xcorr_window: 0.02}
     references: {lab: lab_parameters.yml}
     out: results/robot
@@ -27,15 +27,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from dualid.errors import ConfigError, MissingFileError
+from dualid.errors import ConfigError
 from dualid.estimators.methods import METHODS  # the one list of method names
-
-DEFAULT_PREPROCESSING = (
-    {"resample": {"rate": 500.0}},
-    {"differentiate": {"method": "savgol", "window": 0.05}},
-    {"filter_lowpass": {"cutoff": 20.0, "fields": ["tau"]}},
-    {"downsample": {"factor": 5}},
-)
 
 _TOP_KEYS = (
     "model", "columns", "train", "test", "preprocessing", "joint_terms", "bounds", "methods", "prior",
@@ -43,7 +36,7 @@ _TOP_KEYS = (
 )
 _MODEL_KEYS = ("urdf", "floating_base", "gravity")
 _JOINT_TERM_KEYS = ("viscous", "coulomb", "coulomb_velocity", "armature", "joints")
-_PRIOR_KEYS = ("source", "gamma")
+_PRIOR_KEYS = ("source", "gamma", "per_equation")
 _VALIDATION_KEYS = ("xcorr_window",)
 
 
@@ -75,6 +68,15 @@ def _paths(x, base: Path | None, where: str) -> tuple[Path, ...]:
     return tuple(_path(p, base, where) for p in x)
 
 
+def _float(x, where: str) -> float:
+    if isinstance(x, bool) or not isinstance(x, (int, float, str)):
+        raise ConfigError(f"{where}: expected a number, got {x!r}")
+    try:
+        return float(x)
+    except ValueError:
+        raise ConfigError(f"{where}: expected a number, got {x!r}") from None
+
+
 def _bool(x, where: str) -> bool:
     if not isinstance(x, bool):
         raise ConfigError(f"{where}: expected true or false, got {x!r}")
@@ -100,7 +102,8 @@ class JointTermsConfig:
 @dataclass(frozen=True)
 class PriorConfig:
     source: str = "urdf"  # "urdf" (the URDF's inertials) or a parameters.yaml/json file (from a previous fit)
-    gamma: float = 1.0  # weight of the prior, in units of the data objective
+    gamma: float = 0.1  # weight of the prior: per equation (γ·N·n, the study's convention) or absolute
+    per_equation: bool = True
 
 
 @dataclass(frozen=True)
@@ -111,7 +114,7 @@ class FitConfig:
     train: tuple[Path, ...]
     test: tuple[Path, ...] = ()
     columns: Mapping | None = None  # ColumnMap dict form; None: DFKI default if the logs have those columns
-    preprocessing: tuple[dict, ...] = DEFAULT_PREPROCESSING
+    preprocessing: tuple[dict, ...] | None = None  # None: derived from the first log (dualid.robot.defaults)
     joint_terms: JointTermsConfig = field(default_factory=JointTermsConfig)
     bounds: tuple[tuple[str, float, float], ...] = ()  # (name, lo, hi)
     methods: tuple[str, ...] = ("ols", "dm")
@@ -132,6 +135,9 @@ class FitConfig:
             object.__setattr__(self, "methods", tuple(dict.fromkeys(self.methods)))
         if not (np.isfinite(self.xcorr_window) and self.xcorr_window >= 0):
             raise ConfigError(f"validation.xcorr_window: expected seconds ≥ 0, got {self.xcorr_window!r}")
+        if not (np.isfinite(self.joint_terms.coulomb_velocity) and self.joint_terms.coulomb_velocity > 0):
+            raise ConfigError(
+                f"joint_terms.coulomb_velocity: expected a velocity > 0 [rad/s], got {self.joint_terms.coulomb_velocity!r}")
         if not (np.isfinite(self.prior.gamma) and self.prior.gamma >= 0):
             raise ConfigError(f"prior.gamma: expected a number ≥ 0, got {self.prior.gamma!r}")
         for name, lo, hi in self.bounds:
@@ -156,8 +162,8 @@ class FitConfig:
         gravity = m.get("gravity")
         if gravity is not None:
             try:
-                gravity = tuple(float(x) for x in gravity)
-            except (TypeError, ValueError):
+                gravity = tuple(_float(x, "model.gravity") for x in gravity)
+            except (TypeError, ConfigError):
                 gravity = ()
             if len(gravity) != 3:
                 raise ConfigError(f"model.gravity: expected 3 numbers [m/s²], got {m.get('gravity')!r}")
@@ -170,7 +176,7 @@ class FitConfig:
         joint_terms = JointTermsConfig(
             viscous=_bool(jt.get("viscous", True), "joint_terms.viscous"),
             coulomb=_bool(jt.get("coulomb", True), "joint_terms.coulomb"),
-            coulomb_velocity=float(jt.get("coulomb_velocity", 0.01)),
+            coulomb_velocity=_float(jt.get("coulomb_velocity", 0.01), "joint_terms.coulomb_velocity"),
             armature=_bool(jt.get("armature", True), "joint_terms.armature"),
             joints=joints,
         )
@@ -181,7 +187,8 @@ class FitConfig:
         source = str(pr.get("source", "urdf"))
         if source != "urdf":
             source = str(_path(source, base, "prior.source"))
-        prior = PriorConfig(source, float(pr.get("gamma", 1.0)))
+        prior = PriorConfig(source, _float(pr.get("gamma", 0.1), "prior.gamma"),
+                            _bool(pr.get("per_equation", True), "prior.per_equation"))
 
         bounds_in = d.get("bounds") or {}
         if not isinstance(bounds_in, Mapping):
@@ -190,13 +197,14 @@ class FitConfig:
         for name, pair in bounds_in.items():
             if not isinstance(pair, (list, tuple)) or len(pair) != 2:
                 raise ConfigError(f"bounds: {name!r} must be [lower, upper] (use null for none), got {pair!r}")
-            lo, hi = (-np.inf if pair[0] is None else float(pair[0]), np.inf if pair[1] is None else float(pair[1]))
+            lo = -np.inf if pair[0] is None else _float(pair[0], f"bounds.{name}[0]")
+            hi = np.inf if pair[1] is None else _float(pair[1], f"bounds.{name}[1]")
             bounds.append((str(name), lo, hi))
 
         methods = d.get("methods", ("ols", "dm"))
         methods = (methods,) if isinstance(methods, str) else tuple(str(x) for x in methods)
-        steps = d.get("preprocessing", DEFAULT_PREPROCESSING)
-        if not isinstance(steps, (list, tuple)):
+        steps = d.get("preprocessing")
+        if steps is not None and not isinstance(steps, (list, tuple)):
             raise ConfigError(f"preprocessing: expected a list of steps {{name: parameters}}, got {steps!r}")
         val = _check_keys(d.get("validation"), _VALIDATION_KEYS, "validation")
         refs = d.get("references") or {}
@@ -210,12 +218,12 @@ class FitConfig:
             train=_paths(d["train"], base, "train"),
             test=_paths(d.get("test"), base, "test"),
             columns=columns,
-            preprocessing=tuple(steps),
+            preprocessing=None if steps is None else tuple(steps),
             joint_terms=joint_terms,
             bounds=tuple(bounds),
             methods=methods,
             prior=prior,
-            xcorr_window=float(val.get("xcorr_window", 0.02)),
+            xcorr_window=_float(val.get("xcorr_window", 0.02), "validation.xcorr_window"),
             references=tuple((str(k), _path(v, base, f"references.{k}")) for k, v in refs.items()),
             out=None if d.get("out") is None else _path(d["out"], base, "out"),
         )
@@ -223,14 +231,15 @@ class FitConfig:
     @staticmethod
     def from_yaml(path: str | Path) -> "FitConfig":
         """Read a YAML config; relative paths in it are relative to its folder."""
-        import yaml
+        from dualid.robot.files import read_mapping
 
         path = Path(path)
-        if not path.is_file():
-            raise MissingFileError(f"config file not found: {path}")
-        with open(path) as f:
-            d = yaml.safe_load(f) or {}
-        return FitConfig.from_dict(d, base_dir=path.resolve().parent)
+        from dualid.robot.schema import check_shape
+
+        d = read_mapping(path, "config file")
+        config = FitConfig.from_dict(d, base_dir=path.resolve().parent)  # its messages first: they are the most specific
+        check_shape(d, f"config file {path}")  # then what only the schema sees (e.g. a list where a name belongs)
+        return config
 
     def with_overrides(self, **changes) -> "FitConfig":
         """A copy with the given fields replaced (None values are ignored), e.g. from CLI flags."""
@@ -248,14 +257,14 @@ class FitConfig:
             "columns": None if self.columns is None else dict(self.columns),
             "train": [str(p) for p in self.train],
             "test": [str(p) for p in self.test],
-            "preprocessing": [dict(s) for s in self.preprocessing],
+            "preprocessing": None if self.preprocessing is None else [dict(s) for s in self.preprocessing],
             "joint_terms": {"viscous": self.joint_terms.viscous, "coulomb": self.joint_terms.coulomb,
                             "coulomb_velocity": self.joint_terms.coulomb_velocity,
                             "armature": self.joint_terms.armature,
                             "joints": None if self.joint_terms.joints is None else list(self.joint_terms.joints)},
             "bounds": {n: [lo, hi] for n, lo, hi in self.bounds},
             "methods": list(self.methods),
-            "prior": {"source": self.prior.source, "gamma": self.prior.gamma},
+            "prior": {"source": self.prior.source, "gamma": self.prior.gamma, "per_equation": self.prior.per_equation},
             "validation": {"xcorr_window": self.xcorr_window},
             "references": {k: str(v) for k, v in self.references},
             "out": None if self.out is None else str(self.out),

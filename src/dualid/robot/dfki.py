@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from dualid.errors import ConfigError, DataError, MissingFileError
+from dualid.errors import ConfigError, DataError
 from dualid.model.joint_terms import JointTermsModel
 from dualid.model.rigid_body import RigidBodyModel
 
@@ -41,16 +41,17 @@ CROSS_AXIS_RATIO = 0.1  # along-link / across-link central inertia of the invent
 
 def load_reference(yml_path: str | Path) -> dict[str, float]:
     """The lab's parameters as floats; KeyError-free: missing names raise ValueError."""
-    import yaml
+    from dualid.robot.files import read_mapping
 
     path = Path(yml_path)
-    if not path.is_file():
-        raise MissingFileError(f"DFKI reference parameters not found: {path}")
-    with open(path) as f:
-        d = yaml.safe_load(f) or {}
+    d = read_mapping(path, "DFKI reference parameters")
     missing = [k for k in KEYS if k not in d]
     if missing:
         raise DataError(f"{path}: missing DFKI parameters {missing}; expected {list(KEYS)}")
+    bad = {k: d[k] for k in KEYS if isinstance(d[k], bool) or not isinstance(d[k], (int, float))
+           or not np.isfinite(d[k])}
+    if bad:
+        raise DataError(f"{path}: DFKI parameters must be finite numbers; got {bad}")
     return {k: float(v) for k, v in d.items() if isinstance(v, (int, float))}
 
 

@@ -20,18 +20,18 @@ regularized (logdet, pullback) and dual-metric (dm) estimators.
 from __future__ import annotations
 
 import dataclasses
-import json
-import xml.etree.ElementTree as ET
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+import cvxpy as cp
 import numpy as np
 
 from dualid.data.io import ColumnMap, load_log, read_table
 from dualid.data.preprocessing import preprocess
 from dualid.data.trajectory import Trajectory
-from dualid.errors import DataError, DualidError, MissingFileError
+from dualid.errors import DataError, DualidError, DualidWarning, MissingFileError
 from dualid.estimators import OLS, IdentificationResult
 from dualid.estimators.least_squares import covariance_weight
 from dualid.estimators.methods import make_estimator
@@ -41,8 +41,12 @@ from dualid.evaluation.validation import Validation, validate
 from dualid.linalg import pinv_psd
 from dualid.model.joint_terms import JointTermsModel, with_joint_terms
 from dualid.model.rigid_body import RigidBodyModel
+from dualid.model.urdf_check import read_urdf
 from dualid.problem import Identifiability, IdentificationProblem, build_problem
 from dualid.robot.config import FitConfig
+from dualid.robot.defaults import adaptive_preprocessing, warn_far_from_data
+from dualid.robot.files import read_mapping
+from dualid.robot.inputs import array_column_map, check_runs_differ, check_units
 
 NOT_IDENTIFIABLE = "not identifiable"
 
@@ -60,12 +64,26 @@ def column_map(config_columns, joints: tuple[str, ...], first_log: Path) -> Colu
         raise MissingFileError(f"log file not found: {first_log}")
     _, available = read_table(Path(first_log))
     missing = [c for c in cmap.columns() if c not in available]
+    arrays = array_column_map(joints, available)
+    if missing and arrays is not None:
+        return arrays
     if missing:
         raise DataError(
             f"no column map given and {first_log} lacks the default DFKI columns {missing} "
             f"(available: {available}); give a 'columns' map in a --config file"
         )
     return cmap
+
+
+def choose_preprocessing(steps, first_log: Path, cmap: ColumnMap, joints: tuple[str, ...]) -> tuple[tuple, str]:
+    """The configured steps (with warnings when far from the data) or, when none are configured, steps
+    derived from the first log's rate and motion band, and a sentence saying how (dualid.robot.defaults)."""
+    velocity = "logged" if all(j.velocity for j in cmap.joints) else "gradient"
+    raw = load_log(first_log, cmap, joints, velocity=velocity)
+    if steps is not None:
+        warn_far_from_data(raw, steps)
+        return tuple(steps), ""
+    return adaptive_preprocessing(raw)
 
 
 def load_runs(paths, cmap: ColumnMap, joints: tuple[str, ...], steps) -> list[Trajectory]:
@@ -83,7 +101,6 @@ def load_runs(paths, cmap: ColumnMap, joints: tuple[str, ...], steps) -> list[Tr
     return runs
 
 
-# --- model ------------------------------------------------------------------------------------
 def build_model(config: FitConfig) -> tuple[RigidBodyModel, JointTermsModel | RigidBodyModel]:
     """The URDF's rigid-body model and it with the configured joint terms."""
     rigid = RigidBodyModel.from_urdf(config.model.urdf, config.model.floating_base, config.model.gravity)
@@ -110,7 +127,7 @@ def with_bounds(problem: IdentificationProblem, bounds) -> IdentificationProblem
 
 def urdf_joint_terms(urdf: Path, joints: tuple[str, ...]) -> dict[str, dict[str, float]]:
     """{joint: {damping, friction, armature}} from the <dynamics> of the URDF's moving joints (0 if absent)."""
-    root = ET.parse(urdf).getroot()
+    root = read_urdf(urdf)  # <dynamics> values checked finite and ≥ 0
     out = {}
     for joint in root.findall("joint"):
         name = joint.get("name")
@@ -137,21 +154,17 @@ def prior_theta(config: FitConfig, rigid: RigidBodyModel, model, ols_theta: np.n
     else:
         source, _, pick = config.prior.source.partition("#")
         path = Path(source)
-        if not path.is_file():
-            raise MissingFileError(f"prior.source: no parameters file at {path}")
-        if path.suffix == ".json":
-            d = json.loads(path.read_text())
-        else:
-            import yaml
-
-            d = yaml.safe_load(path.read_text())
-        d = d or {}
+        d = read_mapping(path, "prior.source parameters file")
         if "methods" in d:  # a parameters.yaml/json of a previous fit: "file#method" or its first fitted method
             fitted = [m for m, e in d["methods"].items() if "parameters" in e]
             if not fitted or (pick and pick not in fitted):
                 raise DataError(f"prior.source {path}: no fitted method {pick or ''!r}; fitted methods: {fitted}")
             d = d["methods"][pick or fitted[0]]
-        values = {e["name"]: float(e["value"]) for e in d.get("parameters", [])}
+        try:
+            values = {str(e["name"]): float(e["value"]) for e in d.get("parameters", [])}
+        except (KeyError, TypeError, ValueError) as exc:
+            raise DataError(f"prior.source {path}: 'parameters' must be a list of {{name, value}} with numeric "
+                            f"values; {type(exc).__name__}: {exc}") from None
         missing = [n for n in rigid.parameters.names if n not in values]
         if missing:
             raise DataError(f"prior.source {path}: no values for parameters {missing}")
@@ -169,9 +182,10 @@ def prior_theta(config: FitConfig, rigid: RigidBodyModel, model, ols_theta: np.n
 
 
 # --- estimators -------------------------------------------------------------------------------
-def estimator(method: str, theta0: np.ndarray | None = None, gamma: float = 1.0):
-    """Constrained estimators that accept a URDF chain's null space (never fully identifiable)."""
-    return make_estimator(method, theta0=theta0, gamma=gamma, allow_unidentifiable=True)
+def estimator(method: str, theta0: np.ndarray | None = None, gamma: float = 0.1, per_equation: bool = True):
+    """Constrained estimators that accept a URDF chain's null space (never fully identifiable); the prior
+    weight γ of logdet/pullback is per equation by default (γ·N·n, as in the paper's study)."""
+    return make_estimator(method, theta0=theta0, gamma=gamma, per_equation=per_equation, allow_unidentifiable=True)
 
 
 def standard_errors(method: str, problem: IdentificationProblem, result: IdentificationResult,
@@ -227,6 +241,13 @@ class FitOutcome:
     fits: dict[str, MethodFit]
     references: dict[str, tuple[np.ndarray, Validation | None]] = field(default_factory=dict)
     prior: str = ""  # where θ₀ of the regularized methods came from
+    warnings: tuple[str, ...] = ()  # the DualidWarnings raised while loading, checking and fitting
+    preprocessing_note: str = ""  # how the default preprocessing was derived from the data ("" if configured)
+
+    @property
+    def complete(self) -> bool:
+        """True when every requested method succeeded."""
+        return all(f.ok for f in self.fits.values())
 
     @property
     def steps(self) -> list:
@@ -257,16 +278,34 @@ def _say(progress: Progress | None, message: str) -> None:
 
 
 def fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome:
-    """Run the whole workflow (see the module docstring); progress(message) is called between stages."""
+    """Run the whole workflow (see the module docstring); progress(message) is called between stages.
+    Every DualidWarning raised on the way is recorded in the outcome (and re-issued to the caller)."""
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", DualidWarning)
+            outcome = _fit_robot(config, progress)
+    finally:  # re-issued (each once) also when an error follows: a warning may explain it
+        for w in {(str(w.message), w.category): w for w in caught}.values():
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    ours = [w for w in caught if issubclass(w.category, DualidWarning)]
+    return dataclasses.replace(outcome, warnings=tuple(dict.fromkeys(str(w.message) for w in ours)))
+
+
+def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome:
     from dualid.robot.dfki import reference_theta
 
     _say(progress, f"building the model from {config.model.urdf}")
     rigid, model = build_model(config)
     joints = tuple(rigid.coordinates)
     cmap = column_map(config.columns, joints, config.train[0])
+    check_units(rigid, cmap)
+    check_runs_differ(config.train, config.test)
+    if config.prior.source != "urdf" and {"logdet", "pullback"} & set(config.methods):
+        read_mapping(config.prior.source.partition("#")[0], "prior.source parameters file")  # bad input: before fitting
     _say(progress, f"loading {len(config.train)} training and {len(config.test)} test logs")
-    train = load_runs(config.train, cmap, joints, config.preprocessing)
-    test = load_runs(config.test, cmap, joints, config.preprocessing)
+    steps, steps_note = choose_preprocessing(config.preprocessing, config.train[0], cmap, joints)
+    train = load_runs(config.train, cmap, joints, steps)
+    test = load_runs(config.test, cmap, joints, steps)
     _say(progress, "building regressors")
     problem = with_bounds(build_problem(model, train), config.bounds)
     ident = problem.identifiability()
@@ -281,8 +320,9 @@ def fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome
                 if ols_theta is None and model is not rigid:
                     ols_theta = estimator("ols").fit(problem).theta
                 theta0, prior_text = prior_theta(config, rigid, model, ols_theta)
-            result = estimator(method, theta0, config.prior.gamma).fit(problem)
-        except (DualidError, ValueError, np.linalg.LinAlgError) as exc:  # recorded in the report: one
+            result = estimator(method, theta0, config.prior.gamma, config.prior.per_equation).fit(problem)
+        except (DualidError, ValueError, np.linalg.LinAlgError, cp.error.DCPError, cp.error.SolverError) as exc:
+            # recorded in the report (cvxpy's DCPError: e.g. data so large the problem loses convexity): one
             # method's failure must not lose the others; anything else is a bug and propagates
             fits[method] = MethodFit(method, None, error=f"{type(exc).__name__}: {exc}")
             continue
@@ -300,4 +340,5 @@ def fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome
         _say(progress, f"validating the reference parameters {label}")
         theta_ref = reference_theta(path, model)
         references[label] = (theta_ref, validate(model, theta_ref, test, label, config.xcorr_window) if test else None)
-    return FitOutcome(config, rigid, model, cmap, tuple(train), tuple(test), problem, ident, fits, references, prior_text)
+    return FitOutcome(config, rigid, model, cmap, tuple(train), tuple(test), problem, ident, fits, references, prior_text,
+                      preprocessing_note=steps_note)

@@ -11,8 +11,7 @@ from dualid.errors import DataError
 from dualid.evaluation.validation import Validation, validate
 from dualid.model.joint_terms import JointTermsModel, with_joint_terms
 from dualid.model.rigid_body import RigidBodyModel
-from dualid.robot.config import DEFAULT_PREPROCESSING
-from dualid.robot.fit import column_map, load_runs, urdf_joint_terms
+from dualid.robot.fit import choose_preprocessing, column_map, load_runs, urdf_joint_terms
 
 
 def validate_urdf(urdf, data, columns=None, preprocessing=None, xcorr_window: float = 0.02,
@@ -39,5 +38,6 @@ def validate_urdf(urdf, data, columns=None, preprocessing=None, xcorr_window: fl
         [terms[j]["armature"] for j in joints],
     ])
     cmap = column_map(columns, tuple(rigid.coordinates), data[0])
-    runs = load_runs(data, cmap, tuple(rigid.coordinates), preprocessing if preprocessing is not None else DEFAULT_PREPROCESSING)
+    steps, _ = choose_preprocessing(preprocessing, data[0], cmap, tuple(rigid.coordinates))
+    runs = load_runs(data, cmap, tuple(rigid.coordinates), steps)
     return model, theta, validate(model, theta, runs, label or urdf.stem, xcorr_window)

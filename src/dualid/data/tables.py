@@ -1,0 +1,79 @@
+"""Reading a log file into named float channels: CSV (pandas), Parquet (pyarrow via pandas) and NPZ.
+
+(T, n) arrays (NPZ arrays, Parquet columns holding one list per row) become channels "name[k]".
+Unreadable files are DataErrors naming the file; duplicated CSV header names are refused.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from dualid.data.checks import csv_header
+from dualid.errors import DataError
+
+FORMATS = (".csv", ".parquet", ".npz")
+
+
+def read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
+    """All columns of the file as float arrays (name -> (T,)) and the column order."""
+    ext = path.suffix.lower()
+    if ext not in FORMATS:
+        raise DataError(f"{path}: unknown log format {path.suffix!r}; expected one of {', '.join(FORMATS)}")
+    if ext == ".npz":
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                data = {k: np.asarray(z[k]) for k in z.files}
+        except (ValueError, EOFError, zipfile.BadZipFile) as exc:  # not an npz, truncated, pickled objects
+            raise DataError(f"{path}: cannot read it as .npz ({type(exc).__name__}: {exc})") from None
+        if not data:
+            raise DataError(f"{path}: log is empty (no rows)")
+        data = _split_arrays(path, data)
+        lengths = {k: v.shape[0] for k, v in data.items()}
+        if len(set(lengths.values())) > 1:
+            raise DataError(f"{path}: npz channels have different lengths {lengths}")
+        return data, list(data)
+    import pandas as pd
+
+    if ext == ".csv":
+        try:
+            csv_header(path)
+        except UnicodeDecodeError as exc:
+            raise DataError(f"{path}: cannot read it as CSV text ({exc})") from None  # duplicated names: pandas would rename them silently
+        try:
+            df = pd.read_csv(path)
+        except pd.errors.EmptyDataError:
+            raise DataError(f"{path}: log is empty (no rows)") from None
+        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+            raise DataError(f"{path}: cannot read it as CSV ({type(exc).__name__}: {exc})") from None
+    else:
+        try:
+            df = pd.read_parquet(path)
+        except (ValueError, OSError) as exc:  # pyarrow's ArrowInvalid is a ValueError
+            if isinstance(exc, (PermissionError, IsADirectoryError)):
+                raise
+            raise DataError(f"{path}: cannot read it as Parquet ({type(exc).__name__}: {exc})") from None
+    data = {str(c): df[c].to_numpy() for c in df.columns}
+    for c, x in list(data.items()):  # Parquet list columns (one array per row) -> (T, n)
+        if x.dtype == object and len(x) and isinstance(x[0], (list, tuple, np.ndarray)):
+            try:
+                data[c] = np.stack([np.asarray(r, dtype=float) for r in x])
+            except (ValueError, TypeError):
+                raise DataError(f"{path}: list column {c!r} has rows of different lengths or non-numbers") from None
+    data = _split_arrays(path, data)
+    return data, list(data)
+
+
+def _split_arrays(path: Path, data: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """2-D arrays (T, n) become channels 'name[0]' … 'name[n-1]' (addressed so in a column map)."""
+    out: dict[str, np.ndarray] = {}
+    for k, x in data.items():
+        if x.ndim == 1:
+            out[k] = x
+        elif x.ndim == 2:
+            out.update({f"{k}[{i}]": x[:, i] for i in range(x.shape[1])})
+        else:
+            raise DataError(f"{path}: array {k!r} has shape {x.shape}; expected (T,) channels or (T, n) arrays")
+    return out

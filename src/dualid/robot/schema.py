@@ -1,0 +1,120 @@
+"""The YAML form of a fit config as a pydantic v2 model, for its JSON Schema (editor completion and
+checking: docs/fit-config.schema.json, written by ``dualid schema``) and for checking a config's
+shape with key-path messages (``check_shape``). ``FitConfig.from_dict`` stays the reference for
+the values; tests keep the two in step (the same keys, the example config accepted by both).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from dualid.errors import ConfigError
+from dualid.estimators.methods import METHODS
+
+Method = Literal[tuple(METHODS)]  # type: ignore[valid-type]
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class ModelSection(_Section):
+    urdf: str = Field(description="the robot's URDF (relative to the config file)")
+    floating_base: bool = Field(False, description="add a free-flyer root joint")
+    gravity: list[float] | None = Field(None, min_length=3, max_length=3, description="[m/s²]; default (0, 0, -9.81)")
+
+
+class MotorEffort(_Section):
+    current: str = Field(description="the motor-current column [A]")
+    torque_constant: float = Field(gt=0, description="kt [N m/A]")
+    gear_ratio: float = Field(1.0, gt=0)
+    efficiency: float = Field(1.0, gt=0, le=1)
+
+
+class JointColumnsSection(_Section):
+    position: str
+    effort: str | MotorEffort = Field(description="an effort column, or a motor current: τ = I·kt·N·η")
+    velocity: str | None = None
+    acceleration: str | None = None
+
+
+UnitSpec = str | dict[str, str]  # one unit, or {joint: unit}
+
+
+class ColumnsSection(_Section):
+    time: str = "time"
+    joints: dict[str, JointColumnsSection] = Field(description="model joint name -> its columns; 'q[k]' is column k of an array q")
+    units: dict[Literal["time", "position", "velocity", "acceleration", "effort"], UnitSpec] = Field(default_factory=dict)
+
+
+class JointTermsSection(_Section):
+    viscous: bool = True
+    coulomb: bool = True
+    coulomb_velocity: float = Field(0.01, gt=0, description="v_c of fc·tanh(v/v_c) [rad/s]")
+    armature: bool = True
+    joints: list[str] | str | None = None
+
+
+class PriorSection(_Section):
+    source: str = Field("urdf", description="'urdf' or a parameters.yaml/json of a previous fit ('file#method')")
+    gamma: float = Field(0.1, ge=0)
+    per_equation: bool = Field(True, description="γ·N·n (the study's convention) instead of an absolute γ")
+
+
+class ValidationSection(_Section):
+    xcorr_window: float = Field(0.02, ge=0, description="[s] shift window of the normalized cross-correlation")
+
+
+class FitConfigSchema(_Section):
+    """A real-robot fit (dualid fit --config FILE)."""
+
+    model: ModelSection | str
+    columns: ColumnsSection | None = None
+    train: list[str] | str = Field(description="training logs (csv/parquet/npz)")
+    test: list[str] | str | None = None
+    preprocessing: list[dict[str, dict[str, Any] | None]] | None = Field(
+        None, description="steps {resample | filter_lowpass | differentiate | trim | downsample: parameters}; "
+                          "omit to derive them from the first log's rate and motion band")
+    joint_terms: JointTermsSection | None = None
+    bounds: dict[str, tuple[float | None, float | None]] | None = None
+    methods: list[Method] | Method | None = None
+    prior: PriorSection | str | None = None
+    validation: ValidationSection | None = None
+    references: dict[str, str] | None = None
+    out: str | None = None
+
+
+def json_schema() -> dict:
+    """The JSON Schema of the config file."""
+    schema = FitConfigSchema.model_json_schema()
+    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+    schema["title"] = "dualid fit config"
+    return schema
+
+
+def check_shape(d: Any, where: str = "config") -> None:
+    """ConfigError listing every mismatch with the schema by key path ('joint_terms.coulomb_velocity: …')."""
+    try:
+        FitConfigSchema.model_validate(d)
+    except ValidationError as exc:
+        best: dict[str, tuple[int, list[str]]] = {}  # top key -> (depth, messages): a union's most specific errors
+        for e in exc.errors():
+            parts = [str(p) for p in e["loc"] if not _is_union_tag(p)]
+            path = ".".join(parts) or "(top level)"
+            top = parts[0] if parts else path
+            message = f"{path}: {e['msg']} (got {e.get('input')!r})"
+            depth = len(e["loc"])
+            if top not in best or depth > best[top][0]:
+                best[top] = (depth, [message])
+            elif depth == best[top][0] and message not in best[top][1]:
+                best[top][1].append(message)
+        raise ConfigError(f"{where}: " + "; ".join(m for _, ms in best.values() for m in ms)) from None
+
+
+def _is_union_tag(part) -> bool:
+    """Pydantic names the member of a union it tried ('str', 'ModelSection', 'list[...]') in error paths."""
+    p = str(part)
+    return not isinstance(part, int) and ("[" in p or p in ("str", "float", "int", "bool", "dict", "list", "none")
+                                          or p.endswith(("Section", "Effort")))
