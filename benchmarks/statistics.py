@@ -303,7 +303,10 @@ def to_markdown(result: dict) -> str:
         "",
         f"Command: `{result['command']}`  ",
         f"Wall time {result['wall_time_s'] / 60:.1f} min with {result['workers']} worker(s) on {m['cpu']} "
-        f"({m['cores']} cores, shared), numpy {m['numpy']}, Python {m['python']}.",
+        f"({m['cores']} cores, shared), numpy {m['numpy']}, Python {m['python']}.  ",
+        f"dualid package: {result['provenance']['dualid_package']} at commit {result['provenance']['commit'][:10]}"
+        + (f" with uncommitted changes to {', '.join(result['provenance']['uncommitted'])}" if result['provenance']['uncommitted'] else "")
+        + f"; data module {result['provenance']['data_module']}.",
         "",
         "Data: random serial arms of 3 + (seed mod 5) revolute joints (Pinocchio), true friction and armature; "
         "sum-of-sinusoids excitation (period 5 s, 5 harmonics) sampled at 200 Hz; q quantised (16-bit), v and a by "
@@ -431,10 +434,19 @@ def main(argv=None) -> int:
                   f"{part[0].get('case') or ('N ' + str(part[0].get('N')))}", flush=True)
     _ratios(rows)
     from dualid.studies.bench import machine
+    import subprocess
+
+    import dualid
+
+    src = Path(dualid.__file__).resolve().parents[1]
+    git = lambda *a: subprocess.run(["git", "-C", str(src), *a], capture_output=True, text=True).stdout.strip()  # noqa: E731
+    provenance = {"dualid_package": str(Path(dualid.__file__).resolve().parent), "commit": git("rev-parse", "HEAD"),
+                  "uncommitted": git("status", "--short", "--", "src").splitlines(),
+                  "data_module": str(Path(sb.__file__).resolve())}
 
     result = {"command": "python benchmarks/statistics.py " + " ".join(argv if argv is not None else sys.argv[1:]),
               "methods": labels, "method_specs": methods, "config": cfg, "workers": workers,
-              "wall_time_s": time.time() - t0, "machine": machine(), "python": platform.python_version(), "rows": rows}
+              "wall_time_s": time.time() - t0, "machine": machine(), "provenance": provenance, "python": platform.python_version(), "rows": rows}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "results.json").write_text(json.dumps(result, indent=1, default=float))
