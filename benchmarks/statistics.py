@@ -304,9 +304,10 @@ def to_markdown(result: dict) -> str:
         f"Command: `{result['command']}`  ",
         f"Wall time {result['wall_time_s'] / 60:.1f} min with {result['workers']} worker(s) on {m['cpu']} "
         f"({m['cores']} cores, shared), numpy {m['numpy']}, Python {m['python']}.  ",
-        f"dualid package: {result['provenance']['dualid_package']} at commit {result['provenance']['commit'][:10]}"
+        f"dualid package: {result['provenance']['dualid_package']} at commit {result['provenance']['commit'].split()[0][:10]}"
         + (f" with uncommitted changes to {', '.join(result['provenance']['uncommitted'])}" if result['provenance']['uncommitted'] else "")
-        + f"; data module {result['provenance']['data_module']}.",
+        + f"; data module {result['provenance']['data_module']}."
+        + (f" Note: {result['provenance']['note']}." if result["provenance"].get("note") else ""),
         "",
         "Data: random serial arms of 3 + (seed mod 5) revolute joints (Pinocchio), true friction and armature; "
         "sum-of-sinusoids excitation (period 5 s, 5 harmonics) sampled at 200 Hz; q quantised (16-bit), v and a by "
@@ -326,7 +327,8 @@ def to_markdown(result: dict) -> str:
         "change of the clean torque error (error evaluated in the original chart; θ is chart-free).",
         "",
         "Cells: median over seeds (max over seeds) unless said; FD NCC cells: mean (min). Failed fits are counted "
-        "in the failure table; medians are over the successful fits.",
+        "in the failure table; statistics are over the successful fits, and a cell missing some seeds says "
+        "[successful/all] — compare such cells with care (the failed seed is often the hardest one).",
     ]
 
     def table(title, family_rows, key_cols, key_fn, metric, fmt=_fmt, sub=None):
@@ -336,12 +338,14 @@ def to_markdown(result: dict) -> str:
         for k in keys:
             cells = []
             for meth in methods:
-                vals = []
+                vals, total = [], 0
                 for r in family_rows:
-                    if key_fn(r) == k and r["method"] == meth and r.get("ok"):
+                    if key_fn(r) == k and r["method"] == meth:
+                        total += 1
                         d = r.get(sub, {}) if sub else r
-                        vals.append(d.get(metric))
-                cells.append(fmt(vals))
+                        if r.get("ok") and d.get("ok", True) and d.get(metric) is not None:
+                            vals.append(d.get(metric))
+                cells.append(fmt(vals) + ("" if len(vals) == total else f" [{len(vals)}/{total}]"))
             out.append("| " + " | ".join([str(x) for x in k] + cells) + " |")
 
     noise = [r for r in rows if r["family"] == "noise"]
@@ -408,6 +412,19 @@ def to_markdown(result: dict) -> str:
     return "\n".join(out) + "\n"
 
 
+def _provenance() -> dict:
+    """Which dualid tree and commit run (taken at the start, before any fit)."""
+    import subprocess
+
+    import dualid
+
+    src = Path(dualid.__file__).resolve().parents[1]
+    git = lambda *a: subprocess.run(["git", "-C", str(src), *a], capture_output=True, text=True).stdout.strip()  # noqa: E731
+    return {"dualid_package": str(Path(dualid.__file__).resolve().parent), "commit": git("rev-parse", "HEAD"),
+            "uncommitted": git("status", "--short", "--", "src").splitlines(),
+            "data_module": str(Path(sb.__file__).resolve())}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="smoke run: 2 seeds, N = 1000, 2 noise levels, 2 cases")
@@ -416,7 +433,13 @@ def main(argv=None) -> int:
                     help="comma-separated: ols, wls, dm-paper, [label=]module:Class[:kwargs-json]")
     ap.add_argument("--workers", type=int, default=2, help="processes (at most 2)")
     ap.add_argument("--out", default=str(_HERE / "statistics"))
+    ap.add_argument("--render", metavar="RESULTS_JSON", help="only rewrite results.md next to an existing results.json")
     args = ap.parse_args(argv)
+    if args.render:
+        path = Path(args.render)
+        (path.parent / "results.md").write_text(to_markdown(json.loads(path.read_text())))
+        return 0
+    provenance = _provenance()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     methods = _split_methods(args.methods)
@@ -434,15 +457,7 @@ def main(argv=None) -> int:
                   f"{part[0].get('case') or ('N ' + str(part[0].get('N')))}", flush=True)
     _ratios(rows)
     from dualid.studies.bench import machine
-    import subprocess
 
-    import dualid
-
-    src = Path(dualid.__file__).resolve().parents[1]
-    git = lambda *a: subprocess.run(["git", "-C", str(src), *a], capture_output=True, text=True).stdout.strip()  # noqa: E731
-    provenance = {"dualid_package": str(Path(dualid.__file__).resolve().parent), "commit": git("rev-parse", "HEAD"),
-                  "uncommitted": git("status", "--short", "--", "src").splitlines(),
-                  "data_module": str(Path(sb.__file__).resolve())}
 
     result = {"command": "python benchmarks/statistics.py " + " ".join(argv if argv is not None else sys.argv[1:]),
               "methods": labels, "method_specs": methods, "config": cfg, "workers": workers,
