@@ -39,18 +39,18 @@ from pathlib import Path
 _HERE = Path(__file__).resolve().parent
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
 
-import argparse  # noqa: E402
-import importlib  # noqa: E402
-import inspect  # noqa: E402
-import json  # noqa: E402
-import multiprocessing as mp  # noqa: E402
-import os  # noqa: E402
-import platform  # noqa: E402
-import time  # noqa: E402
-import traceback  # noqa: E402
-import warnings  # noqa: E402
+import argparse
+import importlib
+import inspect
+import json
+import multiprocessing as mp
+import os
+import platform
+import time
+import traceback
+import warnings
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 NOISE_LEVELS = (0.0, 0.02, 0.05, 0.10)
 SIZES = (1000, 3000, 10000)
@@ -242,7 +242,7 @@ def run_task(task: dict) -> list[dict]:
 
 
 # --- planning and aggregation -------------------------------------------------------------------
-def plan(quick: bool, seeds: int, methods: list[str]) -> tuple[list[dict], dict]:
+def plan(quick: bool, seeds: int, methods: list[str], family: str = "both") -> tuple[list[dict], dict]:
     if quick:
         cfg = {"seeds": min(seeds, 2), "sizes": [1000], "noise_levels": [0.0, 0.05], "me_cases": ["sensor", "combined"],
                "me_N": 1000, "test_seconds": 4.0}
@@ -252,10 +252,10 @@ def plan(quick: bool, seeds: int, methods: list[str]) -> tuple[list[dict], dict]
     tasks = []
     for seed in range(cfg["seeds"]):
         dof = 3 + seed % 5
-        for N in cfg["sizes"]:
+        for N in cfg["sizes"] if family in ("both", "noise") else []:
             tasks.append({"family": "noise", "seed": seed, "dof": dof, "N": N, "noise_levels": cfg["noise_levels"],
                           "methods": methods, "test_seconds": cfg["test_seconds"]})
-        for case in cfg["me_cases"]:
+        for case in cfg["me_cases"] if family in ("both", "model_error") else []:
             tasks.append({"family": "model_error", "seed": seed, "dof": dof, "case": case, "N": cfg["me_N"],
                           "methods": methods, "test_seconds": cfg["test_seconds"]})
     tasks.sort(key=lambda t: -(t["N"] * (t["dof"] ** 2) * (len(t.get("noise_levels", [1])))))  # big first
@@ -350,8 +350,8 @@ def to_markdown(result: dict) -> str:
 
     noise = [r for r in rows if r["family"] == "noise"]
     me = [r for r in rows if r["family"] == "model_error"]
-    nkey = lambda r: (f"{100 * r['noise']:g} %", r["N"])  # noqa: E731
-    ckey = lambda r: (r["case"],)  # noqa: E731
+    nkey = lambda r: (f"{100 * r['noise']:g} %", r["N"])
+    ckey = lambda r: (r["case"],)
     if noise:
         out += ["", "## Family 'noise' (every effect is in the model)"]
         table("Clean torque error / floor", noise, ["noise", "N"], nkey, "ratio_to_floor")
@@ -419,7 +419,7 @@ def _provenance() -> dict:
     import dualid
 
     src = Path(dualid.__file__).resolve().parents[1]
-    git = lambda *a: subprocess.run(["git", "-C", str(src), *a], capture_output=True, text=True).stdout.strip()  # noqa: E731
+    git = lambda *a: subprocess.run(["git", "-C", str(src), *a], capture_output=True, text=True).stdout.strip()
     return {"dualid_package": str(Path(dualid.__file__).resolve().parent), "commit": git("rev-parse", "HEAD"),
             "uncommitted": git("status", "--short", "--", "src").splitlines(),
             "data_module": str(Path(sb.__file__).resolve())}
@@ -429,6 +429,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="smoke run: 2 seeds, N = 1000, 2 noise levels, 2 cases")
     ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--family", choices=("both", "noise", "model_error"), default="both")
     ap.add_argument("--methods", default=DEFAULT_METHODS,
                     help="comma-separated: ols, wls, dm-paper, [label=]module:Class[:kwargs-json]")
     ap.add_argument("--workers", type=int, default=2, help="processes (at most 2)")
@@ -446,7 +447,8 @@ def main(argv=None) -> int:
     labels = [make_method(m)[0] for m in methods]  # fail early on a bad spec
     if len(set(labels)) != len(labels) or "oracle" in labels:
         raise SystemExit(f"method labels must be distinct and not 'oracle', got {labels}")
-    tasks, cfg = plan(args.quick, args.seeds, methods)
+    tasks, cfg = plan(args.quick, args.seeds, methods, args.family)
+    cfg["family"] = args.family
     workers = max(1, min(2, args.workers))
     t0 = time.time()
     rows: list[dict] = []
