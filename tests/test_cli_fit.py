@@ -87,3 +87,18 @@ def test_fit_needs_model_and_data(tmp_path):
     result = runner.invoke(app, ["fit", "--out", str(tmp_path / "o")])
     assert result.exit_code == 2
     assert "give --model ROBOT.urdf and at least one --data RUN.csv, or a --config file" in _out(result)
+
+
+def test_solver_flag_and_config_reach_the_estimator_and_the_report(tmp_path):
+    out = tmp_path / "sdp"
+    EXAMPLE = _config(tmp_path)
+    result = runner.invoke(app, ["fit", "--config", str(EXAMPLE), "--method", "dm", "--solver", "dm=sdp",
+                                 "--out", str(out)])
+    assert result.exit_code == 0, _out(result)
+    record = yaml.safe_load((out / "parameters.yaml").read_text())
+    assert record["methods"]["dm"]["solver"] == "sdp/CLARABEL" and record["methods"]["dm"]["fallback_used"] is False
+    assert "| dm | optimal | sdp/CLARABEL | no |" in (out / "report.md").read_text()
+    bad = runner.invoke(app, ["fit", "--config", str(EXAMPLE), "--solver", "dm=gurobi", "--out", str(tmp_path / "x")])
+    assert bad.exit_code == 2 and "solver: expected one of ('newton', 'sdp', 'sdp_clarabel', 'sdp_scs'), got 'gurobi'" in _out(bad)
+    bad = runner.invoke(app, ["fit", "--config", str(EXAMPLE), "--solver", "dm", "--out", str(tmp_path / "y")])
+    assert bad.exit_code == 2 and "--solver: expected METHOD=SOLVER (e.g. dm=sdp), got 'dm'" in _out(bad)

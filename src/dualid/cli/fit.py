@@ -21,12 +21,29 @@ def _config(config: Optional[Path], model: Optional[Path], data: List[Path]):
     return FitConfig.from_dict({"model": {"urdf": str(model)}, "train": [str(p) for p in data]})
 
 
+def _solver_overrides(cfg, flags: List[str]):
+    """cfg.solver with each --solver METHOD=NAME merged in (None when no flag was given)."""
+    from dualid.errors import ConfigError
+
+    if not flags:
+        return None
+    options = {m: dict(o) for m, o in cfg.solver}
+    for flag in flags:
+        method, sep, name = flag.partition("=")
+        if not sep or not method or not name:
+            raise ConfigError(f"--solver: expected METHOD=SOLVER (e.g. dm=sdp), got {flag!r}")
+        options.setdefault(method, {})["solver"] = name
+    return tuple((m, tuple(sorted(o.items()))) for m, o in options.items())
+
+
 @app.command()
 def fit(
     model: Optional[Path] = typer.Option(None, "--model", help="the robot's URDF"),
     data: List[Path] = typer.Option([], "--data", help="training log (csv/parquet/npz); repeatable"),
     test: List[Path] = typer.Option([], "--test", help="held-out log for validation; repeatable"),
     method: List[str] = typer.Option([], "--method", help="ols, wls, energy, logdet, pullback or dm; repeatable"),
+    solver: List[str] = typer.Option([], "--solver", help="METHOD=SOLVER: dm=newton or dm=sdp, wls=CLARABEL or "
+                                     "wls=SCS, …; repeatable (more options: 'solver:' in the config)"),
     config: Optional[Path] = typer.Option(None, "--config", help="fit.yaml (columns, preprocessing, ...); flags override it"),
     out: Optional[Path] = typer.Option(None, "--out", help="output directory"),
     force: bool = typer.Option(False, "--force", metavar=FLAG, help="write into an existing non-empty output directory"),
@@ -46,6 +63,7 @@ def fit(
         train=tuple(data) if data and config is not None else None,
         test=tuple(test) or None,
         methods=tuple(method) or None,
+        solver=_solver_overrides(cfg, solver),
         out=out,
     )
     if cfg.out is None:
@@ -65,7 +83,9 @@ def fit(
     console.print(outcome.identifiability.describe(max_items=0), markup=False)
     for m, f in outcome.fits.items():
         if f.ok:
-            console.print(f"{m}: {f.result.status} in {f.result.solve_time:.2f} s ({f.result.solver})", markup=False)
+            chain = f.result.info.get("solver_chain")
+            used = f" — fallback: {chain}" if f.result.info.get("fallback_used") else ""
+            console.print(f"{m}: {f.result.status} in {f.result.solve_time:.2f} s ({f.result.solver}){used}", markup=False)
     validations = {m: f.validation for m, f in outcome.fits.items() if f.validation is not None}
     validations.update({k: v for k, (_, v) in outcome.references.items() if v is not None})
     if validations:

@@ -4,8 +4,8 @@ all read it; nothing else names methods."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -27,7 +27,8 @@ class Method:
 
 
 def _common(kw: dict) -> dict:
-    return {k: kw[k] for k in ("constrained", "allow_unidentifiable")}
+    """The shared hyperparameters plus the caller's estimator options (solver, tol, ...)."""
+    return {**{k: kw[k] for k in ("constrained", "allow_unidentifiable")}, **dict(kw.get("options") or {})}
 
 
 def _regularized(name: str) -> Callable[..., Any]:
@@ -92,11 +93,21 @@ def make_estimator(
     per_equation: bool = False,
     constrained: bool = True,
     allow_unidentifiable: bool = False,
+    options: Mapping[str, Any] | None = None,
 ):
     """The estimator behind ``key``; logdet/pullback need the nominal θ₀ and the prior weight γ
-    (absolute, or per equation when per_equation=True, see RegularizedWLS)."""
+    (absolute, or per equation when per_equation=True, see RegularizedWLS). ``options`` are further
+    constructor arguments of the estimator (e.g. {"solver": "sdp", "tol": 1e-8} for dm), checked by it."""
     m = method(key)
     if m is TRUTH:
         raise ConfigError("method 'truth' is the simulator's reference, not an estimator")
-    return m.factory(theta0=theta0, gamma=gamma, per_equation=per_equation, constrained=constrained,
-                     allow_unidentifiable=allow_unidentifiable)
+    options = dict(options or {})
+    try:
+        return m.factory(theta0=theta0, gamma=gamma, per_equation=per_equation, constrained=constrained,
+                         allow_unidentifiable=allow_unidentifiable, options=options)
+    except TypeError as exc:  # an option the estimator has no field for
+        cls = type(m.factory(theta0=theta0, gamma=gamma, per_equation=per_equation, constrained=constrained,
+                             allow_unidentifiable=allow_unidentifiable))
+        known = [f.name for f in fields(cls) if f.name not in ("constrained", "allow_unidentifiable")]
+        raise ConfigError(f"method {key!r}: unknown estimator options {sorted(set(options) - set(known))}; "
+                          f"{cls.__name__} accepts {known}") from exc

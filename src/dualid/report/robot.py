@@ -162,6 +162,8 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str]) -> dict:
             "description": method_entry(m).description,
             "status": r.status,
             "solver": r.solver,
+            "solver_chain": r.info.get("solver_chain", r.solver),
+            "fallback_used": bool(r.info.get("fallback_used", False)),
             "solve_time_s": r.solve_time,
             "iterations": r.iterations,
             "objective": r.objective,
@@ -274,15 +276,17 @@ def _report_md(outcome: FitOutcome, validations, urdfs, figures) -> str:
         "",
         "## Fits",
         "",
-        "| method | status | solver | time [s] | consistent | URDF |",
-        "| --- | --- | --- | --- | --- | --- |",
+        "| method | status | solver | fallback | time [s] | consistent | URDF |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
     ]
     for m, f in outcome.fits.items():
         if f.ok:
             r = f.result
-            lines.append(f"| {m} | {r.status} | {r.solver} | {r.solve_time:.2f} | {r.is_consistent} | {urdfs.get(m, '')} |")
+            fallback = r.info.get("solver_chain", "") if r.info.get("fallback_used") else "no"
+            lines.append(f"| {m} | {r.status} | {r.solver} | {fallback} | {r.solve_time:.2f} | {r.is_consistent} | "
+                         f"{urdfs.get(m, '')} |")
         else:
-            lines.append(f"| {m} | failed: {f.error} | | | | |")
+            lines.append(f"| {m} | failed: {f.error} | | | | | |")
     if validations:
         lines += [
             "",

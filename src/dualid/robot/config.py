@@ -28,10 +28,11 @@ from typing import Any, Mapping
 import numpy as np
 
 from dualid.errors import ConfigError
-from dualid.estimators.methods import METHODS  # the one list of method names
+from dualid.estimators.methods import METHODS, make_estimator
+from dualid.estimators.methods import method as method_entry  # the one list of method names
 
 _TOP_KEYS = (
-    "model", "columns", "train", "test", "preprocessing", "joint_terms", "bounds", "methods", "prior",
+    "model", "columns", "train", "test", "preprocessing", "joint_terms", "bounds", "methods", "solver", "prior",
     "validation", "references", "out",
 )
 _MODEL_KEYS = ("urdf", "floating_base", "gravity")
@@ -118,6 +119,7 @@ class FitConfig:
     joint_terms: JointTermsConfig = field(default_factory=JointTermsConfig)
     bounds: tuple[tuple[str, float, float], ...] = ()  # (name, lo, hi)
     methods: tuple[str, ...] = ("ols", "dm")
+    solver: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()  # (method, estimator options) pairs
     prior: PriorConfig = field(default_factory=PriorConfig)
     xcorr_window: float = 0.02  # [s] shift window ± of the normalized cross-correlation
     references: tuple[tuple[str, Path], ...] = ()  # (label, DFKI reference_parameters yml)
@@ -131,6 +133,9 @@ class FitConfig:
             raise ConfigError(f"unknown method {unknown[0]!r}; known methods: {', '.join(METHODS)}")
         if not self.methods:
             raise ConfigError(f"methods: choose at least one of {', '.join(METHODS)}")
+        for m, options in self.solver:  # bad estimator options are bad input, found before any work
+            method_entry(m)
+            make_estimator(m, theta0=np.zeros(1), options=dict(options))
         if len(set(self.methods)) != len(self.methods):
             object.__setattr__(self, "methods", tuple(dict.fromkeys(self.methods)))
         if not (np.isfinite(self.xcorr_window) and self.xcorr_window >= 0):
@@ -201,6 +206,13 @@ class FitConfig:
             hi = np.inf if pair[1] is None else _float(pair[1], f"bounds.{name}[1]")
             bounds.append((str(name), lo, hi))
 
+        solver = d.get("solver") or {}
+        if not isinstance(solver, Mapping) or not all(isinstance(v, Mapping) for v in solver.values()):
+            raise ConfigError("solver: expected a mapping {method: {option: value}}, e.g. {dm: {solver: sdp, tol: 1e-8}}; "
+                              f"got {solver!r}")
+        for m in solver:
+            if m not in METHODS:
+                raise ConfigError(f"solver: unknown method {m!r}; known methods: {', '.join(METHODS)}")
         methods = d.get("methods", ("ols", "dm"))
         methods = (methods,) if isinstance(methods, str) else tuple(str(x) for x in methods)
         steps = d.get("preprocessing")
@@ -222,6 +234,7 @@ class FitConfig:
             joint_terms=joint_terms,
             bounds=tuple(bounds),
             methods=methods,
+            solver=tuple((str(m), tuple(sorted(dict(o).items()))) for m, o in solver.items()),
             prior=prior,
             xcorr_window=_float(val.get("xcorr_window", 0.02), "validation.xcorr_window"),
             references=tuple((str(k), _path(v, base, f"references.{k}")) for k, v in refs.items()),
@@ -264,6 +277,7 @@ class FitConfig:
                             "joints": None if self.joint_terms.joints is None else list(self.joint_terms.joints)},
             "bounds": {n: [lo, hi] for n, lo, hi in self.bounds},
             "methods": list(self.methods),
+            "solver": {m: dict(o) for m, o in self.solver},
             "prior": {"source": self.prior.source, "gamma": self.prior.gamma, "per_equation": self.prior.per_equation},
             "validation": {"xcorr_window": self.xcorr_window},
             "references": {k: str(v) for k, v in self.references},

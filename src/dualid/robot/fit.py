@@ -182,10 +182,13 @@ def prior_theta(config: FitConfig, rigid: RigidBodyModel, model, ols_theta: np.n
 
 
 # --- estimators -------------------------------------------------------------------------------
-def estimator(method: str, theta0: np.ndarray | None = None, gamma: float = 0.1, per_equation: bool = True):
+def estimator(method: str, theta0: np.ndarray | None = None, gamma: float = 0.1, per_equation: bool = True,
+              options=None):
     """Constrained estimators that accept a URDF chain's null space (never fully identifiable); the prior
-    weight γ of logdet/pullback is per equation by default (γ·N·n, as in the paper's study)."""
-    return make_estimator(method, theta0=theta0, gamma=gamma, per_equation=per_equation, allow_unidentifiable=True)
+    weight γ of logdet/pullback is per equation by default (γ·N·n, as in the paper's study); ``options``
+    are the config's estimator options for this method (solver, tolerance, …)."""
+    return make_estimator(method, theta0=theta0, gamma=gamma, per_equation=per_equation, allow_unidentifiable=True,
+                          options=options)
 
 
 def standard_errors(method: str, problem: IdentificationProblem, result: IdentificationResult,
@@ -320,7 +323,8 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
                 if ols_theta is None and model is not rigid:
                     ols_theta = estimator("ols").fit(problem).theta
                 theta0, prior_text = prior_theta(config, rigid, model, ols_theta)
-            result = estimator(method, theta0, config.prior.gamma, config.prior.per_equation).fit(problem)
+            result = estimator(method, theta0, config.prior.gamma, config.prior.per_equation,
+                               dict(dict(config.solver).get(method, ()))).fit(problem)
         except (DualidError, ValueError, np.linalg.LinAlgError, cp.error.DCPError, cp.error.SolverError) as exc:
             # recorded in the report (cvxpy's DCPError: e.g. data so large the problem loses convexity): one
             # method's failure must not lose the others; anything else is a bug and propagates

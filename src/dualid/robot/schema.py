@@ -80,6 +80,9 @@ class FitConfigSchema(_Section):
     joint_terms: JointTermsSection | None = None
     bounds: dict[str, tuple[float | None, float | None]] | None = None
     methods: list[Method] | Method | None = None
+    solver: dict[Method, dict[str, Any]] | None = Field(
+        None, description="estimator options per method, e.g. {dm: {solver: sdp, tol: 1e-8, fallback: []}, "
+                          "wls: {solver: SCS}}; checked by the estimator")
     prior: PriorSection | str | None = None
     validation: ValidationSection | None = None
     references: dict[str, str] | None = None
