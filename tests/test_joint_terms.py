@@ -14,4 +14,4 @@ def test_friction_and_armature_from_theta():
     j1, j2 = model.coordinates
     assert model.friction(theta) == {j1: (0.1, 0.2), j2: (0.0, -0.05)}
     assert model.armature_values(theta) == {j1: 1e-3, j2: 2e-3}
-    assert with_joint_terms(rigid, viscous=True, coulomb=False).armature_values(rigid.nominal) == {}
+    assert with_joint_terms(rigid, viscous=True, coulomb=False, armature=False).armature_values(rigid.nominal) == {}

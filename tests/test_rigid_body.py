@@ -251,7 +251,7 @@ def test_joint_terms_closed_form_on_pan_tilt():
 
 def test_joint_terms_selection_and_errors():
     base = PanTilt()
-    model = with_joint_terms(base, coulomb=False, joints=["tilt"])
+    model = with_joint_terms(base, coulomb=False, armature=False, joints=["tilt"])
     assert model.parameters.names[3:] == ("tilt.b",)
     v = np.array([[1.0, 2.0]])
     Y = model.regressor(np.zeros((1, 2)), v, np.zeros((1, 2)))
@@ -260,7 +260,7 @@ def test_joint_terms_selection_and_errors():
     with pytest.raises(ValueError, match=r"unknown joints \['elbow'\]; valid joints are \['pan', 'tilt'\]"):
         with_joint_terms(base, joints=["elbow"])
     with pytest.raises(ValueError, match="choose at least one of viscous, coulomb, armature"):
-        with_joint_terms(base, viscous=False, coulomb=False)
+        with_joint_terms(base, viscous=False, coulomb=False, armature=False)
     with pytest.raises(ValueError, match="coulomb_velocity must be > 0"):
         with_joint_terms(base, coulomb_velocity=0.0)
 

@@ -29,7 +29,7 @@ class JointTermsModel:
     dofs: tuple[int, ...]  # indices into base.coordinates of the joints that get the terms
     viscous: bool = True
     coulomb: bool = True
-    armature: bool = False
+    armature: bool = True  # the same default as the fit config (reflected rotor inertia of geared joints)
     coulomb_velocity: float = 0.01  # v_c [rad/s or m/s] of the smooth sign tanh(v / v_c)
     kind: ClassVar[Kind] = "inertia"
     parameters: ParameterSpace = field(init=False)
@@ -148,7 +148,7 @@ def with_joint_terms(
     model: Model,
     viscous: bool = True,
     coulomb: bool = True,
-    armature: bool = False,
+    armature: bool = True,
     joints: list[str] | tuple[str, ...] | None = None,
     coulomb_velocity: float = 0.01,
 ) -> JointTermsModel:
