@@ -209,6 +209,11 @@ def build_problem(model: Model, trajectories: list[Trajectory] | Trajectory) -> 
         trajectories = [trajectories]
     problems = []
     for traj in trajectories:
+        if tuple(traj.coordinates) != tuple(model.coordinates):
+            raise DataError(
+                f"trajectory {traj.name!r}: coordinates {list(traj.coordinates)} do not match the model's "
+                f"{list(model.coordinates)} (same names in the same order); load the log with the model's joint order"
+            )
         if model.kind == "inertia" and traj.a is None:
             raise DataError(
                 f"trajectory {traj.name!r} has no accelerations; an inertia-dominated model needs them "
