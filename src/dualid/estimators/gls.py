@@ -256,17 +256,6 @@ class FeasibleGLS:
         C = np.broadcast_to(S, (sensor.N, sensor.n, sensor.n)).copy()
         if kappa > 0:
             C += kappa * sensor.metric.evaluate(theta_ref)
-        try:
-            L = np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 1, 2)))
-        except np.linalg.LinAlgError as exc:
-            lam = np.linalg.eigvalsh(C)[:, 0]
-            raise MetricError(
-                f"{self.name}: the residual covariance Σ + κ M_i(θ_ref) must be positive definite, but it is "
-                f"not at {int(np.sum(~(lam > 0)))} of {sensor.N} samples (κ = {kappa:.3g}, smallest eigenvalue "
-                f"{lam.min():.3g}); give a positive-definite Σ or a pilot with a positive-definite metric"
-            ) from exc
-        # whitening is the per-sample chart B_i = L_i⁻ᵀ: r̃_i = L_i⁻¹ r_i, ‖r̃_i‖² = r_iᵀ C_i⁻¹ r_i
-        white = sensor.in_coordinates(np.swapaxes(np.linalg.inv(L), 1, 2))
         info.update(
             pilot=pilot,
             kappa=float(kappa),
@@ -274,11 +263,8 @@ class FeasibleGLS:
             sigma=S.tolist(),
             feedback=False,  # the weights are fixed before the fit: no dependence on θ̂
         )
-        c = self._common()
-        result = fit_quadratic(
-            white, statistics(white), method=self.name, constrained=c["constrained"], solver=c["solver"],
-            solver_options=c["solver_options"], allow_unidentifiable=c["allow_unidentifiable"], info=info,
-        )
+        result = fit_weighted(sensor, C, self.name, self._common(), info,
+                              what=f"the residual covariance Σ + κ M_i(θ_ref) (κ = {kappa:.3g})")
         if theta_ref is not None:
             try:
                 guard = guard_info(sensor, result.theta, theta_ref, self.guard_bound, f"pilot ({pilot})")
@@ -286,3 +272,26 @@ class FeasibleGLS:
                 guard = {"degenerate": True, "metric_guard_error": str(exc)}
             result = dataclasses.replace(result, info={**result.info, **guard})
         return result
+
+
+def fit_weighted(sensor: IdentificationProblem, C: np.ndarray, method: str, common: dict, info: dict,
+                 what: str = "the weight's covariance") -> IdentificationResult:
+    """argmin Σ r_iᵀ C_i⁻¹ r_i (C (N, n, n) ≻ 0) under the constraints, by whitening with C_i = L_i L_iᵀ.
+
+    Whitening is the per-sample chart B_i = L_i⁻ᵀ: r̃_i = L_i⁻¹ r_i, ‖r̃_i‖² = r_iᵀ C_i⁻¹ r_i; the
+    whitened problem is then an OLS for ``least_squares.fit_quadratic`` (sizes of θ, not of the data).
+    """
+    try:
+        L = np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 1, 2)))
+    except np.linalg.LinAlgError as exc:
+        lam = np.linalg.eigvalsh(C)[:, 0]
+        raise MetricError(
+            f"{method}: {what} must be positive definite at every sample, but it is not at "
+            f"{int(np.sum(~(lam > 0)))} of {sensor.N} samples (smallest eigenvalue {lam.min():.3g}); give a "
+            "positive-definite Σ or a pilot with a positive-definite metric"
+        ) from exc
+    white = sensor.in_coordinates(np.swapaxes(np.linalg.inv(L), 1, 2))
+    return fit_quadratic(
+        white, statistics(white), method=method, constrained=common["constrained"], solver=common["solver"],
+        solver_options=common["solver_options"], allow_unidentifiable=common["allow_unidentifiable"], info=info,
+    )
