@@ -205,3 +205,16 @@ def test_fit_time_shape_errors():
         FeasibleGLS(theta_ref=np.ones(4)).fit(problem)
     with pytest.raises(HyperparameterError, match="sigma"):
         FeasibleGLS(sigma=np.ones(2), kappa=0.0).fit(problem)
+
+
+def test_newton_and_cvxpy_paths_agree():
+    rng = np.random.default_rng(8)
+    problem, _ = drag_problem(rng, N=60, n=3, noise=0.3)
+    for kw in ({}, {"sigma": np.array([0.5, 2.0, 0.1]), "kappa": 0.7, "theta_ref": rng.uniform(0.5, 2, 9)}):
+        newton = FeasibleGLS(**kw).fit(problem)
+        cvx = FeasibleGLS(solver="CLARABEL", **kw).fit(problem)
+        assert newton.solver == "newton" and cvx.solver == "CLARABEL"
+        assert rel(newton.theta, cvx.theta) < 1e-5
+        assert rel(newton.objective, cvx.objective) < 1e-7
+    with pytest.raises(HyperparameterError, match="solver"):
+        FeasibleGLS(solver="MOSEK")

@@ -52,7 +52,7 @@ class BoundedFixedPoint:
     tol: float = 1e-5  # stop when the clipped pencil's eigenvalues move by less than tol (relative, log scale)
     pilot: str = "wls"
     constrained: bool = True
-    solver: str = "CLARABEL"
+    solver: str = "newton"  # as FeasibleGLS: "newton" or a cvxpy solver
     solver_options: tuple | None = None
     allow_unidentifiable: bool = False
     guard_bound: float = DEFAULT_BOUND

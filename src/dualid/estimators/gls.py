@@ -37,11 +37,13 @@ import numpy as np
 
 from dualid.errors import DataError, MetricError, SolverError
 from dualid.estimators.guards import DEFAULT_BOUND, guard_info
-from dualid.estimators.least_squares import OLS, WLS, fit_quadratic, statistics
+from dualid.estimators.base import check_identifiable
+from dualid.estimators.least_squares import OLS, WLS, fit_quadratic, residual_covariance, statistics
 from dualid.estimators.result import IdentificationResult
 from dualid.problem.problem import IdentificationProblem
 
 PILOTS = ("wls", "ols", "dm-paper")
+SOLVERS = ("newton", "CLARABEL", "SCS")
 COVARIANCE_MODELS = ("likelihood", "moments")
 
 
@@ -152,8 +154,8 @@ class FeasibleGLS:
     sigma_floor: float = 1e-9  # σ_a ≥ floor × (coordinate a's residual variance), keeps C_i ≻ 0
     guard_bound: float = DEFAULT_BOUND  # metric guard against M_i(θ_ref) (dualid.estimators.guards)
     constrained: bool = True
-    solver: str = "CLARABEL"
-    solver_options: tuple | None = None  # cvxpy options as a dict or (key, value) pairs
+    solver: str = "newton"  # "newton" (dualid's interior point, constant metric) or a cvxpy solver
+    solver_options: tuple | None = None  # newton: tol, max_iter; cvxpy: its options (a dict or pairs)
     allow_unidentifiable: bool = False
     name = "dm"
 
@@ -191,6 +193,8 @@ class FeasibleGLS:
             raise HyperparameterError(f"sigma_floor: expected a number in (0, 1), got {self.sigma_floor!r}")
         if not (np.isfinite(self.guard_bound) and self.guard_bound > 1):
             raise HyperparameterError(f"guard_bound: expected a finite number > 1, got {self.guard_bound!r}")
+        if self.solver not in SOLVERS:
+            raise HyperparameterError(f"solver: expected one of {SOLVERS}, got {self.solver!r}")
         if isinstance(self.solver_options, dict):
             object.__setattr__(self, "solver_options", tuple(sorted(self.solver_options.items())))
 
@@ -206,13 +210,22 @@ class FeasibleGLS:
             if theta.shape != (sensor.p,):
                 raise HyperparameterError(f"theta_ref: expected shape ({sensor.p},), got {theta.shape}")
             return theta, "given"
+        c = self._common()
+        if self.pilot in ("wls", "ols") and c["solver"] == "newton":
+            # the same estimators (same objective and constraints) by the interior-point Newton
+            # method on a constant metric: OLS is M_i = I, WLS is M_i = Σ̂ from the OLS residuals
+            eye = np.broadcast_to(np.eye(sensor.n), (sensor.N, sensor.n, sensor.n))
+            theta = fit_weighted(sensor, eye, "ols", c, {}).theta
+            if self.pilot == "wls":
+                theta = fit_weighted(sensor, residual_covariance(sensor, theta)[None], "wls", c, {}).theta
+            return theta, self.pilot
+        cvx = {**c, "solver": c["solver"] if c["solver"] != "newton" else "CLARABEL"}
         if self.pilot == "wls":
-            return WLS(**self._common()).fit(sensor).theta, "wls"
+            return WLS(**cvx).fit(sensor).theta, "wls"
         if self.pilot == "ols":
-            return OLS(**self._common()).fit(sensor).theta, "ols"
+            return OLS(**cvx).fit(sensor).theta, "ols"
         from dualid.estimators.dual_metric import DualMetric
 
-        c = self._common()
         return DualMetric(constrained=c["constrained"], allow_unidentifiable=c["allow_unidentifiable"]).fit(sensor).theta, "dm-paper"
 
     def covariance(self, sensor: IdentificationProblem, theta_ref: np.ndarray) -> tuple[np.ndarray, float, dict]:
@@ -276,11 +289,30 @@ class FeasibleGLS:
 
 def fit_weighted(sensor: IdentificationProblem, C: np.ndarray, method: str, common: dict, info: dict,
                  what: str = "the weight's covariance") -> IdentificationResult:
-    """argmin Σ r_iᵀ C_i⁻¹ r_i (C (N, n, n) ≻ 0) under the constraints, by whitening with C_i = L_i L_iᵀ.
+    """argmin Σ r_iᵀ C_i⁻¹ r_i (C (N, n, n) or (1, n, n), ≻ 0) under the constraints.
 
-    Whitening is the per-sample chart B_i = L_i⁻ᵀ: r̃_i = L_i⁻¹ r_i, ‖r̃_i‖² = r_iᵀ C_i⁻¹ r_i; the
-    whitened problem is then an OLS for ``least_squares.fit_quadratic`` (sizes of θ, not of the data).
+    solver "newton": the dual-metric interior-point method of ``estimators.newton`` on the problem
+    with the constant metric M_i = C_i (its objective is then exactly this one); it converges to
+    1e-9 relative, also where the data determine θ only up to a null space. A cvxpy solver: by
+    whitening, C_i = L_i L_iᵀ, the per-sample chart B_i = L_i⁻ᵀ (r̃_i = L_i⁻¹ r_i), then OLS in
+    ``least_squares.fit_quadratic``.
     """
+    C = np.broadcast_to(C, (sensor.N, sensor.n, sensor.n))
+    if common["solver"] == "newton":
+        from dualid.estimators.newton import fit_dual_metric_newton
+        from dualid.problem.metric import AffineMetric
+
+        if not common["allow_unidentifiable"]:
+            check_identifiable(sensor, what=f"{method} regressor")
+        try:
+            np.linalg.cholesky(C)
+        except np.linalg.LinAlgError:
+            pass  # the message below
+        else:
+            const = dataclasses.replace(sensor, metric=AffineMetric(sensor.p, (), np.array(C)))
+            result = fit_dual_metric_newton(const, constrained=common["constrained"], method=method,
+                                            **common["solver_options"])
+            return dataclasses.replace(result, info={**result.info, **info})
     try:
         L = np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 1, 2)))
     except np.linalg.LinAlgError as exc:
