@@ -211,19 +211,22 @@ class FeasibleGLS:
                 raise HyperparameterError(f"theta_ref: expected shape ({sensor.p},), got {theta.shape}")
             return theta, "given"
         c = self._common()
-        if self.pilot in ("wls", "ols") and c["solver"] == "newton":
-            # the same estimators (same objective and constraints) by the interior-point Newton
-            # method on a constant metric: OLS is M_i = I, WLS is M_i = Σ̂ from the OLS residuals
-            eye = np.broadcast_to(np.eye(sensor.n), (sensor.N, sensor.n, sensor.n))
-            theta = fit_weighted(sensor, eye, "ols", c, {}).theta
-            if self.pilot == "wls":
-                theta = fit_weighted(sensor, residual_covariance(sensor, theta)[None], "wls", c, {}).theta
-            return theta, self.pilot
-        cvx = {**c, "solver": c["solver"] if c["solver"] != "newton" else "CLARABEL"}
-        if self.pilot == "wls":
-            return WLS(**cvx).fit(sensor).theta, "wls"
-        if self.pilot == "ols":
-            return OLS(**cvx).fit(sensor).theta, "ols"
+        cvx = {**c, "solver": c["solver"] if c["solver"] != "newton" else "CLARABEL",
+               "solver_options": {} if c["solver"] == "newton" else c["solver_options"]}
+        if self.pilot in ("wls", "ols"):
+            # the library's OLS/WLS (cvxpy); if that solver fails, the same estimator by the interior-point
+            # Newton method on a constant metric (OLS: M_i = I; WLS: M_i = Σ̂ from the OLS residuals),
+            # recorded in the returned label (result.info["pilot"])
+            try:
+                est = WLS(**cvx) if self.pilot == "wls" else OLS(**cvx)
+                return est.fit(sensor).theta, self.pilot
+            except SolverError as exc:
+                newton = {**c, "solver": "newton", "solver_options": {}}
+                eye = np.broadcast_to(np.eye(sensor.n), (sensor.N, sensor.n, sensor.n))
+                theta = fit_weighted(sensor, eye, "ols", newton, {}).theta
+                if self.pilot == "wls":
+                    theta = fit_weighted(sensor, residual_covariance(sensor, theta)[None], "wls", newton, {}).theta
+                return theta, f"{self.pilot} (newton: {cvx['solver']} failed: {str(exc)[:120]})"
         from dualid.estimators.dual_metric import DualMetric
 
         return DualMetric(constrained=c["constrained"], allow_unidentifiable=c["allow_unidentifiable"]).fit(sensor).theta, "dm-paper"
@@ -310,9 +313,13 @@ def fit_weighted(sensor: IdentificationProblem, C: np.ndarray, method: str, comm
             pass  # the message below
         else:
             const = dataclasses.replace(sensor, metric=AffineMetric(sensor.p, (), np.array(C)))
-            result = fit_dual_metric_newton(const, constrained=common["constrained"], method=method,
-                                            **common["solver_options"])
-            return dataclasses.replace(result, info={**result.info, **info})
+            try:
+                result = fit_dual_metric_newton(const, constrained=common["constrained"], method=method,
+                                                **common["solver_options"])
+                return dataclasses.replace(result, info={**result.info, **info})
+            except SolverError as exc:  # the same problem by cvxpy (whitened); recorded in the result
+                info = {**info, "solver_fallback": f"CLARABEL after newton failed: {str(exc)[:200]}"}
+                common = {**common, "solver": "CLARABEL", "solver_options": {}}
     try:
         L = np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 1, 2)))
     except np.linalg.LinAlgError as exc:
