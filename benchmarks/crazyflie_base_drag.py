@@ -74,6 +74,7 @@ def main():
                     row["ratio_truth"] = ratios(problem, th, system.theta_true)
                     row["ratio_wls"] = ratios(problem, th, np.array(wls_high.theta)) if wls_high.ok else None
                     row["score_alpha"] = r.scores[:, alpha].mean(0).tolist()
+                    row["score_all"] = r.scores.mean(0).tolist()
                 else:
                     row["error"] = r.error
                 rows.append(row)
