@@ -60,7 +60,7 @@ def test_unknown_method(tmp_path):
     result = runner.invoke(app, ["fit", "--model", str(URDF), "--data", str(DFKI / "trajectory_00.csv"),
                                  "--method", "lasso", "--out", str(tmp_path / "o")])
     assert result.exit_code == 2
-    assert "unknown method 'lasso'; known methods: ols, ols_unconstrained, wls, energy, logdet, pullback, dm" in _out(result)
+    assert "unknown method 'lasso'; known methods: ols, ols_unconstrained, wls, energy, logdet, pullback, dm, dm-paper, dm-bfp" in _out(result)
 
 
 def test_unknown_config_key(tmp_path):
@@ -92,13 +92,14 @@ def test_fit_needs_model_and_data(tmp_path):
 def test_solver_flag_and_config_reach_the_estimator_and_the_report(tmp_path):
     out = tmp_path / "sdp"
     EXAMPLE = _config(tmp_path)
-    result = runner.invoke(app, ["fit", "--config", str(EXAMPLE), "--method", "dm", "--solver", "dm=sdp",
+    result = runner.invoke(app, ["fit", "--config", str(EXAMPLE), "--method", "dm-paper", "--solver", "dm-paper=sdp",
                                  "--out", str(out)])
     assert result.exit_code == 0, _out(result)
     record = yaml.safe_load((out / "parameters.yaml").read_text())
-    assert record["methods"]["dm"]["solver"] == "sdp/CLARABEL" and record["methods"]["dm"]["fallback_used"] is False
-    assert "| dm | optimal | sdp/CLARABEL | no |" in (out / "report.md").read_text()
+    fit = record["methods"]["dm-paper"]
+    assert fit["solver"] == "sdp/CLARABEL" and fit["fallback_used"] is False
+    assert "| dm-paper | optimal | sdp/CLARABEL | no |" in (out / "report.md").read_text()
     bad = runner.invoke(app, ["fit", "--config", str(EXAMPLE), "--solver", "dm=gurobi", "--out", str(tmp_path / "x")])
-    assert bad.exit_code == 2 and "solver: expected one of ('newton', 'sdp', 'sdp_clarabel', 'sdp_scs'), got 'gurobi'" in _out(bad)
+    assert bad.exit_code == 2 and "solver: expected one of ('newton', 'CLARABEL', 'SCS'), got 'gurobi'" in _out(bad)
     bad = runner.invoke(app, ["fit", "--config", str(EXAMPLE), "--solver", "dm", "--out", str(tmp_path / "y")])
     assert bad.exit_code == 2 and "--solver: expected METHOD=SOLVER (e.g. dm=sdp), got 'dm'" in _out(bad)

@@ -8,7 +8,7 @@ change of coordinates or a subsample return a new problem.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -75,6 +75,10 @@ class IdentificationProblem:
     parameters: ParameterSpace
     kind: Kind = "inertia"  # "inertia": M is the mass matrix; "drag": the resistance matrix
     coordinates: tuple[str, ...] = field(default=())  # names of the n coordinates
+    # B_s (N, n, n) = ∂q_sensor/∂q: the chart the forces were measured in, as seen from this one
+    # (τ = B_sᵀ τ_sensor); None: this problem is in its sensor chart. ``in_coordinates`` composes it,
+    # so a sensor covariance Σ travels as Σ_i = B_sᵢᵀ Σ B_sᵢ (see estimators/gls.py).
+    sensor_chart: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         Y = np.asarray(self.Y)
@@ -97,6 +101,12 @@ class IdentificationProblem:
         if len(coords) != n:
             raise DataError(f"coordinates: expected {n} names, got {len(coords)}")
         object.__setattr__(self, "coordinates", coords)
+        if self.sensor_chart is not None:
+            S = np.asarray(self.sensor_chart, dtype=float)
+            S = _frozen(np.broadcast_to(S, (N, n, n)) if S.shape == (n, n) else S, "sensor_chart", (N, n, n))
+            if N and np.any(np.abs(np.linalg.det(S)) == 0.0):
+                raise DataError("sensor_chart: expected invertible (n, n) Jacobians, got a singular one")
+            object.__setattr__(self, "sensor_chart", S)
         if N == 0:
             raise DataError("the problem has no samples (N = 0)")
 
@@ -164,15 +174,18 @@ class IdentificationProblem:
         """The problem restricted to samples idx (indices, slice or boolean mask)."""
         idx = np.arange(self.N)[idx]
         return IdentificationProblem(
-            self.Y[idx], self.tau[idx], self.metric.take(idx), self.v[idx], self.parameters, self.kind, self.coordinates
+            self.Y[idx], self.tau[idx], self.metric.take(idx), self.v[idx], self.parameters, self.kind, self.coordinates,
+            None if self.sensor_chart is None else self.sensor_chart[idx],
         )
 
     def in_coordinates(self, B: np.ndarray, coordinates: tuple[str, ...] | None = None) -> "IdentificationProblem":
         """The same data in another chart q = φ(q̃), B = ∂φ/∂q̃ ((n, n) or (N, n, n), invertible).
 
-        Forces are covectors and velocities vectors: τ̃ = Bᵀτ, Ỹ = BᵀY, M̃ = BᵀMB, ṽ = B⁻¹v.
+        Forces are covectors and velocities vectors: τ̃ = Bᵀτ, Ỹ = BᵀY, M̃ = BᵀMB, ṽ = B⁻¹v. The
+        sensor chart is composed: B̃_s = B_s B (identity B_s when the problem had none).
         """
         B = np.broadcast_to(np.asarray(B, dtype=float), (self.N, self.n, self.n))
+        S = B if self.sensor_chart is None else self.sensor_chart @ B
         Bt = np.swapaxes(B, 1, 2)
         v = np.linalg.solve(B, self.v[..., None])[..., 0]
         return IdentificationProblem(
@@ -183,7 +196,15 @@ class IdentificationProblem:
             self.parameters,
             self.kind,
             coordinates or tuple(f"{c}~" for c in self.coordinates),
+            S,
         )
+
+    def in_sensor_chart(self) -> "IdentificationProblem":
+        """The same data in the chart the forces were measured in (itself when sensor_chart is None)."""
+        if self.sensor_chart is None:
+            return self
+        back = self.in_coordinates(np.linalg.inv(self.sensor_chart))
+        return replace(back, sensor_chart=None)
 
     @staticmethod
     def concatenate(problems: list["IdentificationProblem"]) -> "IdentificationProblem":
@@ -192,6 +213,12 @@ class IdentificationProblem:
         for q in problems[1:]:
             if q.parameters != first.parameters or q.kind != first.kind or q.n != first.n:
                 raise DataError("concatenate: problems describe different systems (parameters, kind or n differ)")
+        charts = None
+        if any(q.sensor_chart is not None for q in problems):
+            eye = np.eye(first.n)
+            charts = np.concatenate(
+                [q.sensor_chart if q.sensor_chart is not None else np.broadcast_to(eye, (q.N, q.n, q.n)) for q in problems]
+            )
         return IdentificationProblem(
             np.concatenate([q.Y for q in problems]),
             np.concatenate([q.tau for q in problems]),
@@ -200,6 +227,7 @@ class IdentificationProblem:
             first.parameters,
             first.kind,
             first.coordinates,
+            charts,
         )
 
 

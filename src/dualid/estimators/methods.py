@@ -12,6 +12,8 @@ import numpy as np
 
 from dualid.errors import ConfigError
 from dualid.estimators.dual_metric import DualMetric
+from dualid.estimators.fixed_point import BoundedFixedPoint
+from dualid.estimators.gls import FeasibleGLS
 from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS
 
 
@@ -50,11 +52,17 @@ _TABLE = (
     Method("logdet", "logdet_wls", "log-det WLS", "#9467bd", "WLS + log-det prior", _regularized("logdet"), True),
     Method("pullback", "pullback_wls", "pullback WLS", "#ff7f0e", "WLS + constant pullback prior",
            _regularized("pullback"), True),
-    Method("dm", "dual_metric", "DM", "#d62728", "dual-metric weighted least squares",
+    Method("dm", "dm", "DM", "#d62728",
+           "dual-metric GLS: one weighted LS with residual covariance Σ + κ M(θ_pilot), no feedback (the default)",
+           lambda **kw: FeasibleGLS(**_common(kw))),
+    Method("dm-paper", "dual_metric", "DM (paper)", "#e377c2",
+           "the paper's dual-metric objective Σ rᵀ M(θ)⁻¹ r (biased under torque noise; see docs/estimators.md)",
            lambda **kw: DualMetric(**_common(kw))),
+    Method("dm-bfp", "dm-bfp", "DM (bounded fixed point)", "#17becf",
+           "experimental: the fixed point of the dual-metric weight with its eigenvalues bounded around a pilot",
+           lambda **kw: BoundedFixedPoint(**_common(kw))),
 )
 METHODS: dict[str, Method] = {m.key: m for m in _TABLE}
-FIT_METHODS = ("ols", "wls", "energy", "logdet", "pullback", "dm")  # the fit workflow's choices
 TRUTH = Method("truth", "fixed", "true θ", "#000000", "the true parameters (simulation only)", lambda **kw: None)
 
 

@@ -38,7 +38,7 @@ from dualid.problem import IdentificationProblem, build_problem
 from dualid.systems.base import SystemData
 
 Case = Literal["both", "low", "high"]
-DEFAULT_METHODS = ("ols_unconstrained", "ols", "wls", "energy", "logdet", "pullback", "dm")
+DEFAULT_METHODS = ("ols_unconstrained", "ols", "wls", "energy", "logdet", "pullback", "dm-paper", "dm")
 LOW_DATA_MAX_TRIES = 2000  # random subsets drawn per seed before giving up on keeping the rank
 
 _LINEAR = re.compile(r"^(v_?|p_?|pos_?|d)?[xyz]$", re.IGNORECASE)  # names of translational coordinates

@@ -26,8 +26,8 @@ from dualid.report.figures import new_figure, save_figure
 from dualid.report.io import markdown_table, to_json
 from dualid.report.outdir import check_output_dir, write_output
 
-PANELS = (("wls", "energy", "dm"), ("logdet", "pullback", "dm"))
-TRAJECTORY_METHODS = ("dm", "wls", "energy", "logdet", "pullback")
+PANELS = (("wls", "energy", "dm-paper", "dm"), ("logdet", "pullback", "dm-paper", "dm"))
+TRAJECTORY_METHODS = ("dm", "dm-paper", "wls", "energy", "logdet", "pullback")
 CASE_TITLES = {"low": "low-data case", "high": "high-data case"}
 
 

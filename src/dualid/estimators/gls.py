@@ -1,0 +1,333 @@
+"""Feasible generalised least squares with a dual-metric covariance model (candidate default ``dm``).
+
+The residual r_i = Y_i θ − τ_i is modelled as zero-mean with covariance
+
+    C_i = Σ_i + κ M_i(θ_ref)          Σ_i = B_iᵀ Σ B_i,   κ ≥ 0
+
+Σ (n×n, diagonal by default) is the covariance of the force sensors in the chart they measured
+in (a covector covariance; B_i = ``problem.sensor_chart`` carries it to the problem's chart),
+κ M_i(θ_ref) the part of the residual that is isotropic in the model's own metric, and θ_ref a
+fixed pilot fit. Then θ̂ = argmin Σ r_iᵀ C_i⁻¹ r_i, one convex weighted least squares under the
+same physical-consistency constraints as every estimator. The weights never depend on θ̂, so the
+metric cannot run away with the estimate (the paper's DM inflates M under noise, the fixed point
+θ_{k+1} = argmin Σ rᵀM(θ_k)⁻¹r shrinks it under model error; DESIGN.md §5).
+
+Limits: κ → 0 gives WLS with W = Σ⁻¹ (joint-local residuals: sensor noise, friction); Σ → 0 gives
+the frozen dual metric Σ r_iᵀ M_i(θ_ref)⁻¹ r_i. Since Σ_i and M_i both transform as B_iᵀ(·)B_i,
+C_i⁻¹ weighs r_i the same in every chart: the fit is invariant under any change of coordinates
+that the problem records (``in_coordinates``), including configuration-dependent ones.
+
+(Σ, κ) are estimated from the pilot's residuals in the sensor chart, after scaling each coordinate
+by its residual rms (so the estimate is equivariant under unit changes):
+- ``covariance_model="likelihood"`` (default): Gaussian maximum likelihood
+  max −½ Σ_i [log det C_i + r_iᵀ C_i⁻¹ r_i] over diagonal Σ ≻ 0 and κ ≥ 0 (L-BFGS-B, started at
+  the moment estimate);
+- ``"moments"``: non-negative least squares Σ_i ‖r_i r_iᵀ − Σ − κ M_i‖_F² (the prototype).
+The whole fit is done in the sensor chart; the final weighted problem is solved by whitening
+(r̃_i = L_i⁻¹ r_i, C_i = L_i L_iᵀ, a per-sample change of coordinates) and the quadratic machinery
+of ``least_squares``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from dualid.errors import ConfigError, MetricError, SolverError
+from dualid.estimators.base import check_identifiable
+from dualid.estimators.guards import DEFAULT_BOUND, guard_info
+from dualid.estimators.least_squares import OLS, WLS, fit_quadratic, residual_covariance
+from dualid.estimators.result import IdentificationResult
+from dualid.estimators.statistics import statistics
+from dualid.problem import IdentificationProblem
+
+PILOTS = ("wls", "ols", "dm-paper")
+SOLVERS = ("newton", "CLARABEL", "SCS")
+COVARIANCE_MODELS = ("likelihood", "moments")
+
+
+def _as_tuple(x, name: str, ndim: int) -> tuple | None:
+    if x is None:
+        return None
+    a = np.asarray(x, dtype=float)
+    if a.ndim != ndim:
+        raise ConfigError(f"{name}: expected a {ndim}-d array, got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ConfigError(f"{name}: expected finite values, got {a.tolist()}")
+    return tuple(float(v) for v in a) if ndim == 1 else tuple(tuple(float(v) for v in row) for row in a)
+
+
+# --- (Σ, κ) from residuals ---------------------------------------------------------------------
+def moment_estimate(r: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, float]:
+    """(σ (n,), κ) ≥ 0 minimising Σ_i ‖r_i r_iᵀ − diag(σ) − κ M_i‖_F² (normal equations + NNLS)."""
+    from scipy.optimize import nnls
+
+    N, n = r.shape
+    m_scale = float(np.mean(np.trace(M, axis1=1, axis2=2))) / n
+    m_scale = m_scale if m_scale > 0 else 1.0
+    Mh = M / m_scale  # κ' = κ m_scale is O(1) when the two parts are comparable
+    G = np.zeros((n + 1, n + 1))
+    G[:n, :n] = N * np.eye(n)
+    G[:n, n] = G[n, :n] = np.einsum("naa->a", Mh)
+    G[n, n] = float(np.sum(Mh * Mh))
+    b = np.concatenate([np.sum(r * r, axis=0), [float(np.einsum("na,nab,nb->", r, Mh, r))]])
+    d = np.sqrt(np.diag(G))
+    d[d == 0] = 1.0
+    Gs = G / np.outer(d, d)
+    w, U = np.linalg.eigh(Gs)
+    w = np.maximum(w, 1e-14 * w.max())
+    R = np.sqrt(w)[:, None] * U.T  # Gs = RᵀR
+    x = nnls(R, (U.T @ (b / d)) / np.sqrt(w))[0] / d
+    return x[:n], float(x[n] / m_scale)
+
+
+def _nll(x: np.ndarray, r: np.ndarray, M: np.ndarray, m_scale: float):
+    """Mean of log det C_i + r_iᵀ C_i⁻¹ r_i and its gradient in x = (σ, κ·m_scale)."""
+    n = r.shape[1]
+    sigma, kappa = x[:n], x[n] / m_scale
+    C = kappa * M
+    C[:, np.arange(n), np.arange(n)] += sigma
+    try:
+        L = np.linalg.cholesky(C)
+    except np.linalg.LinAlgError:
+        return np.inf, np.zeros_like(x)
+    logdet = 2.0 * np.sum(np.log(np.diagonal(L, axis1=1, axis2=2)), axis=1)
+    Ci = np.linalg.inv(C)
+    w = np.einsum("nab,nb->na", Ci, r)
+    f = float(np.mean(logdet + np.einsum("na,na->n", r, w)))
+    G = Ci - w[:, :, None] * w[:, None, :]  # ∂/∂C_i of log det C_i + rᵀC_i⁻¹r
+    grad = np.concatenate([np.mean(np.einsum("naa->na", G), axis=0), [float(np.mean(np.sum(G * M, axis=(1, 2)))) / m_scale]])
+    return f, grad
+
+
+def likelihood_estimate(r: np.ndarray, M: np.ndarray, floor: float) -> tuple[np.ndarray, float, dict]:
+    """(σ, κ, info): Gaussian maximum likelihood over σ ≥ floor, κ ≥ 0 (coordinates pre-scaled, r ~ 1)."""
+    from scipy.optimize import minimize
+
+    n = r.shape[1]
+    sigma0, kappa0 = moment_estimate(r, M)
+    m_scale = float(np.mean(np.trace(M, axis1=1, axis2=2))) / n
+    m_scale = m_scale if m_scale > 0 else 1.0
+    var = np.mean(r * r, axis=0)
+    # start inside the domain: each σ at least half its coordinate's residual variance not claimed by κM
+    x0 = np.concatenate([np.maximum(sigma0, np.maximum(0.5 * var, floor)), [kappa0 * m_scale]])
+    f0, _ = _nll(x0, r, M, m_scale)
+    bounds = [(floor, None)] * n + [(0.0, None)]
+    res = minimize(_nll, x0, args=(r, M, m_scale), jac=True, method="L-BFGS-B", bounds=bounds,
+                   options={"maxiter": 500, "ftol": 1e-13, "gtol": 1e-9})
+    if not np.all(np.isfinite(res.x)) or not np.isfinite(res.fun):
+        raise SolverError(f"(Σ, κ) likelihood: L-BFGS-B returned a non-finite point ({res.message})", status="failed")
+    x = res.x if res.fun <= f0 else x0
+    info = {
+        "sigma_kappa_status": str(res.message),
+        "sigma_kappa_iterations": int(res.nit),
+        "sigma_kappa_nll": float(min(res.fun, f0)),
+        "sigma_kappa_moment_kappa": float(kappa0),
+    }
+    if res.fun > f0:  # never worse than the start; recorded, not silent
+        info["sigma_kappa_fallback"] = "moment start (L-BFGS-B did not improve it)"
+    return x[:n], float(x[n] / m_scale), info
+
+
+# --- the estimator -----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class FeasibleGLS:
+    """Σ r_iᵀ (Σ_i + κ M_i(θ_ref))⁻¹ r_i with (Σ, κ) from a fixed pilot's residuals (module docstring).
+
+    pilot: "wls" (default), "ols" or "dm-paper" (the paper's objective), fitted under the same
+    constraints in the sensor chart; or give ``theta_ref`` (p,) to fix it. ``sigma`` (n,) diagonal or
+    (n, n) and ``kappa`` fix the covariance model instead of estimating it (sigma in the sensor
+    chart's force units squared, κ dimensionless). With both fixed the pilot only supplies
+    M_i(θ_ref) (and is not fitted when κ = 0).
+    """
+
+    pilot: str = "wls"
+    covariance_model: str = "likelihood"  # "likelihood" | "moments"
+    theta_ref: tuple | None = None  # (p,) fixed pilot θ
+    sigma: tuple | None = None  # (n,) or (n, n) fixed sensor covariance Σ
+    kappa: float | None = None  # fixed κ ≥ 0
+    sigma_floor: float = 1e-9  # σ_a ≥ floor × (coordinate a's residual variance), keeps C_i ≻ 0
+    guard_bound: float = DEFAULT_BOUND  # metric guard against M_i(θ_ref) (dualid.estimators.guards)
+    constrained: bool = True
+    solver: str = "newton"  # "newton" (dualid's interior point, constant metric) or a cvxpy solver
+    solver_options: tuple | None = None  # newton: tol, max_iter; cvxpy: its options (a dict or pairs)
+    allow_unidentifiable: bool = False
+    name = "dm"
+
+    def __post_init__(self) -> None:
+        if self.pilot not in PILOTS:
+            raise ConfigError(f"pilot: expected one of {PILOTS}, got {self.pilot!r}")
+        if self.covariance_model not in COVARIANCE_MODELS:
+            raise ConfigError(
+                f"covariance_model: expected one of {COVARIANCE_MODELS}, got {self.covariance_model!r}"
+            )
+        object.__setattr__(self, "theta_ref", _as_tuple(self.theta_ref, "theta_ref", 1))
+        if self.sigma is not None:
+            s = np.asarray(self.sigma, dtype=float)
+            if s.ndim == 1:
+                if np.any(s < 0):
+                    raise ConfigError(f"sigma: expected non-negative variances, got {s.tolist()}")
+            elif s.ndim == 2 and s.shape[0] == s.shape[1]:
+                if not np.allclose(s, s.T) or np.linalg.eigvalsh(0.5 * (s + s.T))[0] < 0:
+                    raise ConfigError("sigma: expected a symmetric positive semidefinite (n, n) matrix")
+            else:
+                raise ConfigError(f"sigma: expected shape (n,) or (n, n), got {s.shape}")
+            object.__setattr__(self, "sigma", _as_tuple(s, "sigma", s.ndim))
+        if self.kappa is not None:
+            if isinstance(self.kappa, bool) or not isinstance(self.kappa, (int, float, np.floating, np.integer)):
+                raise ConfigError(f"kappa: expected a number ≥ 0, got {self.kappa!r}")
+            if not (np.isfinite(self.kappa) and self.kappa >= 0):
+                raise ConfigError(f"kappa: expected a finite number ≥ 0, got {self.kappa!r}")
+            object.__setattr__(self, "kappa", float(self.kappa))
+        if (self.sigma is None) != (self.kappa is None):
+            raise ConfigError(
+                f"sigma and kappa: give both (a fixed covariance model) or neither (estimated), got "
+                f"sigma={'given' if self.sigma is not None else None}, kappa={self.kappa!r}"
+            )
+        if not (np.isfinite(self.sigma_floor) and 0 < self.sigma_floor < 1):
+            raise ConfigError(f"sigma_floor: expected a number in (0, 1), got {self.sigma_floor!r}")
+        if not (np.isfinite(self.guard_bound) and self.guard_bound > 1):
+            raise ConfigError(f"guard_bound: expected a finite number > 1, got {self.guard_bound!r}")
+        if self.solver not in SOLVERS:
+            raise ConfigError(f"solver: expected one of {SOLVERS}, got {self.solver!r}")
+        if isinstance(self.solver_options, dict):
+            object.__setattr__(self, "solver_options", tuple(sorted(self.solver_options.items())))
+
+    # --- steps --------------------------------------------------------------------------------
+    def _common(self) -> dict:
+        return {"constrained": self.constrained, "solver": self.solver,
+                "solver_options": dict(self.solver_options or ()), "allow_unidentifiable": self.allow_unidentifiable}
+
+    def reference(self, sensor: IdentificationProblem) -> tuple[np.ndarray, str]:
+        """θ_ref and how it was obtained, in the sensor chart."""
+        if self.theta_ref is not None:
+            theta = np.array(self.theta_ref)
+            if theta.shape != (sensor.p,):
+                raise ConfigError(f"theta_ref: expected shape ({sensor.p},), got {theta.shape}")
+            return theta, "given"
+        c = self._common()
+        cvx = {**c, "solver": c["solver"] if c["solver"] != "newton" else "CLARABEL",
+               "solver_options": {} if c["solver"] == "newton" else c["solver_options"]}
+        if self.pilot in ("wls", "ols"):
+            # the library's OLS/WLS (cvxpy); if that solver fails, the same estimator by the interior-point
+            # Newton method on a constant metric (OLS: M_i = I; WLS: M_i = Σ̂ from the OLS residuals),
+            # recorded in the returned label (result.info["pilot"])
+            try:
+                est = WLS(**cvx) if self.pilot == "wls" else OLS(**cvx)
+                return est.fit(sensor).theta, self.pilot
+            except SolverError as exc:
+                newton = {**c, "solver": "newton", "solver_options": {}}
+                eye = np.broadcast_to(np.eye(sensor.n), (sensor.N, sensor.n, sensor.n))
+                theta = fit_weighted(sensor, eye, "ols", newton, {}).theta
+                if self.pilot == "wls":
+                    theta = fit_weighted(sensor, residual_covariance(sensor, theta)[None], "wls", newton, {}).theta
+                return theta, f"{self.pilot} (newton: {cvx['solver']} failed: {str(exc)[:120]})"
+        from dualid.estimators.dual_metric import DualMetric
+
+        return DualMetric(constrained=c["constrained"], allow_unidentifiable=c["allow_unidentifiable"]).fit(sensor).theta, "dm-paper"
+
+    def covariance(self, sensor: IdentificationProblem, theta_ref: np.ndarray) -> tuple[np.ndarray, float, dict]:
+        """(Σ (n, n), κ, info) in the sensor chart: given, or estimated from the residuals at θ_ref."""
+        n = sensor.n
+        info: dict = {}
+        if self.sigma is not None and self.kappa is not None:
+            S = np.asarray(self.sigma)
+            S = np.diag(S) if S.ndim == 1 else S
+            if S.shape != (n, n):
+                raise ConfigError(f"sigma: expected {n} coordinates, got shape {np.asarray(self.sigma).shape}")
+            info["covariance_model"] = "given"
+            return S, self.kappa, info
+        r = sensor.residual(theta_ref)
+        M = sensor.metric.evaluate(theta_ref)
+        rms = np.sqrt(np.mean(r * r, axis=0))
+        floor_abs = 1e-150
+        scale = np.where(rms > 1e-9 * max(rms.max(), floor_abs), rms, max(1e-9 * rms.max(), floor_abs))
+        rh = r / scale
+        Mh = M / np.outer(scale, scale)
+        if self.covariance_model == "moments":
+            sig, kappa = moment_estimate(rh, Mh)
+            sig = np.maximum(sig, self.sigma_floor)
+            info["covariance_model"] = "moments"
+        else:
+            sig, kappa, info = likelihood_estimate(rh, Mh, self.sigma_floor)
+            info["covariance_model"] = "likelihood"
+        # the share of the residual's second moment each part explains, in the scaled chart
+        total = float(np.sum(rh * rh))
+        info["kappa_share"] = float(kappa * np.einsum("naa->", Mh) / total) if total > 0 else 0.0
+        return np.diag(sig * scale**2), kappa, info
+
+    def fit(self, problem: IdentificationProblem) -> IdentificationResult:
+        sensor = problem.in_sensor_chart()
+        need_pilot = not (self.kappa == 0.0 and self.sigma is not None) or self.theta_ref is not None
+        if need_pilot:
+            theta_ref, pilot = self.reference(sensor)
+        else:
+            theta_ref, pilot = None, "none (κ = 0)"
+        S, kappa, info = self.covariance(sensor, theta_ref)
+        C = np.broadcast_to(S, (sensor.N, sensor.n, sensor.n)).copy()
+        if kappa > 0:
+            C += kappa * sensor.metric.evaluate(theta_ref)
+        info.update(
+            pilot=pilot,
+            kappa=float(kappa),
+            sigma_diag=np.diag(S).tolist(),
+            sigma=S.tolist(),
+            feedback=False,  # the weights are fixed before the fit: no dependence on θ̂
+        )
+        result = fit_weighted(sensor, C, self.name, self._common(), info,
+                              what=f"the residual covariance Σ + κ M_i(θ_ref) (κ = {kappa:.3g})")
+        if theta_ref is not None:
+            try:
+                guard = guard_info(sensor, result.theta, theta_ref, self.guard_bound, f"pilot ({pilot})")
+            except MetricError as exc:  # no reference to measure against: recorded, and not certified
+                guard = {"degenerate": True, "metric_guard_error": str(exc)}
+            result = dataclasses.replace(result, info={**result.info, **guard})
+        return result
+
+
+def fit_weighted(sensor: IdentificationProblem, C: np.ndarray, method: str, common: dict, info: dict,
+                 what: str = "the weight's covariance") -> IdentificationResult:
+    """argmin Σ r_iᵀ C_i⁻¹ r_i (C (N, n, n) or (1, n, n), ≻ 0) under the constraints.
+
+    solver "newton": the dual-metric interior-point method of ``estimators.newton`` on the problem
+    with the constant metric M_i = C_i (its objective is then exactly this one); it converges to
+    1e-9 relative, also where the data determine θ only up to a null space. A cvxpy solver: by
+    whitening, C_i = L_i L_iᵀ, the per-sample chart B_i = L_i⁻ᵀ (r̃_i = L_i⁻¹ r_i), then OLS in
+    ``least_squares.fit_quadratic``.
+    """
+    C = np.broadcast_to(C, (sensor.N, sensor.n, sensor.n))
+    if common["solver"] == "newton":
+        from dualid.estimators.newton import fit_dual_metric_newton
+        from dualid.model.metric import AffineMetric
+
+        if not common["allow_unidentifiable"]:
+            check_identifiable(sensor, what=f"{method} regressor")
+        try:
+            np.linalg.cholesky(C)
+        except np.linalg.LinAlgError:
+            pass  # the message below
+        else:
+            const = dataclasses.replace(sensor, metric=AffineMetric(sensor.p, (), np.array(C)))
+            try:
+                result = fit_dual_metric_newton(const, constrained=common["constrained"], method=method,
+                                                **common["solver_options"])
+                return dataclasses.replace(result, info={**result.info, **info})
+            except SolverError as exc:  # the same problem by cvxpy (whitened); recorded in the result
+                info = {**info, "solver_fallback": f"CLARABEL after newton failed: {str(exc)[:200]}"}
+                common = {**common, "solver": "CLARABEL", "solver_options": {}}
+    try:
+        L = np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 1, 2)))
+    except np.linalg.LinAlgError as exc:
+        lam = np.linalg.eigvalsh(C)[:, 0]
+        raise MetricError(
+            f"{method}: {what} must be positive definite at every sample, but it is not at "
+            f"{int(np.sum(~(lam > 0)))} of {sensor.N} samples (smallest eigenvalue {lam.min():.3g}); give a "
+            "positive-definite Σ or a pilot with a positive-definite metric"
+        ) from exc
+    white = sensor.in_coordinates(np.swapaxes(np.linalg.inv(L), 1, 2))
+    return fit_quadratic(
+        white, statistics(white), method=method, constrained=common["constrained"], solver=common["solver"],
+        solver_options=common["solver_options"], allow_unidentifiable=common["allow_unidentifiable"], info=info,
+    )
