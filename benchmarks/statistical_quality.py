@@ -51,7 +51,7 @@ NOISE_LEVELS = (0.0, 0.02, 0.05, 0.10)
 SIZES = (1000, 3000, 10000)
 ME_NOISE = 0.02
 ME_N = 3000
-DEFAULT_METHODS = "ols,wls,dm-paper"
+DEFAULT_METHODS = "ols,wls,dm-paper,dm"
 
 
 from dualid.bench import arms as sb  # noqa: E402
@@ -59,17 +59,15 @@ from dualid.bench import arms as sb  # noqa: E402
 
 # --- methods --------------------------------------------------------------------------------------
 def make_method(spec: str):
-    """(label, estimator) from 'ols' | 'wls' | 'dm-paper' | '[label=]module:Class[:kwargs-json]'."""
-    from dualid import OLS, WLS, DualMetric
+    """(label, estimator) from a key of dualid's method table ('ols', 'wls', 'dm', 'dm-paper', …) or
+    '[label=]module:Class[:kwargs-json]'."""
+    from dualid.estimators.methods import METHODS, make_estimator
 
-    builtin = {
-        "ols": lambda: OLS(allow_unidentifiable=True),
-        "wls": lambda: WLS(allow_unidentifiable=True),
-        # the paper's objective; 300 Newton iterations (the default 100 stops short on some model-error fits)
-        "dm-paper": lambda: DualMetric(solver="newton", solver_options={"max_iter": 300}, allow_unidentifiable=True),
-    }
-    if spec in builtin:
-        return spec, builtin[spec]()
+    # the paper's objective gets 300 Newton iterations (the default stops short on some model-error fits)
+    options = {"dm-paper": {"max_iter": 300}}
+    if spec in METHODS:
+        return spec, make_estimator(spec, allow_unidentifiable=True, options=options.get(spec))
+    builtin = METHODS
     label, sep, rest = spec.partition("=")
     if not sep or ":" in label:
         label, rest = "", spec
@@ -409,7 +407,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--family", choices=("both", "noise", "model_error"), default="both")
     ap.add_argument("--methods", default=DEFAULT_METHODS,
-                    help="comma-separated: ols, wls, dm-paper, [label=]module:Class[:kwargs-json]")
+                    help="comma-separated: keys of the method table (ols, wls, dm, dm-paper, …) or [label=]module:Class[:kwargs-json]")
     ap.add_argument("--workers", type=int, default=2, help="processes (at most 2)")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "statistics"))
     ap.add_argument("--render", metavar="RESULTS_JSON", help="only rewrite results.md next to an existing results.json")
