@@ -178,3 +178,6 @@ def test_pooled_data_sets_and_paired_differences(system):
     np.testing.assert_allclose(d.mean, (dm - wls).mean(0))
     assert d.n_pairs == dm.shape[0] and np.array_equal(d.wins, (dm > wls).sum(0))
     assert "### Paired score difference against WLS" in study_markdown(pooled)
+    # every fit carries the metric guard against the prior, and the tables count the flagged fits
+    assert all({"metric_ratio_min", "metric_ratio_max", "degenerate"} <= set(r.info) for r in pooled.records if r.ok)
+    assert "| failed | degenerate metric |" in study_markdown(pooled)

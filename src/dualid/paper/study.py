@@ -31,6 +31,7 @@ import numpy as np
 
 from dualid.errors import ConfigError, DualidError, IdentifiabilityError
 from dualid.estimators import methods as methods_table
+from dualid.estimators.guards import guard_info
 from dualid.evaluation.prediction import PredictionData, measured_signal
 from dualid.evaluation.scores import metric_rmse, rmse, score_run, shift_window
 from dualid.paper.results import FitRecord, StudyResult, Summary, Trace
@@ -151,6 +152,8 @@ def _fit_one(estimator, problem, system, case, method, seed, max_shift, evaluati
         msg = f"{type(exc).__name__} during {stage}: {exc}"
         return FitRecord(case, method, seed, problem.N, False, error=msg), None
     info = {k: v for k, v in result.info.items() if isinstance(v, (bool, int, float, str))}
+    if method != "truth":  # how far M(θ̂) moved from M(θ_prior): a collapsed or blown-up metric is flagged
+        info.update(guard_info(problem, result.theta, system.theta_nominal, reference="prior θ₀"))
     rec = FitRecord(
         case, method, seed, problem.N, True, theta=tuple(float(x) for x in result.theta),
         objective=float(result.objective), solve_time=float(result.solve_time), status=str(result.status),

@@ -198,9 +198,10 @@ def study_markdown(self: StudyResult, reference: str = "wls") -> str:
         title = {"low": f"Low-data case ({self.config.get('low_data_samples')} samples, "
                         f"{len(self.config.get('seeds') or [])} seeds)", "high": "High-data case (all samples)"}[case]
         lines += ["", f"## {title}", "", "### Score (higher is better, max 1)", ""]
-        lines += markdown_table(["method"] + [f"{sym}:{x}" for x in c] + ["failed"],
+        lines += markdown_table(["method"] + [f"{sym}:{x}" for x in c] + ["failed", "degenerate metric"],
                         [[method_label(s.method)] + [_pm(m, d, 3) for m, d in zip(s.score_mean, s.score_std)]
-                         + [f"{s.n_failed}/{s.n_fits}"] for s in self.summaries if s.case == case])
+                         + [f"{s.n_failed}/{s.n_fits}", _degenerate(self, case, s.method)]
+                         for s in self.summaries if s.case == case])
         lines += ["", "### RMSE per coordinate (signal units) and chart-invariant RMSE √(mean eᵀMe)", ""]
         lines += markdown_table(["method"] + [f"{sym}:{x}" for x in c] + ["√(eᵀMe)"],
                         [[method_label(s.method)] + [_pm(m, d, 3, "g") for m, d in zip(s.rmse_mean, s.rmse_std)]
@@ -228,6 +229,14 @@ def _pm(m: float, d: float, digits: int, fmt: str = "f") -> str:
     if not np.isfinite(m):
         return "failed"
     return f"{m:.{digits}{fmt}} ± {d:.{digits}{fmt}}" if fmt == "f" else f"{m:.{digits}g} ± {d:.{digits - 1}g}"
+
+
+def _degenerate(result: StudyResult, case: str, method: str) -> str:
+    """'k/n' successful fits whose identified metric left [1/c, c] of the prior's (the metric guard)."""
+    recs = [r for r in result.records if r.case == case and r.method == method and r.ok]
+    flagged = sum(bool(r.info.get("degenerate", False)) for r in recs)
+    worst = min((r.info.get("metric_ratio_min", float("nan")) for r in recs), default=float("nan"))
+    return f"{flagged}/{len(recs)}" + (f" (min λ {worst:.1e})" if flagged else "")
 
 
 def _paired_section(result: StudyResult, case: str, reference: str, sym: str) -> list[str]:
