@@ -36,12 +36,15 @@ METHODS = {
 
 
 def with_drag(system):
+    """The same data set with the base-drag identification model (as make(..., base_drag=True) builds it)."""
+    from dualid.systems.crazyflie import NOMINAL_DRAG
+
     model = with_base_drag(system.model)
     drag = np.array(CrazyflieNoise().drag)
     return dataclasses.replace(
         system, model=model,
         theta_true=np.concatenate([system.theta_true, drag]),
-        theta_nominal=np.concatenate([system.theta_nominal, 0.5 * drag]),
+        theta_nominal=np.concatenate([system.theta_nominal, NOMINAL_DRAG]),
     )
 
 

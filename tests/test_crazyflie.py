@@ -216,3 +216,27 @@ def test_ols_fits_realistic_data_consistently(realistic):
     r_true = np.sum(problem.residual(realistic.theta_true) ** 2)
     assert r_fit <= r_true * (1 + 1e-6)
     np.testing.assert_allclose(result.theta[[0, 10, 20]].sum(), realistic.theta_true[[0, 10, 20]].sum(), rtol=0.1)
+
+
+def test_base_drag_variant_models_the_rotor_drag():
+    from dualid.systems.base import make_system
+    from dualid.systems.crazyflie import NOMINAL_DRAG, CrazyflieNoise
+
+    plain = make_system("crazyflie", size="small")
+    drag = make_system("crazyflie", size="small", base_drag=True)
+    assert drag.model.parameters.p == plain.model.parameters.p + 3
+    np.testing.assert_array_equal(drag.theta_true[-3:], CrazyflieNoise().drag)
+    np.testing.assert_array_equal(drag.theta_nominal[-3:], NOMINAL_DRAG)
+    assert "linear base drag" in drag.description
+    # exact states and forces, rotor drag the only effect: the true θ with the drag explains the forces, the
+    # rigid model's true θ does not
+    import dataclasses
+
+    from dualid.problem import build_problem
+
+    only_drag = dataclasses.replace(CrazyflieNoise.none(), drag=CrazyflieNoise().drag)
+    exact = make_system("crazyflie", size="small", noise=only_drag, base_drag=True)
+    problem = build_problem(exact.model, list(exact.train))
+    rigid = build_problem(plain.model, list(exact.train))
+    assert np.abs(problem.residual(exact.theta_true)).max() < 1e-6 * np.abs(problem.tau).max()
+    assert np.abs(rigid.residual(exact.theta_true[:-3])).max() > 1e-3 * np.abs(rigid.tau).max()

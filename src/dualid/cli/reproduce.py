@@ -17,6 +17,8 @@ def reproduce(
     case: str = typer.Option("both", "--case", help="low, high or both"),
     seeds: int = typer.Option(5, "--seeds", help="random low-data subsamples"),
     data_seeds: int = typer.Option(5, "--data-seeds", help="simulated data sets (seeds 0..N-1), pooled"),
+    base_drag: bool = typer.Option(False, "--base-drag", metavar=FLAG,
+                                   help="crazyflie: identify the base's linear (rotor) drag too"),
     noise: str = typer.Option("realistic", "--noise", help="realistic, ideal (Gaussian force noise only) or none"),
     size: str = typer.Option("default", "--size", help="default or small (a quick smoke run)"),
     ablation: str = typer.Option(None, "--ablation", help="'units': fit in re-charted coordinates (mm, degrees)"),
@@ -40,6 +42,8 @@ def reproduce(
                                  ("--size", size, get_args(Size))):
         if value not in allowed:
             fail(f"{flag}: expected one of {', '.join(allowed)}, got {value!r}")
+    if base_drag and system != "crazyflie":
+        fail(f"--base-drag: only the crazyflie has a floating base to put drag on, got {system!r}")
     if ablation is not None and ablation != "units":
         fail(f"--ablation: expected units, got {ablation!r}")
     if seeds < 1:
@@ -50,7 +54,8 @@ def reproduce(
     try:
         with Progress(*columns, console=console) as progress:
             result = run(system, out, case=case, seeds=seeds, noise=noise, size=size, ablation=ablation,
-                         overwrite=force, progress=progress, data_seeds=data_seeds)
+                         overwrite=force, progress=progress, data_seeds=data_seeds,
+                         **({"base_drag": True} if base_drag else {}))
     except FileExistsError as exc:
         fail(f"{exc}; pass --force to overwrite it")
     console.print(study_markdown(result), markup=False)

@@ -355,8 +355,14 @@ def dataset(seed: int = 0, n_train: int = 6, n_test: int = 6, duration: float = 
     return model, runs[:n_train], runs[n_train:], np.array(TRUE_THETA)
 
 
-def make(seed: int = 0, noise: str = "realistic", size: str = "default"):
-    """The Crazyflie–pendulum ``SystemData`` (see dualid.systems.base)."""
+NOMINAL_DRAG = (3e-3, 3e-3, 3e-3)  # [N s/m] a prior for the base drag: of the literature's order, not the truth
+
+
+def make(seed: int = 0, noise: str = "realistic", size: str = "default", base_drag: bool = False):
+    """The Crazyflie–pendulum ``SystemData`` (see dualid.systems.base). ``base_drag``: the identification
+    model also has the base's linear drag (3 parameters d ≥ 0, ``dualid.model.extra_terms``), the
+    unmodelled rotor drag that otherwise leaves residual the rigid model cannot fit."""
+    from dualid.model.extra_terms import with_base_drag
     from dualid.systems.base import SystemData
 
     sizes = {"default": (6, 6, 35.0), "small": (2, 2, 8.0)}
@@ -366,18 +372,24 @@ def make(seed: int = 0, noise: str = "realistic", size: str = "default"):
     model, train, test, theta = dataset(seed, n_train, n_test, duration, noise)
     alpha = np.concatenate([run.meta["true"]["q"][:, 7:9] for run in train])  # [rad] true shape angles
     swing = np.degrees(np.sqrt(np.mean((alpha - alpha.mean(0)) ** 2, axis=0)))
+    nominal = np.array(NOMINAL_THETA)
+    if base_drag:
+        model = with_base_drag(model)
+        theta = np.concatenate([theta, noise_preset(noise).drag])
+        nominal = np.concatenate([nominal, NOMINAL_DRAG])
     return SystemData(
         name="crazyflie",
         model=model,
         train=tuple(train),
         test=tuple(test),
         theta_true=theta,
-        theta_nominal=np.array(NOMINAL_THETA),
+        theta_nominal=nominal,
         low_data_samples=20,
         slowest_period=max(REFERENCE_PERIODS),  # the yaw period
         shape_coordinates=("alpha1", "alpha2"),
         gamma=0.1,  # per equation: the prior counts as a tenth of the WLS data term
         description="Crazyflie 2.0 with a universal-joint pendulum (floating base, 30 inertial parameters); "
         f"pendulum swing rms {swing[0]:.1f}° (alpha1), {swing[1]:.1f}° (alpha2) over the training runs; "
-        f"motor lag {noise_preset(noise).motor_lag * 1e3:.0f} ms",
+        f"motor lag {noise_preset(noise).motor_lag * 1e3:.0f} ms"
+        + ("; identification model with linear base drag (3 parameters)" if base_drag else ""),
     )
