@@ -21,7 +21,17 @@ from dualid.errors import (
     OutputError,
     SolverError,
 )
-from dualid.estimators import OLS, WLS, DualMetric, EnergyLS, IdentificationResult, RegularizedWLS
+from dualid.estimators import (
+    OLS,
+    WLS,
+    DualMetric,
+    EnergyLS,
+    FeasibleGLS,
+    Guarded,
+    IdentificationResult,
+    RegularizedWLS,
+    guard_info,
+)
 from dualid.estimators.methods import METHODS, Method, make_estimator
 from dualid.evaluation.prediction import forward_dynamics, predict
 from dualid.evaluation.scores import max_normalized_xcorr, metric_rmse, rmse, score_run
@@ -35,6 +45,7 @@ from dualid.model import (
     RigidBodyModel,
     with_joint_terms,
 )
+from dualid.model.extra_terms import with_base_drag
 from dualid.model.joint_terms import JointTermsModel
 from dualid.model.landsalp import LandSalpModel
 from dualid.problem import Identifiability, IdentificationProblem, build_problem
@@ -47,12 +58,13 @@ __all__ = [
     "ColumnMap", "JointColumns", "Trajectory", "load_dataset", "load_log", "load_logs",
     "differentiate", "filter_lowpass", "preprocess", "resample", "trim",
     # models
-    "Model", "RigidBodyModel", "JointTermsModel", "with_joint_terms", "LandSalpModel",
+    "Model", "RigidBodyModel", "JointTermsModel", "with_joint_terms", "with_base_drag", "LandSalpModel",
     "AffineMetric", "MetricTerm", "ParameterBlock", "ParameterSpace",
     # problem
     "IdentificationProblem", "Identifiability", "build_problem",
     # estimators
-    "OLS", "WLS", "EnergyLS", "RegularizedWLS", "DualMetric", "IdentificationResult",
+    "OLS", "WLS", "EnergyLS", "RegularizedWLS", "DualMetric", "FeasibleGLS", "Guarded", "guard_info",
+    "IdentificationResult",
     "METHODS", "Method", "make_estimator",
     # evaluation
     "predict", "forward_dynamics", "validate", "Validation", "max_normalized_xcorr", "metric_rmse", "rmse",
