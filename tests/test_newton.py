@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from dualid import DualMetric
 from dualid.errors import MetricError, SolverError, SolverOptionError
-from dualid.estimators.newton import _apply_quad, dual_metric_derivatives, fit_dual_metric_newton
+from dualid.estimators.newton import dual_metric_derivatives, fit_dual_metric_newton
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.pan_tilt import PanTilt
 from dualid.model.parameters import ParameterBlock, ParameterSpace
@@ -129,9 +129,10 @@ def test_chunked_passes_equal_one_pass_and_match_the_metric_methods():
     np.testing.assert_allclose(many.hess, one.hess, rtol=1e-10, atol=1e-12 * np.abs(one.hess).max())
     np.testing.assert_allclose(one.f, problem.dual_metric_objective(theta), rtol=1e-12)
     w = np.random.default_rng(2).normal(size=(problem.N, problem.n))
-    Mw, wMw = _apply_quad(problem.metric, w, slice(None))
-    np.testing.assert_allclose(-Mw, problem.metric.apply(w), atol=1e-12)
-    np.testing.assert_allclose(wMw, problem.metric.quad(w).sum(axis=0), rtol=1e-12)
+    Mw, wMw = problem.metric.apply_quad(w, slice(None))
+    _, Mk = problem.metric.basis()  # the dense M_ik (N, p, n, n): an independent path
+    np.testing.assert_allclose(-Mw, np.einsum("nkij,nj->nik", Mk, w), atol=1e-12)
+    np.testing.assert_allclose(wMw, np.einsum("ni,nkij,nj->k", w, Mk, w), rtol=1e-10)
 
 
 # --- agreement with the SDP ---------------------------------------------------------------------

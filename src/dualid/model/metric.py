@@ -116,28 +116,40 @@ class AffineMetric:
     def quad(self, w: np.ndarray, rows: slice | np.ndarray = slice(None)) -> np.ndarray:
         """(N', p): w_iᵀ M_ik w_i for w (N', n)."""
         out = np.zeros((w.shape[0], self.n_params))
-        for t in self.terms:
-            u = np.einsum("ndj,nj->nd", t.J[rows], w)
-            if t.per_sample:
-                q = np.einsum("nd,nkde,ne->nk", u, t.E[rows], u)
-            else:
-                q = np.einsum("nd,kde,ne->nk", u, t.E, u)
-            out[:, list(t.indices)] += q
+        for t, u, Eu in self._factors(w, rows):
+            out[:, _as_slice(t.indices)] += np.einsum("ckd,cd->ck", Eu, u)
         return out
 
     def apply(self, w: np.ndarray, rows: slice | np.ndarray = slice(None)) -> np.ndarray:
         """(N', n, p): the columns M_ik w_i for w (N', n)."""
-        N, n = w.shape
-        out = np.zeros((N, n, self.n_params))
+        out = np.zeros((w.shape[0], w.shape[1], self.n_params))
+        return -self.apply_quad(w, rows, out)[0]
+
+    def apply_quad(self, w: np.ndarray, rows: slice | np.ndarray = slice(None),
+                   out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(out − [M_ik w_i]_k (N', n, p), Σ_i w_iᵀ M_ik w_i (p,)) in one pass over the factors, which the
+        two share (u_i = J_i w_i and E_k u_i); ``out`` (N', n, p) is updated in place (zeros if None).
+        The dual-metric gradient and Hessian need exactly this pair."""
+        out = np.zeros((w.shape[0], w.shape[1], self.n_params)) if out is None else out
+        wMw = np.zeros(self.n_params)
+        for t, u, Eu in self._factors(w, rows):
+            idx = _as_slice(t.indices)
+            out[:, :, idx] -= np.matmul(np.swapaxes(t.J[rows], 1, 2), np.swapaxes(Eu, 1, 2))  # J_iᵀ E_k u_i
+            wMw[idx] += np.einsum("ckd,cd->k", Eu, u)
+        return out, wMw
+
+    def _factors(self, w: np.ndarray, rows):
+        """Per term: (term, u_i = J_i w_i (c, d), E_k u_i (c, k, d)); a shared E is one GEMM."""
         for t in self.terms:
-            J = t.J[rows]
-            u = np.einsum("ndj,nj->nd", J, w)
+            J = t.J[rows]  # (c, d, n)
+            u = np.einsum("cdn,cn->cd", J, w)
+            c, d = u.shape
             if t.per_sample:
-                Eu = np.einsum("nkde,ne->nkd", t.E[rows], u)
+                Eu = np.einsum("ckde,ce->ckd", t.E[rows], u)
             else:
-                Eu = np.einsum("kde,ne->nkd", t.E, u)
-            out[:, :, list(t.indices)] += np.einsum("ndj,nkd->njk", J, Eu)
-        return out
+                k = t.E.shape[0]
+                Eu = (u @ t.E.transpose(2, 0, 1).reshape(d, k * d)).reshape(c, k, d)  # E_k symmetric
+            yield t, u, Eu
 
     def basis(self, rows: slice | np.ndarray = slice(None)) -> tuple[np.ndarray, np.ndarray]:
         """Dense (M_0 (N', n, n), M_k (N', p, n, n)); costs N'·p·n² memory: the SDP's form."""
@@ -220,3 +232,10 @@ class AffineMetric:
             raise ModelError("AffineMetric.concatenate: some metrics have M0 and some do not")
         M0 = None if first.M0 is None else np.concatenate([m.M0 for m in metrics])
         return AffineMetric(first.n_params, tuple(terms), M0)
+
+
+def _as_slice(indices: tuple[int, ...]):
+    """A slice when the indices are consecutive (cheap in-place updates), else the index list."""
+    if indices and list(indices) == list(range(indices[0], indices[0] + len(indices))):
+        return slice(indices[0], indices[0] + len(indices))
+    return list(indices)

@@ -32,8 +32,8 @@ linalg (Newton-matrix solves), interior_point (the iterations), fit (fit_dual_me
 """
 
 from dualid.estimators.newton.fit import fit_dual_metric_newton
-from dualid.estimators.newton.objective import _apply_quad, dual_metric_derivatives
+from dualid.estimators.newton.objective import dual_metric_derivatives
 from dualid.estimators.newton.start import starting_point
 from dualid.model.consistency import feasible_set
 
-__all__ = ["_apply_quad", "feasible_set", "dual_metric_derivatives", "fit_dual_metric_newton", "starting_point"]
+__all__ = ["feasible_set", "dual_metric_derivatives", "fit_dual_metric_newton", "starting_point"]

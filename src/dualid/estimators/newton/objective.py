@@ -53,55 +53,6 @@ def _forward(L: np.ndarray, r: np.ndarray) -> np.ndarray:
     return z
 
 
-def _metric_chunk(metric, theta: np.ndarray, rows: slice) -> np.ndarray:
-    """M_i(θ) (c, n, n) for the samples in rows: Σ_terms J_iᵀ G(θ) J_i + M0_i."""
-    M = None
-    for t in metric.terms:
-        J = t.J[rows]  # (c, d, n)
-        G = t.G(theta)  # (d, d) or (N, d, d)
-        if t.per_sample:
-            GJ = np.matmul(G[rows], J)
-        else:
-            c, d, n = J.shape
-            GJ = (G @ np.swapaxes(J, 0, 1).reshape(d, c * n)).reshape(d, c, n).swapaxes(0, 1)
-        term = np.matmul(np.swapaxes(J, 1, 2), GJ)
-        M = term if M is None else M + term
-    if metric.M0 is not None:
-        M = metric.M0[rows].copy() if M is None else M + metric.M0[rows]
-    return M  # symmetric up to rounding; the Cholesky factorisation reads the lower triangle only
-
-
-def _as_slice(indices: tuple[int, ...]):
-    """A slice when the indices are consecutive (cheap in-place updates), else the index list."""
-    if indices and list(indices) == list(range(indices[0], indices[0] + len(indices))):
-        return slice(indices[0], indices[0] + len(indices))
-    return list(indices)
-
-
-def _apply_quad(metric, w: np.ndarray, rows: slice, out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(out − [M_ik w_i]_k (c, n, p), Σ_i w_iᵀ M_ik w_i (p,)) in one pass over the metric's factors.
-
-    With out = 0 these are ``−metric.apply(w, rows)`` and ``metric.quad(w, rows).sum(0)``; u_i = J_i w_i
-    and E_k u_i are shared between the two. ``out`` (c, n, p) is updated in place.
-    """
-    c, n = w.shape
-    out = np.zeros((c, n, metric.n_params)) if out is None else out
-    wMw = np.zeros(metric.n_params)
-    for t in metric.terms:
-        J = t.J[rows]  # (c, d, n)
-        u = np.einsum("cdn,cn->cd", J, w)  # (c, d)
-        d = u.shape[1]
-        if t.per_sample:
-            Eu = np.einsum("ckde,ce->ckd", t.E[rows], u)  # (c, k, d)
-        else:
-            k = t.E.shape[0]
-            Eu = (u @ t.E.transpose(2, 0, 1).reshape(d, k * d)).reshape(c, k, d)  # E symmetric
-        idx = _as_slice(t.indices)
-        out[:, :, idx] -= np.matmul(np.swapaxes(J, 1, 2), np.swapaxes(Eu, 1, 2))  # J_iᵀ E_k u_i
-        wMw[idx] += np.einsum("ckd,cd->k", Eu, u)
-    return out, wMw
-
-
 @dataclass(frozen=True)
 class _Derivatives:
     f: float
@@ -126,7 +77,7 @@ def dual_metric_derivatives(
         Y = problem.Y[rows]  # (c, n, p)
         c = Y.shape[0]
         r = (Y.reshape(c * n, p) @ theta).reshape(c, n) - problem.tau[rows]  # (c, n)
-        L = _cholesky(_metric_chunk(problem.metric, theta, rows))  # M_i = L_i L_iᵀ
+        L = _cholesky(problem.metric.evaluate(theta, rows))  # M_i = L_i L_iᵀ
         if not order:
             z = _forward(L, r)  # L⁻¹ r
             f += float(np.sum(z * z))
@@ -135,7 +86,7 @@ def dual_metric_derivatives(
         z = np.einsum("cab,cb->ca", Li, r)  # L⁻¹ r
         f += float(np.sum(z * z))
         w = np.einsum("cba,cb->ca", Li, z)  # M⁻¹ r = L⁻ᵀ L⁻¹ r
-        D, wMw = _apply_quad(problem.metric, w, rows, out=Y.copy())  # D = Y_i − [M_ik w_i]_k, Σ_i w_iᵀ M_ik w_i
+        D, wMw = problem.metric.apply_quad(w, rows, out=Y.copy())  # D = Y_i − [M_ik w_i]_k, Σ_i w_iᵀ M_ik w_i
         grad += 2.0 * (w.reshape(-1) @ Y.reshape(-1, p)) - wMw
         Z = np.matmul(Li, D).reshape(-1, p)  # L⁻¹ (Y_i − M_ik w_i)
         hess += 2.0 * (Z.T @ Z)
