@@ -218,8 +218,8 @@ def study_markdown(self: StudyResult, reference: str = "wls") -> str:
     if failed:
         lines += ["", "## Failed fits", ""]
         for r in failed:
-            seed = f", seed {r.seed}" if r.seed is not None else ""
-            lines.append(f"- {r.case}, {method_label(r.method)}{seed}: {r.error}")
+            seed = f", subset seed {r.seed}" if r.seed is not None else ""
+            lines.append(f"- {r.case}, {method_label(r.method)}, data set {r.data_seed}{seed}: {r.error}")
     return "\n".join(lines) + "\n"
 
 
