@@ -16,16 +16,9 @@ import pytest
 
 from dualid.estimators.dual_metric import fit_dual_metric_sdp
 from dualid.estimators.newton import fit_dual_metric_newton
+from dualid.robot.defaults import FIXED_PREPROCESSING_0_1
 
 DFKI = Path(__file__).resolve().parents[1] / "examples" / "dfki" / "data"
-# the fixed preprocessing `dualid fit` used by default when issue 12 was measured (500 Hz, 0.05 s window):
-# the reproducer of the Newton jam, kept fixed so the case stays the same whatever the defaults become
-ISSUE12_PREPROCESSING = (
-    {"resample": {"rate": 500.0}},
-    {"differentiate": {"method": "savgol", "window": 0.05}},
-    {"filter_lowpass": {"cutoff": 20.0, "fields": ["tau"]}},
-    {"downsample": {"factor": 5}},
-)
 
 TYPICAL, WORST = 15, 30
 
@@ -88,7 +81,7 @@ def _dfki_problem(mass_bound: float | None = 5.0):
 
     cfg = FitConfig.from_dict({"model": {"urdf": str(DFKI / "pendubot_model_2.1.urdf")},
                                "train": [str(DFKI / "trajectory_00.csv")],
-                               "preprocessing": [dict(x) for x in ISSUE12_PREPROCESSING]})
+                               "preprocessing": [dict(x) for x in FIXED_PREPROCESSING_0_1]})
     rigid, model = build_model(cfg)
     joints = tuple(rigid.coordinates)
     runs = load_runs(cfg.train, column_map(cfg.columns, joints, cfg.train[0]), joints, cfg.preprocessing)

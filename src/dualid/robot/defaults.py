@@ -21,6 +21,14 @@ from dualid.errors import DataError, DualidWarning
 MIN_RATE = 10.0  # [Hz] slower logs get no derived defaults (time in ms read as s?)
 MIN_SAMPLES = 100
 BAND_POWER = 0.99  # the motion band holds this fraction of the detrended q's power
+# the fixed preprocessing dualid 0.1 applied whatever the log (500 Hz, 0.05 s window, 20 Hz τ filter): kept
+# for reproducing results measured with it (the Newton solver's convergence corpus uses it on DFKI data)
+FIXED_PREPROCESSING_0_1 = (
+    {"resample": {"rate": 500.0}},
+    {"differentiate": {"method": "savgol", "window": 0.05}},
+    {"filter_lowpass": {"cutoff": 20.0, "fields": ["tau"]}},
+    {"downsample": {"factor": 5}},
+)
 
 
 def _round(x: float, digits: int = 2) -> float:
