@@ -52,11 +52,14 @@ def test_recovers_truth_from_noiseless_pan_tilt_data(name, pan_tilt_noiseless):
 def test_regularized_wls_recovers_truth(regularizer):
     problem, theta = drag_problem(np.random.default_rng(1), N=40, n=3)
     eye = np.eye(3)  # a given covariance keeps the data term's scale fixed (Σ r_iᵀ r_i)
-    at_truth = RegularizedWLS(theta0=theta, gamma=10.0, regularizer=regularizer, covariance=eye).fit(problem)
+    at_truth = RegularizedWLS(theta0=theta, gamma=10.0, per_equation=False, regularizer=regularizer,
+                              covariance=eye).fit(problem)
     np.testing.assert_allclose(at_truth.theta, theta, rtol=1e-6)
-    off = RegularizedWLS(theta0=1.3 * theta, gamma=1e-6, regularizer=regularizer, covariance=eye).fit(problem)
+    off = RegularizedWLS(theta0=1.3 * theta, gamma=1e-6, per_equation=False, regularizer=regularizer,
+                         covariance=eye).fit(problem)
     np.testing.assert_allclose(off.theta, theta, rtol=1e-4)
-    strong = RegularizedWLS(theta0=1.3 * theta, gamma=1e7, regularizer=regularizer, covariance=eye).fit(problem)
+    strong = RegularizedWLS(theta0=1.3 * theta, gamma=1e7, per_equation=False, regularizer=regularizer,
+                            covariance=eye).fit(problem)
     np.testing.assert_allclose(strong.theta, 1.3 * theta, rtol=1e-3)  # the prior dominates
 
 
@@ -193,6 +196,6 @@ def test_per_equation_gamma_scales_with_the_number_of_equations():
     problem, theta = drag_problem(np.random.default_rng(4), N=40, n=3, noise=0.3)
     theta0 = 1.3 * theta
     relative = RegularizedWLS(theta0=theta0, gamma=0.5, per_equation=True).fit(problem)
-    absolute = RegularizedWLS(theta0=theta0, gamma=0.5 * 40 * 3).fit(problem)
+    absolute = RegularizedWLS(theta0=theta0, gamma=0.5 * 40 * 3, per_equation=False).fit(problem)
     np.testing.assert_allclose(relative.theta, absolute.theta, rtol=1e-7)
     assert relative.info["gamma"] == pytest.approx(60.0)

@@ -87,7 +87,7 @@ def test_regularized_fit_agrees_with_cvxpy_where_clarabel_is_optimal(arm3, kind)
     gamma = 10.0
     theta, info = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, regularizer=(kind, theta0, gamma))
     value = stats.objective(problem, theta) + gamma * regularizer_value(kind, problem.parameters, theta, theta0)
-    ref = RegularizedWLS(theta0=theta0, gamma=gamma, regularizer=kind, covariance=np.eye(problem.n),
+    ref = RegularizedWLS(theta0=theta0, gamma=gamma, per_equation=False, regularizer=kind, covariance=np.eye(problem.n),
                          allow_unidentifiable=True).fit(problem)
     assert ref.status == "optimal" and ref.solver == "CLARABEL"
     assert value == pytest.approx(ref.objective, rel=1e-7)

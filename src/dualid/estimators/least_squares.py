@@ -265,10 +265,10 @@ class RegularizedWLS(_Common):
     """
 
     theta0: np.ndarray | None = None  # (p,) nominal parameters (e.g. CAD), physically consistent
-    gamma: float = 1.0  # weight of the prior, in units of the data objective
+    gamma: float = 0.1  # weight of the prior: per equation (γ·N·n) by default, else in units of the data objective
     regularizer: str = "logdet"  # "logdet" | "pullback"
     covariance: np.ndarray | None = None  # (n, n); None: from the unregularized (OLS) residuals
-    per_equation: bool = False  # γ_eff = γ·N·n: with W = Σ̂⁻¹ the data term is ≈ N·n at its optimum,
+    per_equation: bool = True  # γ_eff = γ·N·n: with W = Σ̂⁻¹ the data term is ≈ N·n at its optimum,
     # so a per-equation γ weighs the prior the same against 20 samples as against 20,000
 
     def __post_init__(self) -> None:
