@@ -29,3 +29,11 @@ def test_unknown_method_lists_the_table():
                                           r"logdet, pullback, dm, dm-paper, dm-bfp$"):
         make_estimator("lasso")
     assert label("my_estimator") == "my_estimator" and label("dual_metric") == "DM (paper)" and label("dm") == "DM"
+
+
+@pytest.mark.parametrize("key", list(METHODS))
+def test_every_estimator_is_a_hashable_value(key):
+    options = {"dm-paper": {"solver_options": {"chunk": 512}}, "dm": {"solver_options": {"max_iter": 50}}}.get(key)
+    a = make_estimator(key, theta0=np.ones(3), options=options)
+    b = make_estimator(key, theta0=np.ones(3), options=options)
+    assert a == b and hash(a) == hash(b) and len({a, b}) == 1

@@ -10,13 +10,15 @@ and the physical-consistency constraints. All N blocks are one batched PSD const
 from __future__ import annotations
 
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
 from dualid.errors import MetricError, SolverError, SolverOptionError
-from dualid.estimators.base import check_identifiable, parameter_scale, solve_cvxpy
+from dualid.estimators.base import check_identifiable, freeze_options, parameter_scale, solve_cvxpy
 from dualid.estimators.newton import fit_dual_metric_newton
 from dualid.estimators.result import IdentificationResult
 from dualid.model.consistency import cvxpy_constraints
@@ -206,7 +208,7 @@ class DualMetric:
     constrained: bool = True
     solver: str = "newton"
     sdp_solver: str = "CLARABEL"  # cvxpy solver for solver="sdp": "CLARABEL" or "SCS"
-    solver_options: dict | None = None
+    solver_options: Mapping[str, Any] | None = None  # stored as sorted (key, value) pairs (hashable)
     allow_unidentifiable: bool = False
     tol: float | None = None
     max_iter: int | None = None
@@ -234,8 +236,10 @@ class DualMetric:
         if self.max_iter is not None and not (isinstance(self.max_iter, (int, np.integer)) and self.max_iter >= 1):
             raise SolverOptionError(f"max_iter: expected a positive integer, got {self.max_iter!r}")
         options = self.solver_options or {}
-        if not isinstance(options, dict):
+        if not isinstance(options, (dict, tuple)):
             raise SolverOptionError(f"solver_options: expected a dict, got {type(options).__name__}")
+        options = dict(options)
+        object.__setattr__(self, "solver_options", freeze_options(options, "DualMetric: solver_options"))
         if self.solver == "newton":
             unknown = sorted(set(options) - set(NEWTON_OPTIONS))
             if unknown:
