@@ -28,6 +28,14 @@ JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "plan
 _INERTIA_KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 
 
+def _check_origins(element, where: str, path) -> None:
+    """Every <origin xyz= rpy=> of ``element`` holds three finite numbers."""
+    for el in element.findall("origin"):
+        for key in ("xyz", "rpy"):
+            if el.get(key) is not None:
+                _numbers(el.get(key), 3, f"{where} <origin {key}>", path)
+
+
 def _numbers(text: str | None, count: int, where: str, path: Path) -> np.ndarray:
     try:
         x = np.array([float(v) for v in (text or "").split()])
@@ -46,10 +54,7 @@ def _inertia(inertial: ET.Element, link: str, path: Path) -> None:
     mass = _numbers(mass_el.get("value"), 1, f"{where} <mass value>", path)[0]
     if mass < 0:
         raise ModelError(f"{path}: {where} <mass value>: expected a mass ≥ 0 kg, got {mass_el.get('value')!r}")
-    for el in inertial.findall("origin"):
-        for key in ("xyz", "rpy"):
-            if el.get(key) is not None:
-                _numbers(el.get(key), 3, f"{where} <origin {key}>", path)
+    _check_origins(inertial, where, path)
     inertia_el = inertial.find("inertia")
     if inertia_el is None:
         if mass > 0:
@@ -115,10 +120,7 @@ def read_urdf(path: str | Path) -> ET.Element:
                 raise ModelError(f"{path}: joint {name!r} has no <{tag} link=...>")
             if link not in declared and not (tag == "parent" and link == "world"):
                 raise ModelError(f"{path}: joint {name!r}: {tag} link {link!r} is not declared; links: {sorted(declared)}")
-        for el in joint.findall("origin"):
-            for key in ("xyz", "rpy"):
-                if el.get(key) is not None:
-                    _numbers(el.get(key), 3, f"joint {name!r} <origin {key}>", path)
+        _check_origins(joint, f"joint {name!r}", path)
         axis = joint.find("axis")
         if kind in ("revolute", "continuous", "prismatic", "planar") and axis is not None:
             a = _numbers(axis.get("xyz"), 3, f"joint {name!r} <axis xyz>", path)
