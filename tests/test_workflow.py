@@ -198,3 +198,12 @@ def test_joint_not_in_model_is_refused():
         fit_robot(FitConfig.from_dict(small_config(columns=cols)))
     with pytest.raises(DataError, match=r"joint_terms.joints: joints \['Elbow'\] are not in the model"):
         fit_robot(FitConfig.from_dict(small_config(joint_terms={"joints": ["Elbow"]})))
+
+
+def test_every_fit_records_the_metric_guard_against_the_urdf(outcome, written):
+    for f in outcome.fits.values():
+        assert {"metric_ratio_min", "metric_ratio_max", "degenerate"} <= set(f.result.info)
+        assert f.result.info["metric_guard_reference"] == "the URDF's inertials"
+    record = yaml.safe_load((written / "parameters.yaml").read_text())
+    assert set(record["methods"]["dm"]["metric_guard"]) >= {"metric_ratio_min", "degenerate"}
+    assert "| metric vs URDF |" in (written / "report.md").read_text()

@@ -49,6 +49,14 @@ def _armature(model, theta) -> dict[str, float]:
     return model.armature_values(theta) if isinstance(model, JointTermsModel) else {}
 
 
+def _guard_cell(info: dict) -> str:
+    """The generalised-eigenvalue range of M(θ̂) against the URDF's M, flagged when it left [1/100, 100]."""
+    if "metric_ratio_min" not in info:
+        return info.get("metric_guard_error", "—")
+    cell = f"[{info['metric_ratio_min']:.2g}, {info['metric_ratio_max']:.2g}]"
+    return f"**degenerate** {cell}" if info.get("degenerate") else cell
+
+
 def _slug(s: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", s)
 
@@ -164,6 +172,8 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str]) -> dict:
             "solver": r.solver,
             "solver_chain": r.info.get("solver_chain", r.solver),
             "fallback_used": bool(r.info.get("fallback_used", False)),
+            "metric_guard": {k: r.info[k] for k in ("metric_ratio_min", "metric_ratio_max", "degenerate",
+                                                    "metric_guard_reference", "metric_guard_error") if k in r.info},
             "solve_time_s": r.solve_time,
             "iterations": r.iterations,
             "objective": r.objective,
@@ -276,17 +286,17 @@ def _report_md(outcome: FitOutcome, validations, urdfs, figures) -> str:
         "",
         "## Fits",
         "",
-        "| method | status | solver | fallback | time [s] | consistent | URDF |",
-        "| --- | --- | --- | --- | --- | --- | --- |",
+        "| method | status | solver | fallback | time [s] | consistent | metric vs URDF | URDF |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for m, f in outcome.fits.items():
         if f.ok:
             r = f.result
             fallback = r.info.get("solver_chain", "") if r.info.get("fallback_used") else "no"
             lines.append(f"| {m} | {r.status} | {r.solver} | {fallback} | {r.solve_time:.2f} | {r.is_consistent} | "
-                         f"{urdfs.get(m, '')} |")
+                         f"{_guard_cell(r.info)} | {urdfs.get(m, '')} |")
         else:
-            lines.append(f"| {m} | failed: {f.error} | | | | | |")
+            lines.append(f"| {m} | failed: {f.error} | | | | | | |")
     if validations:
         lines += [
             "",

@@ -33,6 +33,7 @@ from dualid.data.preprocessing import preprocess
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError, DualidError, DualidWarning, MissingFileError
 from dualid.estimators import OLS, IdentificationResult
+from dualid.estimators.guards import guard_info
 from dualid.estimators.least_squares import covariance_weight
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.methods import method as method_entry
@@ -138,6 +139,18 @@ def urdf_joint_terms(urdf: Path, joints: tuple[str, ...]) -> dict[str, dict[str,
 
 
 # --- prior ------------------------------------------------------------------------------------
+def _guarded(result: IdentificationResult, problem: IdentificationProblem, rigid: RigidBodyModel, model):
+    """The result with the metric guard against the URDF's own inertials (joint terms at zero) in its info:
+    how far the identified mass matrix collapsed or blew up (dualid.estimators.guards)."""
+    theta_urdf = np.zeros(model.parameters.p)
+    theta_urdf[: rigid.parameters.p] = rigid.nominal
+    try:
+        guard = guard_info(problem, result.theta, theta_urdf, reference="the URDF's inertials")
+    except DualidError as exc:  # e.g. a URDF whose own mass matrix is singular: recorded, not hidden
+        guard = {"metric_guard_error": str(exc)}
+    return dataclasses.replace(result, info={**result.info, **guard})
+
+
 def prior_theta(config: FitConfig, rigid: RigidBodyModel, model, ols_theta: np.ndarray | None) -> tuple[np.ndarray, str]:
     """θ₀ for the regularized methods, and a sentence saying where it came from.
 
@@ -332,6 +345,7 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
             continue
         if method == "ols":
             ols_theta = result.theta
+        result = _guarded(result, problem, rigid, model)
         uncertainty = standard_errors(method, problem, result, ident)
         validation = None
         if test:
