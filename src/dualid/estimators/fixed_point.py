@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualid.errors import ConfigError, MetricError
+from dualid.estimators.base import freeze_options
 from dualid.estimators.gls import PILOTS, FeasibleGLS, fit_weighted
 from dualid.estimators.guards import DEFAULT_BOUND, guard_info
 from dualid.problem import IdentificationProblem
@@ -69,8 +70,7 @@ class BoundedFixedPoint:
             raise ConfigError(f"tol: expected a number > 0, got {self.tol!r}")
         if self.pilot not in PILOTS:
             raise ConfigError(f"pilot: expected one of {PILOTS}, got {self.pilot!r}")
-        if isinstance(self.solver_options, dict):
-            object.__setattr__(self, "solver_options", tuple(sorted(self.solver_options.items())))
+        object.__setattr__(self, "solver_options", freeze_options(self.solver_options, "BoundedFixedPoint: solver_options"))
 
     def fit(self, problem: IdentificationProblem):
         sensor = problem.in_sensor_chart()

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualid.errors import ConfigError, MetricError, SolverError
-from dualid.estimators.base import check_identifiable
+from dualid.estimators.base import check_identifiable, freeze_options
 from dualid.estimators.guards import DEFAULT_BOUND, guard_info
 from dualid.estimators.least_squares import OLS, WLS, fit_quadratic, residual_covariance
 from dualid.estimators.result import IdentificationResult
@@ -192,8 +192,7 @@ class FeasibleGLS:
             raise ConfigError(f"guard_bound: expected a finite number > 1, got {self.guard_bound!r}")
         if self.solver not in SOLVERS:
             raise ConfigError(f"solver: expected one of {SOLVERS}, got {self.solver!r}")
-        if isinstance(self.solver_options, dict):
-            object.__setattr__(self, "solver_options", tuple(sorted(self.solver_options.items())))
+        object.__setattr__(self, "solver_options", freeze_options(self.solver_options, "FeasibleGLS: solver_options"))
 
     # --- steps --------------------------------------------------------------------------------
     def _common(self) -> dict:
@@ -228,8 +227,10 @@ class FeasibleGLS:
 
         return DualMetric(constrained=c["constrained"], allow_unidentifiable=c["allow_unidentifiable"]).fit(sensor).theta, "dm-paper"
 
-    def covariance(self, sensor: IdentificationProblem, theta_ref: np.ndarray) -> tuple[np.ndarray, float, dict]:
-        """(Σ (n, n), κ, info) in the sensor chart: given, or estimated from the residuals at θ_ref."""
+    def covariance(self, sensor: IdentificationProblem, theta_ref: np.ndarray,
+                   M: np.ndarray | None = None) -> tuple[np.ndarray, float, dict]:
+        """(Σ (n, n), κ, info) in the sensor chart: given, or estimated from the residuals at θ_ref;
+        M (N, n, n): M_i(θ_ref) when the caller has it already."""
         n = sensor.n
         info: dict = {}
         if self.sigma is not None and self.kappa is not None:
@@ -240,7 +241,7 @@ class FeasibleGLS:
             info["covariance_model"] = "given"
             return S, self.kappa, info
         r = sensor.residual(theta_ref)
-        M = sensor.metric.evaluate(theta_ref)
+        M = sensor.metric.evaluate(theta_ref) if M is None else M
         rms = np.sqrt(np.mean(r * r, axis=0))
         floor_abs = 1e-150
         scale = np.where(rms > 1e-9 * max(rms.max(), floor_abs), rms, max(1e-9 * rms.max(), floor_abs))
@@ -265,10 +266,11 @@ class FeasibleGLS:
             theta_ref, pilot = self.reference(sensor)
         else:
             theta_ref, pilot = None, "none (κ = 0)"
-        S, kappa, info = self.covariance(sensor, theta_ref)
+        M_ref = None if theta_ref is None else sensor.metric.evaluate(theta_ref)  # once: Σ, κ and the weight
+        S, kappa, info = self.covariance(sensor, theta_ref, M_ref)
         C = np.broadcast_to(S, (sensor.N, sensor.n, sensor.n)).copy()
         if kappa > 0:
-            C += kappa * sensor.metric.evaluate(theta_ref)
+            C += kappa * M_ref
         info.update(
             pilot=pilot,
             kappa=float(kappa),
