@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import time
 import warnings
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -51,6 +52,22 @@ def check_covariance(covariance, who: str) -> tuple[tuple[float, ...], ...] | No
     if not np.all(np.isfinite(C)) or not np.allclose(C, C.T) or np.linalg.eigvalsh(0.5 * (C + C.T))[0] <= 0:
         raise ConfigError(f"{who}: covariance must be a finite symmetric positive-definite matrix")
     return tuple(tuple(float(x) for x in row) for row in C)
+
+
+def is_problem_property(exc: SolverError) -> bool:
+    """Infeasible or unbounded: a property of the problem, which another solver cannot change (no fallback)."""
+    return bool(exc.status) and ("infeasible" in exc.status or "unbounded" in exc.status)
+
+
+@contextmanager
+def captured_warnings() -> Iterator[list[str]]:
+    """Record the warnings raised inside (e.g. cvxpy's "Solution may be inaccurate") instead of printing
+    them; the yielded list holds them, sorted and unique as "Category: message", once the block ends."""
+    notes: list[str] = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield notes
+    notes.extend(sorted({f"{w.category.__name__}: {w.message}" for w in caught}))
 
 
 def check_identifiable(problem: IdentificationProblem, rank: int | None = None, what: str = "regressor") -> None:

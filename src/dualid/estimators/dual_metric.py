@@ -9,7 +9,6 @@ and the physical-consistency constraints. All N blocks are one batched PSD const
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
@@ -18,7 +17,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from dualid.errors import MetricError, SolverError, SolverOptionError
-from dualid.estimators.base import check_identifiable, freeze_options, parameter_scale, solve_cvxpy
+from dualid.estimators.base import (
+    captured_warnings,
+    check_identifiable,
+    freeze_options,
+    is_problem_property,
+    parameter_scale,
+    solve_cvxpy,
+)
 from dualid.estimators.newton import fit_dual_metric_newton
 from dualid.estimators.result import IdentificationResult
 from dualid.model.consistency import cvxpy_constraints
@@ -280,16 +286,14 @@ class DualMetric:
             if k and solver != "newton" and problem.N > SDP_FALLBACK_MAX_N:
                 failures.append(f"{solver} skipped (N = {problem.N} > {SDP_FALLBACK_MAX_N}: too large for a fallback SDP)")
                 continue
-            with warnings.catch_warnings(record=True) as caught:  # e.g. cvxpy's "Solution may be inaccurate"
-                warnings.simplefilter("always")
+            with captured_warnings() as notes:  # e.g. cvxpy's "Solution may be inaccurate"
                 try:
                     result = self._fit_with(problem, solver, first=k == 0)
                 except SolverError as exc:
-                    if exc.status and ("infeasible" in exc.status or "unbounded" in exc.status):
-                        raise  # a property of the problem, which another solver cannot change
+                    if is_problem_property(exc):
+                        raise
                     failures.append(f"{solver} failed ({exc.status}): {exc}")
                     continue
-            notes = sorted({f"{w.category.__name__}: {w.message}" for w in caught})
             if result.status == "optimal_inaccurate" and k + 1 < len(chain):
                 failures.append(f"{solver} returned optimal_inaccurate (objective {result.objective:.10g})")
                 inaccurate = inaccurate or (result, notes)

@@ -16,10 +16,12 @@ import numpy as np
 from dualid.errors import ConfigError, DataError, SolverError
 from dualid.estimators.base import (
     SOLVERS,
+    captured_warnings,
     check_covariance,
     check_identifiable,
     check_nominal,
     freeze_options,
+    is_problem_property,
     parameter_scale,
     solve_cvxpy,
 )
@@ -106,7 +108,7 @@ def fit_quadratic(
         objective = objective + (gamma / norm) * reg
     constraints = cvxpy_constraints(theta, problem.parameters) if constrained else []
     cvx = cp.Problem(cp.Minimize(objective), constraints)
-    solved, theta_hat, status, used, iterations, solve_time = _solve_with_fallback(
+    theta_hat, status, used, iterations, solve_time = _solve_with_fallback(
         cvx, phi, s, stats, problem, method, constrained, solver, solver_options, regularizer, info
     )
     value = stats.objective(problem, theta_hat)
@@ -124,25 +126,22 @@ def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solve
     (estimators.quadratic_newton). What happened is recorded in info (solver_chain, fallback_used,
     solver_warnings); an inaccurate cvxpy result is returned only, and labelled, if that fails too."""
     import time
-    import warnings
 
     from dualid.estimators.quadratic_newton import fit_quadratic_newton
 
     solved, failure = None, None
-    with warnings.catch_warnings(record=True) as caught:  # cvxpy's warnings go into the result, not the terminal
-        warnings.simplefilter("always")
+    with captured_warnings() as notes:  # cvxpy's warnings go into the result, not the terminal
         try:
             solved = solve_cvxpy(cvx, phi, solver, solver_options, what=f"{method} fit")
         except SolverError as exc:
-            if exc.status and ("infeasible" in exc.status or "unbounded" in exc.status):
+            if is_problem_property(exc):
                 raise
             failure = f"{solver} failed ({exc.status}): {exc}"
-    notes = sorted({f"{w.category.__name__}: {w.message}" for w in caught})
     if notes:
         info["solver_warnings"] = " | ".join(notes)
     if solved is not None and solved.status == "optimal":
         info.update(solver_chain=f"{solver} optimal", fallback_used=False)
-        return solved, s * solved.value, solved.status, solved.solver, solved.iterations, solved.solve_time
+        return s * solved.value, solved.status, solved.solver, solved.iterations, solved.solve_time
     first = failure or f"{solver} returned {solved.status}"
     t0 = time.perf_counter()
     try:
@@ -154,10 +153,10 @@ def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solve
                               status="all_solvers_failed") from exc
         info.update(solver_chain=f"{first} → newton failed ({exc.status}) → {solver} {solved.status}",
                     fallback_used=False, fallback_reason=first)
-        return solved, s * solved.value, solved.status, solved.solver, solved.iterations, solved.solve_time
+        return s * solved.value, solved.status, solved.solver, solved.iterations, solved.solve_time
     info.update(solver_chain=f"{first} → newton optimal", fallback_used=True, fallback_reason=first,
                 relative_gap=ipm["relative_gap"])
-    return None, theta, "optimal", "newton", ipm["iterations"], time.perf_counter() - t0
+    return theta, "optimal", "newton", ipm["iterations"], time.perf_counter() - t0
 
 
 @dataclass(frozen=True)
