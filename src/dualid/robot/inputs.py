@@ -58,6 +58,7 @@ def check_runs_differ(train, test) -> None:
             warnings.warn(f"training logs {seen[k]} and {p} are the same data; it is counted twice", DualidWarning,
                           stacklevel=3)
         seen.setdefault(k, p)
+    train_rows: dict[Path, set[bytes]] | None = None
     for p in test:
         k = key(p)
         if k in seen:
@@ -65,8 +66,10 @@ def check_runs_differ(train, test) -> None:
                           "held-out scores", DualidWarning, stacklevel=3)
             continue
         test_rows = _rows(p)
-        for q in dict.fromkeys(seen.values()):
-            shared = len(test_rows & _rows(q)) / max(len(test_rows), 1)
+        if train_rows is None:  # each training log is read once, not once per held-out log
+            train_rows = {q: _rows(q) for q in dict.fromkeys(seen.values())}
+        for q, rows in train_rows.items():
+            shared = len(test_rows & rows) / max(len(test_rows), 1)
             if shared >= OVERLAP:
                 warnings.warn(f"held-out log {p} shares {shared:.0%} of its rows with training log {q}; its scores are "
                               "not fully held-out scores", DualidWarning, stacklevel=3)
