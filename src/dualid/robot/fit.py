@@ -79,7 +79,7 @@ def column_map(config_columns, joints: tuple[str, ...], first_log: Path) -> Colu
 def choose_preprocessing(steps, first_log: Path, cmap: ColumnMap, joints: tuple[str, ...]) -> tuple[tuple, str]:
     """The configured steps (with warnings when far from the data) or, when none are configured, steps
     derived from the first log's rate and motion band, and a sentence saying how (dualid.robot.defaults)."""
-    velocity = "logged" if all(j.velocity for j in cmap.joints) else "gradient"
+    velocity = velocity_source(cmap)
     raw = load_log(first_log, cmap, joints, velocity=velocity)
     if steps is not None:
         warn_far_from_data(raw, steps)
@@ -87,10 +87,15 @@ def choose_preprocessing(steps, first_log: Path, cmap: ColumnMap, joints: tuple[
     return adaptive_preprocessing(raw)
 
 
+def velocity_source(cmap: ColumnMap) -> str:
+    """"logged" when the map names a velocity column for every joint, else "gradient" (v from dq/dt)."""
+    return "logged" if all(j.velocity for j in cmap.joints) else "gradient"
+
+
 def load_runs(paths, cmap: ColumnMap, joints: tuple[str, ...], steps) -> list[Trajectory]:
     """Load and preprocess each log; the runs must end with accelerations (a 'differentiate' step)."""
     runs = []
-    velocity = "logged" if all(j.velocity for j in cmap.joints) else "gradient"
+    velocity = velocity_source(cmap)
     for p in paths:
         traj = preprocess(load_log(p, cmap, joints, velocity=velocity), [dict(s) for s in steps])
         if traj.a is None:
