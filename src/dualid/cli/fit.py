@@ -11,6 +11,14 @@ from dualid.cli.app import FLAG, app
 from dualid.cli.common import EXIT_FAILED, console, fail, output_dir, print_error, show_warnings
 
 
+def _command_line() -> str:
+    """The command as typed (recorded in the run metadata of the reports)."""
+    import shlex
+    import sys
+
+    return shlex.join(["dualid", *sys.argv[1:]])
+
+
 def _config(config: Optional[Path], model: Optional[Path], data: List[Path]):
     from dualid.robot.config import FitConfig
 
@@ -76,7 +84,7 @@ def fit(
             try:
                 outcome = fit_robot(cfg, progress=lambda msg: bar.update(task, description=msg))
                 bar.update(task, description=f"writing {cfg.out}")
-                write_fit(outcome, cfg.out, force)
+                write_fit(outcome, cfg.out, force, command=_command_line(), config_file=config)
             finally:  # also when an error follows: a warning may explain it
                 bar.stop()
                 show_warnings(caught)
@@ -91,8 +99,8 @@ def fit(
     if validations:
         typer.echo(score_table(validations))
     failed = [m for m, f in outcome.fits.items() if not f.ok]
-    console.print(f"wrote parameters, URDFs and report.md to {cfg.out}"
-                  + (" (incomplete: see report.md)" if failed else ""), markup=False)
+    console.print(f"wrote parameters, URDFs, report.md and report.html to {cfg.out}"
+                  + (" (incomplete: see report.html)" if failed else ""), markup=False)
     for m in failed:
         print_error(f"{m}: failed: {outcome.fits[m].error}")
     if failed:
@@ -104,7 +112,7 @@ def validate(
     model: Path = typer.Option(..., "--model", help="an (identified) URDF; friction from <dynamics>"),
     data: List[Path] = typer.Option(..., "--data", help="log to validate on; repeatable"),
     config: Optional[Path] = typer.Option(None, "--config", help="fit.yaml for columns, preprocessing, gravity"),
-    out: Optional[Path] = typer.Option(None, "--out", help="write validation.json, report.md and PNGs here"),
+    out: Optional[Path] = typer.Option(None, "--out", help="write validation.json, report.md, report.html and PNGs here"),
     force: bool = typer.Option(False, "--force", metavar=FLAG, help="write into an existing non-empty output directory"),
 ) -> None:
     """Predicted vs measured effort (inverse dynamics) and acceleration (forward dynamics) of a URDF on logs."""
@@ -116,7 +124,7 @@ def validate(
         output_dir(out, force)
     import warnings
 
-    kw = {}
+    kw: dict = {}
     if config is not None:
         cfg = FitConfig.from_yaml(config)
         kw = dict(columns=cfg.columns, preprocessing=cfg.preprocessing, xcorr_window=cfg.xcorr_window,
@@ -128,9 +136,12 @@ def validate(
             with console.status(f"validating {model.name} on {len(data)} runs"):
                 _, _, val = validate_urdf(model, data, **kw)
             if out is not None:
-                write_validation(val, out, {"model": str(model), "data": [str(p) for p in data]}, force)
+                meta = {"model": str(model), "data": [str(p) for p in data],
+                        "config": None if config is None else str(config)}
+                write_validation(val, out, meta, force, command=_command_line(),
+                                 xcorr_window=kw.get("xcorr_window", 0.02))
         finally:
             show_warnings(caught)
     typer.echo(score_table({val.label: val}))
     if out is not None:
-        console.print(f"wrote validation.json, report.md and figures to {out}", markup=False)
+        console.print(f"wrote validation.json, report.md, report.html and figures to {out}", markup=False)

@@ -1,0 +1,276 @@
+"""The fit and validation reports as one value (``document.Report``), built once from the outcome and
+rendered by the Markdown and HTML writers alike.
+
+A section is one function of ``FitReportData`` returning a ``Section``; ``FIT_SECTIONS`` lists them
+in order, so a new section (e.g. base parameters with intervals) is one function and one line.
+"""
+
+from __future__ import annotations
+
+import io
+import re
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from dualid.evaluation.validation import Validation, validate
+from dualid.report.document import (
+    Bullets,
+    Image,
+    Pre,
+    Report,
+    Section,
+    Table,
+    Text,
+    chunks,
+    fmt,
+    fmt_value,
+    mean_cell,
+    runs_phrase,
+)
+from dualid.report.metadata import metadata_items
+from dualid.report.render import table_markdown
+from dualid.report.signals import score_bars, signal_plot
+from dualid.robot.fit import FitOutcome
+
+JOINTS_PER_TABLE = 7  # score tables of more joints are split into groups
+SCORES = (("tau_rmse", "τ RMSE [N m]"), ("tau_ncc", "τ NCC"), ("a_ncc", "a NCC"))
+SCORE_NOTE = ("τ: inverse dynamics τ̂ = Y(q, v, a)θ̂ from measured q, v and differentiated a, against the measured "
+              "effort. a: forward dynamics â = M̂⁻¹(τ − ĥ) from measured q, v, τ, against the differentiated "
+              "accelerations. NCC: normalized cross-correlation, maximum over shifts within ±{window} s.")
+SOLVER_NOTES = ("fallback_reason", "solver_warnings", "fallback", "sigma_kappa_fallback", "covariance_model",
+                "pilot", "metric_guard_error")
+
+
+def slug(s: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", s)
+
+
+def png(fig: Figure, dpi: int = 110) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    return buf.getvalue()
+
+
+# --- shared tables ------------------------------------------------------------------------------
+def score_tables(validations: dict[str, Validation], what: str = "held-out") -> list[Table]:
+    """One table per score (rows: models, columns: joints in groups of JOINTS_PER_TABLE), each cell the mean
+    ± std over runs (a single run: its value, said in the title)."""
+    first = next(iter(validations.values()))
+    coords = first.coordinates
+    n_runs = {len(v.runs) for v in validations.values()}
+    runs = runs_phrase(n_runs.pop()) if len(n_runs) == 1 else "mean ± std over runs"
+    tables = []
+    for key, name in SCORES:
+        groups = chunks(list(range(len(coords))), JOINTS_PER_TABLE)
+        for g, idx in enumerate(groups):
+            part = f" (joints {g + 1}/{len(groups)})" if len(groups) > 1 else ""
+            rows = [(label, *[mean_cell([getattr(r, key)[j] for r in v.runs]) for j in idx])
+                    for label, v in validations.items()]
+            tables.append(Table(("model", *[coords[j] for j in idx]), tuple(rows), title=f"{what} {name}, {runs}{part}".strip()))
+    return tables
+
+
+def per_run_table(validations: dict[str, Validation], key: str = "tau_rmse", name: str = "τ RMSE [N m]") -> Table:
+    """Per run and joint (rows: run × model); the spread behind the means."""
+    first = next(iter(validations.values()))
+    rows = []
+    for i, r0 in enumerate(first.runs):
+        for label, v in validations.items():
+            rows.append((r0.run, label, *[mean_cell([x]) for x in getattr(v.runs[i], key)]))
+    return Table(("run", "model", *first.coordinates), tuple(rows), title=f"held-out {name} per run")
+
+
+def preprocessing_table(steps: list) -> Table:
+    rows = []
+    for k, step in enumerate(steps, 1):
+        name, settings = next(iter(step.items())) if isinstance(step, dict) and len(step) == 1 else ("step", step)
+        rows.append((str(k), name, fmt_value(settings)))
+    return Table(("#", "step", "settings"), tuple(rows), title="preprocessing (numbers rounded to 4 significant digits; "
+                 "exact values in parameters.yaml)")
+
+
+def run_section(meta: dict) -> Section:
+    inputs = Table(("role", "file", "SHA-256"), tuple((i["role"], i["path"], i["sha256"] or "(missing)")
+                                                     for i in meta["inputs"]), title="input files")
+    return Section("Run", (Table(("", ""), metadata_items(meta)), inputs))
+
+
+# --- the fit report -------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class FitReportData:
+    """Everything a fit report shows, computed once: the outcome, the URDF each method wrote, run metadata
+    and the training/held-out validations (methods that succeeded, then references)."""
+
+    outcome: FitOutcome
+    urdfs: dict[str, str]
+    meta: dict
+    train: dict[str, Validation] = field(default_factory=dict)
+    held_out: dict[str, Validation] = field(default_factory=dict)
+
+
+def report_data(outcome: FitOutcome, urdfs: dict[str, str], meta: dict) -> FitReportData:
+    """The held-out validations of the outcome and the same scores on the training runs (θ̂ of each
+    method and reference predicting the data it was fitted on)."""
+    window = outcome.config.xcorr_window
+    thetas = {m: f.result.theta for m, f in outcome.fits.items() if f.ok}
+    thetas.update({lab: th for lab, (th, _) in outcome.references.items()})
+    train = {lab: validate(outcome.model, th, list(outcome.train), lab, window) for lab, th in thetas.items()}
+    held = {m: f.validation for m, f in outcome.fits.items() if f.ok and f.validation is not None}
+    held.update({lab: v for lab, (_, v) in outcome.references.items() if v is not None})
+    return FitReportData(outcome, urdfs, meta, train, held)
+
+
+def _summary(d: FitReportData) -> Section:
+    o, cfg = d.outcome, d.outcome.config
+    items = [
+        f"training runs: {', '.join(p.name for p in cfg.train)}",
+        f"held-out runs: {', '.join(p.name for p in cfg.test) or '(none: no validation)'}",
+        f"samples after preprocessing: {o.problem.N} × {o.problem.n} joints; parameters: {o.problem.p}",
+        f"joint terms: viscous={cfg.joint_terms.viscous}, coulomb={cfg.joint_terms.coulomb} "
+        f"(v_c = {cfg.joint_terms.coulomb_velocity} rad/s), armature={cfg.joint_terms.armature}",
+    ]
+    if o.preprocessing_note:
+        items.append(f"preprocessing {o.preprocessing_note} (no 'preprocessing' in the config)")
+    if o.prior:
+        weight = f"γ = {cfg.prior.gamma} per equation (γ·N·n)" if cfg.prior.per_equation else f"γ = {cfg.prior.gamma}"
+        items.append(f"prior of logdet/pullback ({weight}): {o.prior}")
+    return Section("Summary", (Bullets(tuple(items)), preprocessing_table(o.steps)))
+
+
+def _warnings(d: FitReportData) -> Section:
+    return Section("Warnings", (Bullets(tuple(d.outcome.warnings)),) if d.outcome.warnings else ())
+
+
+def _identifiability(d: FitReportData) -> Section:
+    return Section("Identifiability", (Pre(d.outcome.identifiability_text()),))
+
+
+def guard_cell(info: dict) -> str:
+    """The generalised-eigenvalue range of M(θ̂) against the URDF's M, flagged when it left [1/100, 100]."""
+    if "metric_ratio_min" not in info:
+        return info.get("metric_guard_error", "—")
+    cell = f"[{info['metric_ratio_min']:.2g}, {info['metric_ratio_max']:.2g}]"
+    return f"degenerate {cell}" if info.get("degenerate") else cell
+
+
+def _fits(d: FitReportData) -> Section:
+    rows, notes = [], []
+    for m, f in d.outcome.fits.items():
+        if not f.ok:
+            rows.append((m, "failed", "—", "—", "—", "—", "—", "—", "—"))
+            notes.append(f"{m}: failed: {f.error}")
+            continue
+        r = f.result
+        chain = str(r.info.get("solver_chain", r.solver))
+        rows.append((m, r.status, r.solver, chain if r.info.get("fallback_used") else "no",
+                     f"{r.solve_time:.2f}", fmt(r.iterations), str(r.is_consistent), guard_cell(r.info),
+                     d.urdfs.get(m, "")))
+        notes += [f"{m}: solver chain: {chain}"] if "→" in chain and not r.info.get("fallback_used") else []
+        notes += [f"{m}: {k.replace('_', ' ')}: {fmt_value(r.info[k])}" for k in SOLVER_NOTES
+                  if k in r.info and k != "metric_guard_error"]
+    table = Table(("method", "status", "solver", "fallback", "time [s]", "iterations", "consistent",
+                   "metric vs URDF", "URDF"), tuple(rows),
+                  note="fallback: when used, the solvers tried in order and the one that produced θ̂. metric vs URDF: range "
+                       "of the generalized eigenvalues of the identified mass matrix against the URDF's over the "
+                       "training samples ('degenerate' outside [1/100, 100]).")
+    return Section("Fits", (table, *((Bullets(tuple(notes)),) if notes else ())))
+
+
+def _scores(d: FitReportData) -> Section:
+    blocks: list = []
+    if d.train:
+        blocks += [Text("Training scores: each model predicting the runs it was fitted on (references: the "
+                        "same runs).")] + score_tables(d.train, "training")
+    if d.held_out:
+        blocks += [Text("Held-out scores: the runs not used for fitting.")] + score_tables(d.held_out, "held-out")
+        if len(next(iter(d.held_out.values())).runs) > 1:
+            blocks.append(per_run_table(d.held_out))
+    if blocks:
+        blocks.append(Text(SCORE_NOTE.format(window=d.outcome.config.xcorr_window)))
+    return Section("Scores", tuple(blocks))
+
+
+def signal_images(validations: dict[str, Validation]) -> list[Image]:
+    """Effort and acceleration figures for every held-out run."""
+    images = []
+    first = next(iter(validations.values()))
+    for i, r in enumerate(first.runs):
+        for signal, stem in (("tau", "effort"), ("a", "acceleration")):
+            sf = signal_plot(validations, i, signal)
+            images.append(Image(f"{stem}_{slug(r.run)}.png", png(sf.figure), sf.caption))
+    return images
+
+
+def _figures(d: FitReportData) -> Section:
+    if not d.held_out:
+        return Section("Held-out signals")
+    images = signal_images(d.held_out)
+    if len(d.held_out) > 1:
+        images.append(Image("scores.png", png(score_bars(d.held_out)),
+                            "Held-out scores per joint (bars: mean over runs; whiskers: std when more than one run)."))
+    return Section("Held-out signals", tuple(images))
+
+
+def parameter_tables(d: FitReportData) -> list[Table]:
+    """One table per body/joint (parameter-name prefix): rows parameters, columns methods and references."""
+    o = d.outcome
+    ok = [m for m, f in o.fits.items() if f.ok]
+    P = o.problem.parameters
+    unident = set(o.identifiability.unidentifiable)
+    groups: dict[str, list[int]] = {}
+    for k, n in enumerate(P.names):
+        groups.setdefault(n.split(".", 1)[0] if "." in n else "other", []).append(k)
+    columns = [o.fits[m].result.theta for m in ok] + [th for th, _ in o.references.values()]
+    tiny = [1e-10 * float(np.max(np.abs(th))) for th in columns]  # solver round-off, shown as 0
+    tables = []
+    for group, idx in groups.items():
+        rows = []
+        for k in idx:
+            cells = [P.names[k] + (" (n.i.)" if P.names[k] in unident else ""), P.units[k]]
+            values = ["0" if abs(th[k]) <= eps else f"{th[k]:.5g}" for th, eps in zip(columns, tiny)]
+            for i, m in enumerate(ok):
+                se = o.fits[m].uncertainty[k] if o.fits[m].uncertainty else None
+                values[i] += f" ± {se:.2g}" if isinstance(se, float) else ""
+            cells += values
+            rows.append(tuple(cells))
+        tables.append(Table(("parameter", "unit", *ok, *o.references), tuple(rows), title=group))
+    return tables
+
+
+def _parameters(d: FitReportData) -> Section:
+    return Section("Parameters", (Text("n.i.: not identifiable on its own; ± standard error (see the uncertainty note "
+                                       "in parameters.yaml); 0: below 1e-10 × the largest value of its column "
+                                       "(solver round-off; exact values in parameters.yaml)."), *parameter_tables(d)))
+
+
+FIT_SECTIONS: list[Callable[[FitReportData], Section]] = [
+    _summary, _warnings, _identifiability, _fits, _scores, _figures, _parameters,
+]
+
+
+def fit_report(d: FitReportData) -> Report:
+    o = d.outcome
+    failed = [m for m, f in o.fits.items() if not f.ok]
+    banner = (f"Incomplete: {len(failed)} of {len(o.fits)} requested methods failed ({', '.join(failed)}); see Fits."
+              if failed else "")
+    sections = [build(d) for build in FIT_SECTIONS] + [run_section(d.meta)]
+    return Report(f"Identification of {o.config.model.urdf.name}", tuple(sections), banner)
+
+
+# --- the validation report ----------------------------------------------------------------------
+def validation_report(validation: Validation, model: str, meta: dict, xcorr_window: float | None = None) -> Report:
+    vals = {validation.label: validation}
+    blocks: list = [Bullets((f"model: {model}", f"runs: {', '.join(r.run for r in validation.runs)}")),
+                    *score_tables(vals, "")]
+    if xcorr_window is not None:
+        blocks.append(Text(SCORE_NOTE.format(window=xcorr_window)))
+    sections = [Section("Scores", tuple(blocks)), Section("Signals", tuple(signal_images(vals))), run_section(meta)]
+    return Report(f"Validation of {model}", tuple(sections))
+
+
+def score_table(validations: dict[str, Validation]) -> str:
+    """The held-out score tables as Markdown (what the CLI prints)."""
+    return "\n\n".join("\n".join(table_markdown(t)) for t in score_tables(validations))

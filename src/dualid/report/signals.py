@@ -1,0 +1,133 @@
+"""Figures of a validation: measured vs predicted signals per run and joint, and per-joint score bars.
+
+Axes follow the measured signal: each panel's y-range is the measured range, widened to show
+predictions that stay near it (at most one measured span on either side) and clipped beyond,
+so a wild prediction (e.g. 1e4 rad/s² forward dynamics of a nearly singular M̂) does not flatten the
+measurement into a line; ``clipped`` names the curves that left the axes, for the caption.
+Every panel has its own legend with the RMSE of that joint on that run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from dualid.estimators.methods import color as method_color
+from dualid.evaluation.validation import Validation
+from dualid.report.figures import cycle_color, new_figure
+
+SIGNALS = {
+    "tau": ("effort", "N m", "measured", "effort: inverse dynamics Y(q,v,a)θ̂"),
+    "a": ("acceleration", "rad/s²", "differentiated (measured q)", "acceleration: forward dynamics M̂⁻¹(τ−ĥ)"),
+}
+WIDEN = 1.0  # predictions may widen the axes by this fraction of the measured span on either side
+MARGIN = 0.05  # blank margin, fraction of the axis span
+
+
+def color(label: str, k: int):
+    return method_color(label) or cycle_color(k)
+
+
+def axis_limits(measured: np.ndarray, predicted: list[np.ndarray]) -> tuple[float, float]:
+    """The y-range of one panel: the measured range, widened by the predictions up to WIDEN × its span
+    on either side, plus a MARGIN (see the module docstring)."""
+    m = np.asarray(measured, dtype=float)
+    m = m[np.isfinite(m)]
+    lo, hi = (float(m.min()), float(m.max())) if m.size else (-1.0, 1.0)
+    span = hi - lo if hi > lo else max(abs(hi), 1.0) * 0.2
+    p = np.concatenate([np.asarray(x, dtype=float).ravel() for x in predicted]) if predicted else np.empty(0)
+    p = p[np.isfinite(p)]
+    if p.size:
+        lo = max(min(lo, float(p.min())), lo - WIDEN * span)
+        hi = min(max(hi, float(p.max())), hi + WIDEN * span)
+    if hi <= lo:
+        lo, hi = lo - 0.1 * span, hi + 0.1 * span
+    pad = MARGIN * (hi - lo)
+    return lo - pad, hi + pad
+
+
+def _pred(val: Validation, run: int, signal: str):
+    r = val.runs[run]
+    return r.tau_pred if signal == "tau" else r.a_pred
+
+
+@dataclass(frozen=True, eq=False)
+class SignalFigure:
+    figure: Figure
+    run: str
+    signal: str  # "tau" or "a"
+    clipped: tuple[str, ...]  # "label (joint)" of the predictions that left the axes
+
+    @property
+    def caption(self) -> str:
+        stem, _, _, what = SIGNALS[self.signal]
+        text = f"Held-out run {self.run}, {what}; the legend of each joint gives its RMSE on this run."
+        if self.clipped:
+            text += (" The axes follow the measured signal; predictions clipped (they leave the axes): "
+                     + ", ".join(self.clipped) + ".")
+        return text
+
+
+def signal_plot(validations: dict[str, Validation], run: int, signal: str = "tau") -> SignalFigure:
+    """Measured vs predicted effort ("tau") or acceleration ("a") on held-out run ``run``, one panel per
+    joint, each with its own legend (label and that joint's RMSE on this run)."""
+    first = next(iter(validations.values()))
+    coords = first.coordinates
+    meas_run = first.runs[run]
+    stem, unit, measured_label, what = SIGNALS[signal]
+    fig, axes = new_figure(len(coords), 1, figsize=(11, 2.4 * len(coords) + 0.4), sharex=True)
+    measured = meas_run.tau if signal == "tau" else meas_run.a
+    clipped: list[str] = []
+    for j, ax in enumerate(axes[:, 0]):
+        ax.plot(meas_run.t, measured[:, j], color="black", lw=1.2, label=measured_label)
+        preds = []
+        for k, (label, val) in enumerate(validations.items()):
+            pred = _pred(val, run, signal)
+            if pred is None:
+                continue
+            r = val.runs[run]
+            score = (r.tau_rmse if signal == "tau" else r.a_rmse)[j]
+            ax.plot(r.t, pred[:, j], color=color(label, k), lw=0.8, alpha=0.85, label=f"{label}: RMSE {score:.3g} {unit}")
+            preds.append((label, pred[:, j]))
+        lo, hi = axis_limits(measured[:, j], [p for _, p in preds])
+        ax.set_ylim(lo, hi)
+        clipped += [f"{label} ({coords[j]})" for label, p in preds
+                    if np.nanmin(p) < lo or np.nanmax(p) > hi or not np.isfinite(p).all()]
+        ax.set_ylabel(f"{coords[j]} [{unit}]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False, title=coords[j],
+                  title_fontsize=7)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle(f"held-out run {meas_run.run}: {what}", fontsize=10)
+    fig.tight_layout()
+    return SignalFigure(fig, meas_run.run, signal, tuple(clipped))
+
+
+def score_bars(validations: dict[str, Validation]) -> Figure:
+    """Grouped bars per joint of held-out effort RMSE and NCC, and acceleration NCC (mean ± std over runs)."""
+    first = next(iter(validations.values()))
+    coords = first.coordinates
+    panels = (("tau_rmse", "effort RMSE [N m] (lower is better)"), ("tau_ncc", "effort NCC (higher is better)"),
+              ("a_ncc", "forward-dynamics acceleration NCC"))
+    fig, axes = new_figure(1, 3, figsize=(13, 4))
+    x = np.arange(len(coords))
+    w = 0.8 / len(validations)
+    for ax, (key, title) in zip(axes[0], panels):
+        for k, (label, val) in enumerate(validations.items()):
+            yerr = np.nan_to_num(val.std(key)) if len(val.runs) > 1 else None
+            ax.bar(x - 0.4 + w * (k + 0.5), np.nan_to_num(val.mean(key)), w, yerr=yerr,
+                   capsize=2, color=color(label, k), label=label, error_kw={"elinewidth": 0.8})
+        ax.set_xticks(x)
+        ax.set_xticklabels(coords)
+        ax.set_title(title, fontsize=9)
+        ax.grid(axis="y", alpha=0.3)
+        if key != "tau_rmse":
+            lo = min([0.0] + [float(np.nanmin(v.mean(key))) for v in validations.values() if np.isfinite(v.mean(key)).any()])
+            ax.set_ylim(min(lo - 0.05, 0.0) if lo < 0 else 0.0, 1.0)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 8), fontsize=8, frameon=False,
+               bbox_to_anchor=(0.5, -0.04))
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
+    return fig

@@ -1,0 +1,248 @@
+"""The fit/validation reports: one value rendered as Markdown and as one self-contained HTML file.
+
+End to end on the DFKI example (``dualid fit --config examples/dfki/fit.yaml``, two methods to keep it
+short), and unit checks of the figure rules: a legend per joint with that joint's RMSE (the old plot
+showed only the last joint's, as if overall), axes that follow the measured signal, no "± 0.000".
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+import sys
+from datetime import datetime
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from dualid.cli import app
+from dualid.evaluation.validation import RunValidation, Validation
+from dualid.report.document import Image, Report, Section, Table, Text, mean_cell
+from dualid.report.render import to_html, to_markdown
+from dualid.report.signals import axis_limits, signal_plot
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "examples" / "dfki"
+runner = CliRunner()
+
+VOID = {"meta", "img", "br", "hr", "link", "input", "source", "col", "area", "base", "wbr"}
+
+
+class Checker(HTMLParser):
+    """Well-formedness (every non-void element closed in order) and self-containment (no external
+    src/href, no script, no stylesheet link)."""
+
+    def __init__(self):
+        super().__init__(convert_charrefs=True)
+        self.stack: list[str] = []
+        self.errors: list[str] = []
+        self.external: list[str] = []
+        self.images = 0
+        self.ids: list[str] = []
+        self.text: list[str] = []
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if tag in ("script", "link", "iframe", "object", "embed"):
+            self.external.append(f"<{tag}>")
+        for key in ("src", "href", "srcset", "data"):
+            v = a.get(key)
+            if v is not None and not (v.startswith("data:image/png;base64,") or v.startswith("#")):
+                self.external.append(f"{tag} {key}={v[:60]}")
+        if tag == "img":
+            self.images += 1
+        if "id" in a:
+            self.ids.append(a["id"])
+        if tag not in VOID:
+            self.stack.append(tag)
+
+    def handle_startendtag(self, tag, attrs):
+        self.handle_starttag(tag, attrs)
+        if tag not in VOID:
+            self.stack.pop()
+
+    def handle_endtag(self, tag):
+        if not self.stack or self.stack[-1] != tag:
+            self.errors.append(f"</{tag}> closes {self.stack[-1] if self.stack else 'nothing'}")
+            return
+        self.stack.pop()
+
+    def handle_data(self, data):
+        self.text.append(data)
+
+
+def check_html(text: str) -> Checker:
+    c = Checker()
+    c.feed(text)
+    c.close()
+    assert text.startswith("<!DOCTYPE html>")
+    assert not c.errors and not c.stack, (c.errors, c.stack)
+    assert not c.external, c.external
+    return c
+
+
+def invoke(args: list[str]):
+    """The CLI as a user runs it (sys.argv is what the run metadata records as the command line)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(sys, "argv", ["/usr/bin/dualid", *args])
+        return runner.invoke(app, args)
+
+
+ZERO_SPREAD = re.compile(r"± 0(\.0*)?(?![0-9.])")  # "± 0.000", "± 0", not "± 0.00029"
+
+
+@pytest.fixture(scope="module")
+def dfki_fit(tmp_path_factory):
+    out = tmp_path_factory.mktemp("dfki") / "fit"
+    result = invoke(["fit", "--config", str(EXAMPLE / "fit.yaml"), "--method", "ols", "--method", "dm", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def test_the_dfki_fit_writes_a_self_contained_html_report(dfki_fit):
+    html = (dfki_fit / "report.html").read_text()
+    c = check_html(html)
+    text = " ".join(" ".join(c.text).split())
+    # every held-out run plotted (effort and acceleration), each figure embedded
+    for run in ("trajectory_04", "trajectory_05"):
+        for stem in ("effort", "acceleration"):
+            assert f"{stem}_{run}.png" in c.ids
+            assert (dfki_fit / f"{stem}_{run}.png").is_file()  # the Markdown's copy
+    assert c.images == 5  # 2 runs × 2 signals + scores.png
+    # training and held-out scores, per method and reference, per joint
+    assert "training τ RMSE [N m], mean ± std over 4 runs" in text
+    assert "held-out τ RMSE [N m], mean ± std over 2 runs" in text
+    for label in ("ols", "dm", "lab model 2.0", "lab model 2.1"):
+        assert f"<td>{label}</td>" in html
+    # solver / fallback / guard per method; readable preprocessing (rounded), run metadata
+    assert "metric vs URDF" in text and "fallback" in text
+    assert "downsample" in text and "cutoff = 40" in text and "39.99999" not in html
+    assert not ZERO_SPREAD.search(html) and not ZERO_SPREAD.search((dfki_fit / "report.md").read_text())
+    assert "dualid fit --config" in text and "SHA-256" in text
+
+
+def test_markdown_and_html_show_the_same_tables(dfki_fit):
+    md = (dfki_fit / "report.md").read_text()
+    html = (dfki_fit / "report.html").read_text()
+    rows = [line for line in md.splitlines() if line.startswith("| ") and " ± " in line]
+    assert len(rows) > 10
+    for line in rows:
+        cells = [c.strip() for c in line.strip("|").split(" | ")]
+        for cell in cells:
+            assert cell.replace("&", "&amp;") in html, cell
+    # no table wider than the joints of one group plus the model column (the old one had 3·n + 1 columns)
+    widths = {len(line.strip("|").split(" | ")) for line in md.splitlines() if line.startswith("| model |")}
+    assert widths == {3}
+
+
+def test_parameters_yaml_records_the_run(dfki_fit):
+    record = yaml.safe_load((dfki_fit / "parameters.yaml").read_text())
+    run = record["run"]
+    assert run["dualid_version"] and "git_commit" in run
+    datetime.strptime(run["time_utc"], "%Y-%m-%dT%H:%M:%SZ")
+    assert run["command"].startswith("dualid fit --config")
+    roles = {}
+    for entry in run["inputs"]:
+        roles.setdefault(entry["role"], []).append(Path(entry["path"]).name)
+        assert entry["sha256"] == hashlib.sha256(Path(entry["path"]).read_bytes()).hexdigest()
+    assert roles["config"] == ["fit.yaml"] and roles["urdf"] == ["pendubot_model_2.1.urdf"]
+    assert roles["train"] == [f"trajectory_0{i}.csv" for i in range(4)] and len(roles["test"]) == 2
+    assert len(roles["reference"]) == 2
+    train = record["methods"]["dm"]["training_scores"]
+    assert len(train["runs"]) == 4 and set(train["mean"]["tau_rmse"]) == {"Joint1", "Joint2"}
+    assert record["references"]["lab model 2.0"]["training_scores"]["label"] == "lab model 2.0"
+
+
+def test_validate_writes_the_html_report_with_one_run(dfki_fit, tmp_path):
+    out = tmp_path / "val"
+    result = invoke(["validate", "--model", str(dfki_fit / "dm.urdf"), "--data", str(EXAMPLE / "data" / "trajectory_05.csv"),
+                     "--config", str(EXAMPLE / "fit.yaml"), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    html = (out / "report.html").read_text()
+    c = check_html(html)
+    text = " ".join(" ".join(c.text).split())
+    assert "τ RMSE [N m], 1 run" in text and " ± " not in text.split("Signals")[0]
+    assert c.images == 2 and "effort_trajectory_05.png" in c.ids
+    record = yaml.safe_load((out / "validation.json").read_text())
+    assert record["run"]["command"].startswith("dualid validate")
+
+
+# --- figures ---------------------------------------------------------------------------------------
+def _validation(label: str, tau_pred: np.ndarray, a_pred: np.ndarray | None = None) -> Validation:
+    t = np.linspace(0.0, 1.0, 50)
+    tau = np.stack([np.sin(2 * np.pi * t), 0.5 * np.cos(2 * np.pi * t)], axis=1)
+    a = 10 * tau
+    a_pred = a if a_pred is None else a_pred
+    rmse = np.sqrt(np.mean((tau_pred - tau) ** 2, axis=0))
+    run = RunValidation("run", t, tau, tau_pred, a, a_pred, rmse, np.ones(2),
+                        np.sqrt(np.mean((a_pred - a) ** 2, axis=0)), np.ones(2))
+    return Validation(label, ("J1", "J2"), (run,))
+
+
+def test_each_joint_has_its_own_legend_with_its_rmse():
+    # regression: the old plot put one legend under the last panel, so the RMSE it showed per method was
+    # the last joint's, read as if overall
+    t = np.linspace(0.0, 1.0, 50)
+    tau = np.stack([np.sin(2 * np.pi * t), 0.5 * np.cos(2 * np.pi * t)], axis=1)
+    vals = {"ols": _validation("ols", tau + [0.1, 0.02]), "dm": _validation("dm", tau + [0.3, 0.04])}
+    sf = signal_plot(vals, 0, "tau")
+    axes = sf.figure.axes
+    assert len(axes) == 2
+    for j, ax in enumerate(axes):
+        legend = ax.get_legend()
+        assert legend is not None, f"joint {j} has no legend"
+        texts = [t.get_text() for t in legend.get_texts()]
+        expected = {"ols": [0.1, 0.02][j], "dm": [0.3, 0.04][j]}
+        for label, rmse in expected.items():
+            assert f"{label}: RMSE {rmse:.3g} N m" in texts, texts
+    assert not sf.clipped
+
+
+def test_axes_follow_the_measured_signal_and_the_caption_says_what_is_clipped():
+    t = np.linspace(0.0, 1.0, 50)
+    tau = np.stack([np.sin(2 * np.pi * t), 0.5 * np.cos(2 * np.pi * t)], axis=1)
+    wild = 10 * tau.copy()
+    wild[10, 0] = 1e4  # a forward-dynamics blow-up on joint J1
+    vals = {"ols": _validation("ols", tau, a_pred=wild)}
+    sf = signal_plot(vals, 0, "a")
+    lo, hi = sf.figure.axes[0].get_ylim()
+    measured = 10 * tau[:, 0]
+    span = np.ptp(measured)
+    assert measured.min() - 1.1 * span <= lo <= measured.min() and measured.max() <= hi <= measured.max() + 1.1 * span
+    assert sf.clipped == ("ols (J1)",)
+    assert "clipped" in sf.caption and "ols (J1)" in sf.caption
+    # predictions near the measurement widen the axes instead of being clipped
+    lo2, hi2 = axis_limits(np.array([0.0, 1.0]), [np.array([-0.3, 1.2])])
+    assert lo2 < -0.3 and hi2 > 1.2
+
+
+def test_one_run_has_no_spread_and_small_spreads_keep_a_digit():
+    assert ZERO_SPREAD.search("0.961 ± 0.000 |") and ZERO_SPREAD.search("1 ± 0") and not ZERO_SPREAD.search("± 0.00029")
+    assert mean_cell([0.25]) == "0.250"
+    assert mean_cell([0.25, 0.27]) == "0.260 ± 0.010"
+    assert mean_cell([0.9610, 0.9615]) == "0.961 ± 0.0003"
+    assert mean_cell([np.nan]) == "—"
+
+
+# --- the report value -------------------------------------------------------------------------------
+def test_a_new_section_renders_in_both_writers():
+    extra = Section("Base parameters", (Text("a < b & c"), Table(("name", "value"), (("m1 + m2", "1.5"),),
+                                                                    title="base", note="from QR")))
+    report = Report("T", (Section("Empty"), extra, Section("Fig", (Image("f.png", b"\x89PNG", "cap"),))))
+    md, html = to_markdown(report), to_html(report)
+    assert "## Base parameters" in md and "| m1 + m2 | 1.5 |" in md and "## Empty" not in md
+    assert "![f.png](f.png)" in md and "*cap*" in md
+    c = check_html(html)
+    assert "a &lt; b &amp; c" in html and "<caption>base</caption>" in html and "Empty" not in html
+    assert c.images == 1 and re.search(r'src="data:image/png;base64,iVBORw=="', html)
+    assert [i.name for i in report.images] == ["f.png"]
+
+
+def test_the_templates_are_package_data():
+    pyproject = (ROOT / "pyproject.toml").read_text()
+    assert 'dualid = ["py.typed", "report/templates/*.j2"]' in pyproject and '"jinja2>=' in pyproject
+    assert (ROOT / "src" / "dualid" / "report" / "templates" / "report.html.j2").is_file()
