@@ -246,3 +246,16 @@ def test_the_templates_are_package_data():
     pyproject = (ROOT / "pyproject.toml").read_text()
     assert 'dualid = ["py.typed", "report/templates/*.j2"]' in pyproject and '"jinja2>=' in pyproject
     assert (ROOT / "src" / "dualid" / "report" / "templates" / "report.html.j2").is_file()
+
+
+def test_score_tables_of_many_joints_are_split():
+    from dualid.report.fit_report import score_tables
+
+    coords = tuple(f"j{i}" for i in range(9))
+    t = np.linspace(0, 1, 20)
+    z = np.zeros((20, 9))
+    run = RunValidation("r", t, z, z, z, z, np.arange(9.0), np.ones(9), np.ones(9), np.ones(9))
+    tables = score_tables({"ols": Validation("ols", coords, (run,))})
+    assert len(tables) == 6  # 3 scores × 2 groups of joints
+    assert [len(t.header) for t in tables[:2]] == [8, 3] and tables[0].header[1:] == coords[:7]
+    assert tables[1].title == "held-out τ RMSE [N m], 1 run (joints 2/2)" and tables[1].rows == (("ols", "7.000", "8.000"),)
