@@ -259,3 +259,23 @@ def test_score_tables_of_many_joints_are_split():
     assert len(tables) == 6  # 3 scores × 2 groups of joints
     assert [len(t.header) for t in tables[:2]] == [8, 3] and tables[0].header[1:] == coords[:7]
     assert tables[1].title == "held-out τ RMSE [N m], 1 run (joints 2/2)" and tables[1].rows == (("ols", "7.000", "8.000"),)
+
+
+def test_the_interactive_svg_names_each_curve_with_its_joint_rmse_and_keeps_the_measurement_in_frame():
+    from dualid.report.svgplot import BOTTOM, TOP, H, signal_svg
+
+    t = np.linspace(0.0, 1.0, 50)
+    tau = np.stack([np.sin(2 * np.pi * t), 0.5 * np.cos(2 * np.pi * t)], axis=1)
+    wild = tau.copy()
+    wild[5, 1] = 1e4
+    vals = {"ols": _validation("ols", tau + [0.1, 0.02]), "dm&co": _validation("dm&co", wild)}
+    svg = signal_svg(vals, 0, "tau")
+    check_html(f"<!DOCTYPE html><html><body>{svg}</body></html>")
+    assert "<title>ols: RMSE 0.1 N m</title>" in svg and "<title>ols: RMSE 0.02 N m</title>" in svg
+    assert "<title>dm&amp;co: RMSE 0 N m</title>" in svg  # labels escaped
+    panels = re.findall(r'<g transform="translate\(0 (\d+)\)">(.*?)</g></g>', svg)
+    assert len(panels) == 2
+    for _, body in panels:
+        measured = re.search(r'<polyline stroke="#000000" points="([^"]+)"', body).group(1)
+        y = np.array([float(p.split(",")[1]) for p in measured.split()])
+        assert TOP <= y.min() and y.max() <= H - BOTTOM  # the axes follow the measured signal

@@ -56,12 +56,14 @@ class Table:
 
 @dataclass(frozen=True, eq=False)
 class Image:
-    """A figure rendered to PNG; ``name`` is the file the Markdown links (written beside it)."""
+    """A figure rendered to PNG; ``name`` is the file the Markdown links (written beside it); ``svg``: an
+    optional interactive version of the same plot (inline SVG markup, escaped) shown by the HTML."""
 
     kind: ClassVar[str] = "image"
     name: str
     png: bytes
     caption: str = ""
+    svg: str = ""
 
 
 Block = Union[Text, Bullets, Pre, Table, Image]

@@ -33,6 +33,7 @@ from dualid.report.document import (
 from dualid.report.metadata import metadata_items
 from dualid.report.render import table_markdown
 from dualid.report.signals import score_bars, signal_plot
+from dualid.report.svgplot import signal_svg
 from dualid.robot.fit import FitOutcome
 
 JOINTS_PER_TABLE = 7  # score tables of more joints are split into groups
@@ -200,7 +201,7 @@ def signal_images(validations: dict[str, Validation]) -> list[Image]:
     for i, r in enumerate(first.runs):
         for signal, stem in (("tau", "effort"), ("a", "acceleration")):
             sf = signal_plot(validations, i, signal)
-            images.append(Image(f"{stem}_{slug(r.run)}.png", png(sf.figure), sf.caption))
+            images.append(Image(f"{stem}_{slug(r.run)}.png", png(sf.figure), sf.caption, signal_svg(validations, i, signal)))
     return images
 
 
