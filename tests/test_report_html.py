@@ -98,7 +98,8 @@ ZERO_SPREAD = re.compile(r"± 0(\.0*)?(?![0-9.])")  # "± 0.000", "± 0", not "�
 @pytest.fixture(scope="module")
 def dfki_fit(tmp_path_factory):
     out = tmp_path_factory.mktemp("dfki") / "fit"
-    result = invoke(["fit", "--config", str(EXAMPLE / "fit.yaml"), "--method", "ols", "--method", "dm", "--out", str(out)])
+    result = invoke(["fit", "--config", str(EXAMPLE / "fit.yaml"), "--method", "ols", "--method", "dm",
+                     "--out", str(out)])
     assert result.exit_code == 0, result.output
     return out
 
@@ -159,7 +160,8 @@ def test_parameters_yaml_records_the_run(dfki_fit):
 
 def test_validate_writes_the_html_report_with_one_run(dfki_fit, tmp_path):
     out = tmp_path / "val"
-    result = invoke(["validate", "--model", str(dfki_fit / "dm.urdf"), "--data", str(EXAMPLE / "data" / "trajectory_05.csv"),
+    result = invoke(["validate", "--model", str(dfki_fit / "dm.urdf"),
+                     "--data", str(EXAMPLE / "data" / "trajectory_05.csv"),
                      "--config", str(EXAMPLE / "fit.yaml"), "--out", str(out)])
     assert result.exit_code == 0, result.output
     html = (out / "report.html").read_text()
@@ -258,7 +260,8 @@ def test_score_tables_of_many_joints_are_split():
     tables = score_tables({"ols": Validation("ols", coords, (run,))})
     assert len(tables) == 6  # 3 scores × 2 groups of joints
     assert [len(t.header) for t in tables[:2]] == [8, 3] and tables[0].header[1:] == coords[:7]
-    assert tables[1].title == "held-out τ RMSE [N m], 1 run (joints 2/2)" and tables[1].rows == (("ols", "7.000", "8.000"),)
+    assert tables[1].title == "held-out τ RMSE [N m], 1 run (joints 2/2)"
+    assert tables[1].rows == (("ols", "7.000", "8.000"),)
 
 
 def test_the_interactive_svg_names_each_curve_with_its_joint_rmse_and_keeps_the_measurement_in_frame():

@@ -112,7 +112,7 @@ def validate(
     model: Path = typer.Option(..., "--model", help="an (identified) URDF; friction from <dynamics>"),
     data: List[Path] = typer.Option(..., "--data", help="log to validate on; repeatable"),
     config: Optional[Path] = typer.Option(None, "--config", help="fit.yaml for columns, preprocessing, gravity"),
-    out: Optional[Path] = typer.Option(None, "--out", help="write validation.json, report.md, report.html and PNGs here"),
+    out: Optional[Path] = typer.Option(None, "--out", help="write validation.json, report.md/.html and PNGs here"),
     force: bool = typer.Option(False, "--force", metavar=FLAG, help="write into an existing non-empty output directory"),
 ) -> None:
     """Predicted vs measured effort (inverse dynamics) and acceleration (forward dynamics) of a URDF on logs."""

@@ -42,7 +42,7 @@ SCORE_NOTE = ("τ: inverse dynamics τ̂ = Y(q, v, a)θ̂ from measured q, v and
               "effort. a: forward dynamics â = M̂⁻¹(τ − ĥ) from measured q, v, τ, against the differentiated "
               "accelerations. NCC: normalized cross-correlation, maximum over shifts within ±{window} s.")
 SOLVER_NOTES = ("fallback_reason", "solver_warnings", "fallback", "sigma_kappa_fallback", "covariance_model",
-                "pilot", "metric_guard_error")
+                "pilot")
 
 
 def slug(s: str) -> str:
@@ -70,7 +70,8 @@ def score_tables(validations: dict[str, Validation], what: str = "held-out") -> 
             part = f" (joints {g + 1}/{len(groups)})" if len(groups) > 1 else ""
             rows = [(label, *[mean_cell([getattr(r, key)[j] for r in v.runs]) for j in idx])
                     for label, v in validations.items()]
-            tables.append(Table(("model", *[coords[j] for j in idx]), tuple(rows), title=f"{what} {name}, {runs}{part}".strip()))
+            title = f"{what} {name}, {runs}{part}".strip()
+            tables.append(Table(("model", *[coords[j] for j in idx]), tuple(rows), title=title))
     return tables
 
 
@@ -89,8 +90,8 @@ def preprocessing_table(steps: list) -> Table:
     for k, step in enumerate(steps, 1):
         name, settings = next(iter(step.items())) if isinstance(step, dict) and len(step) == 1 else ("step", step)
         rows.append((str(k), name, fmt_value(settings)))
-    return Table(("#", "step", "settings"), tuple(rows), title="preprocessing (numbers rounded to 4 significant digits; "
-                 "exact values in parameters.yaml)")
+    return Table(("#", "step", "settings"), tuple(rows),
+                 title="preprocessing (numbers rounded to 4 significant digits; exact values in parameters.yaml)")
 
 
 def run_section(meta: dict) -> Section:
@@ -171,12 +172,12 @@ def _fits(d: FitReportData) -> Section:
                      d.urdfs.get(m, "")))
         notes += [f"{m}: solver chain: {chain}"] if "→" in chain and not r.info.get("fallback_used") else []
         notes += [f"{m}: {k.replace('_', ' ')}: {fmt_value(r.info[k])}" for k in SOLVER_NOTES
-                  if k in r.info and k != "metric_guard_error"]
+                  if k in r.info]
     table = Table(("method", "status", "solver", "fallback", "time [s]", "iterations", "consistent",
                    "metric vs URDF", "URDF"), tuple(rows),
-                  note="fallback: when used, the solvers tried in order and the one that produced θ̂. metric vs URDF: range "
-                       "of the generalized eigenvalues of the identified mass matrix against the URDF's over the "
-                       "training samples ('degenerate' outside [1/100, 100]).")
+                  note="fallback: when used, the solvers tried in order and the one that produced θ̂. "
+                       "metric vs URDF: range of the generalized eigenvalues of the identified mass matrix against "
+                       "the URDF's over the training samples ('degenerate' outside [1/100, 100]).")
     return Section("Fits", (table, *((Bullets(tuple(notes)),) if notes else ())))
 
 
@@ -201,7 +202,8 @@ def signal_images(validations: dict[str, Validation]) -> list[Image]:
     for i, r in enumerate(first.runs):
         for signal, stem in (("tau", "effort"), ("a", "acceleration")):
             sf = signal_plot(validations, i, signal)
-            images.append(Image(f"{stem}_{slug(r.run)}.png", png(sf.figure), sf.caption, signal_svg(validations, i, signal)))
+            images.append(Image(f"{stem}_{slug(r.run)}.png", png(sf.figure), sf.caption,
+                                svg=signal_svg(validations, i, signal)))
     return images
 
 

@@ -89,7 +89,8 @@ def signal_plot(validations: dict[str, Validation], run: int, signal: str = "tau
                 continue
             r = val.runs[run]
             score = (r.tau_rmse if signal == "tau" else r.a_rmse)[j]
-            ax.plot(r.t, pred[:, j], color=color(label, k), lw=0.8, alpha=0.85, label=f"{label}: RMSE {score:.3g} {unit}")
+            ax.plot(r.t, pred[:, j], color=color(label, k), lw=0.8, alpha=0.85,
+                    label=f"{label}: RMSE {score:.3g} {unit}")
             preds.append((label, pred[:, j]))
         lo, hi = axis_limits(measured[:, j], [p for _, p in preds])
         ax.set_ylim(lo, hi)
@@ -124,7 +125,8 @@ def score_bars(validations: dict[str, Validation]) -> Figure:
         ax.set_title(title, fontsize=9)
         ax.grid(axis="y", alpha=0.3)
         if key != "tau_rmse":
-            lo = min([0.0] + [float(np.nanmin(v.mean(key))) for v in validations.values() if np.isfinite(v.mean(key)).any()])
+            lo = min([0.0] + [float(np.nanmin(v.mean(key))) for v in validations.values()
+                              if np.isfinite(v.mean(key)).any()])
             ax.set_ylim(min(lo - 0.05, 0.0) if lo < 0 else 0.0, 1.0)
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 8), fontsize=8, frameon=False,

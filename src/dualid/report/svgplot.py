@@ -62,7 +62,8 @@ def signal_svg(validations: dict[str, Validation], run: int, signal: str = "tau"
         out.append(f'<g transform="translate(0 {H * j})"><clipPath id="c{run}{signal}{j}">'
                    f'<rect x="{LEFT}" y="{TOP}" width="{W - LEFT - RIGHT}" height="{H - TOP - BOTTOM}"/></clipPath>'
                    f'<rect class="frame" x="{LEFT}" y="{TOP}" width="{W - LEFT - RIGHT}" height="{H - TOP - BOTTOM}"/>'
-                   f'<text x="{LEFT}" y="12">{escape(joint)} [{escape(unit)}] (hover a curve for its model and RMSE)</text>')
+                   f'<text x="{LEFT}" y="12">{escape(joint)} [{escape(unit)}] '
+                   '(hover a curve for its model and RMSE)</text>')
         for v in _ticks(lo, hi):
             y = TOP + (hi - v) / (hi - lo) * (H - TOP - BOTTOM)
             out.append(f'<text class="tick" x="{LEFT - 4}" y="{y + 3:.1f}">{v:.3g}</text>')
