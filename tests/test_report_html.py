@@ -282,3 +282,23 @@ def test_the_interactive_svg_names_each_curve_with_its_joint_rmse_and_keeps_the_
         measured = re.search(r'<polyline stroke="#000000" points="([^"]+)"', body).group(1)
         y = np.array([float(p.split(",")[1]) for p in measured.split()])
         assert TOP <= y.min() and y.max() <= H - BOTTOM  # the axes follow the measured signal
+
+
+def test_the_git_commit_is_dualids_own_or_none(tmp_path):
+    import subprocess
+
+    from dualid.report.metadata import PACKAGE_DIR, git_commit
+
+    commit = git_commit()
+    if (PACKAGE_DIR.parents[1] / ".git").exists():  # run from a checkout (a worktree has a .git file)
+        assert re.fullmatch(r"[0-9a-f]{40}(-dirty)?", commit)
+    # a package folder inside another project's repository (e.g. its virtual environment) has no commit
+    pkg = tmp_path / "project" / ".venv" / "lib" / "dualid"
+    pkg.mkdir(parents=True)
+    (pkg / "x.py").write_text("")
+    git = ["git", "-C", str(tmp_path / "project"), "-c", "user.name=t", "-c", "user.email=t@t"]
+    subprocess.run([*git, "init", "-q"], check=True)
+    subprocess.run([*git, "add", "."], check=True)
+    subprocess.run([*git, "commit", "-q", "-m", "x"], check=True)
+    assert git_commit(pkg) is None
+    assert git_commit(tmp_path) is None  # not a repository at all

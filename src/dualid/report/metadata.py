@@ -23,13 +23,18 @@ def dualid_version() -> str:
 
 
 def git_commit(where: Path = PACKAGE_DIR) -> str | None:
-    """The commit of the git checkout holding ``where`` (with "-dirty" when it has uncommitted changes
-    to tracked files); None when it is not a checkout (e.g. an installed wheel) or git is missing."""
+    """The commit of the dualid checkout that ``where`` (the package folder) is the ``src/dualid`` of, with
+    "-dirty" when it has uncommitted changes to tracked files; None when dualid is not run from its own
+    checkout (e.g. installed into a virtual environment that lies inside another project's repository,
+    whose commit says nothing about dualid) or git is missing."""
+    where = Path(where).resolve()
     try:
         def git(*args: str) -> str:
             return subprocess.run(["git", "-C", str(where), *args], capture_output=True, text=True, timeout=10,
                                   check=True).stdout.strip()
 
+        if Path(git("rev-parse", "--show-toplevel")).resolve() / "src" / "dualid" != where:
+            return None
         commit = git("rev-parse", "HEAD")
         dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
     except (OSError, subprocess.SubprocessError):
