@@ -39,5 +39,5 @@ def validate_urdf(urdf, data, columns=None, preprocessing=None, xcorr_window: fl
     ])
     cmap = column_map(columns, tuple(rigid.coordinates), data[0])
     steps, _ = choose_preprocessing(preprocessing, data[0], cmap, tuple(rigid.coordinates))
-    runs = load_runs(data, cmap, tuple(rigid.coordinates), steps)
+    runs = load_runs(data, cmap, tuple(rigid.coordinates), steps, rigid)
     return model, theta, validate(model, theta, runs, label or urdf.stem, xcorr_window)
