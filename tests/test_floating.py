@@ -154,6 +154,7 @@ def test_quaternion_sign_flips_and_orders_give_the_same_run(tmp_path):
                     {"time": "time", "base": {**BASE, "quaternion": ["qw", "qx", "qy", "qz"], "quaternion_order": "wxyz"}},
                     velocity="gradient")
     np.testing.assert_allclose(np.abs(np.sum(run.q[:, 3:7] * ref.q[:, 3:7], 1)), 1.0, atol=1e-12)
+    assert np.all(np.sum(run.q[1:, 3:7] * run.q[:-1, 3:7], 1) > 0)  # sign-continuous, as component-wise uses need
     np.testing.assert_allclose(wxyz.q, run.q, atol=1e-14)
     assert run.coordinates == FREE_FLYER_COORDINATES and run.q.shape == (t.size, 7)
     np.testing.assert_allclose(run.v, np.tile(v0[:6], (t.size, 1)), atol=1e-9)  # group differences on the raw stamps
