@@ -330,3 +330,13 @@ def test_cli_fits_the_box_demo_end_to_end(tmp_path):
         assert values["root_joint.m"] == pytest.approx(4.0, rel=0.03)  # truth 4.0 kg; the URDF's prior says 3.7
     assert (out / "dm.urdf").is_file()
     RigidBodyModel.from_urdf(out / "dm.urdf", floating_base=True)  # the written URDF loads back
+
+
+def test_a_configuration_without_unit_quaternions_is_not_taken_for_a_floating_base():
+    T = 30
+    q = np.zeros((T, 7))  # nq = n + 1, but columns 3–6 are no quaternion (e.g. (cos, sin) pairs elsewhere)
+    traj = Trajectory(np.arange(T) / 100.0, q, np.zeros((T, 6)), np.zeros((T, 6)))
+    with pytest.raises(DataError) as err:
+        differentiate(traj)
+    assert str(err.value) == ("differentiate: q has 7 columns for 6 velocity coordinates; only a floating base "
+                              "(free flyer first, nq = n + 1) is supported")

@@ -37,8 +37,11 @@ _MAX_CHART_ANGLE = 0.9 * np.pi  # [rad] largest rotation a window may span about
 
 
 def is_floating(q: np.ndarray, v: np.ndarray) -> bool:
-    """True when q holds a free-flyer root (nq = n + 1, see the module docstring)."""
-    return q.shape[1] == v.shape[1] + 1 and v.shape[1] >= 6
+    """True when q holds a free-flyer root (nq = n + 1, n ≥ 6, unit quaternions in columns 3–6; see the
+    module docstring)."""
+    if not (q.shape[1] == v.shape[1] + 1 and v.shape[1] >= 6):
+        return False
+    return bool(np.all(np.abs(np.linalg.norm(q[:, 3:7], axis=1) - 1.0) <= QUATERNION_TOL))
 
 
 def group(nq: int, nv: int):
