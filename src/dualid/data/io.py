@@ -23,6 +23,8 @@ from typing import Iterable, Mapping, Sequence
 import numpy as np
 
 from dualid.data.checks import check_magnitude, check_time, check_velocity
+from dualid.data.floating_columns import BaseColumns, WrenchColumns, read_wrenches, with_base
+from dualid.data.lie import BASE_COORDINATES
 from dualid.data.tables import FORMATS, read_table
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError, MissingFileError
@@ -80,7 +82,7 @@ class JointColumns:
 
     name: str
     position: str
-    effort: str  # the effort column, or the motor-current column when ``motor`` is given
+    effort: str | None  # the effort column, the motor-current column when ``motor`` is given, None: passive (τ = 0)
     velocity: str | None = None
     acceleration: str | None = None
     motor: tuple[tuple[str, float], ...] = ()  # (torque_constant [N m/A], gear_ratio, efficiency): τ = I·kt·N·η
@@ -99,10 +101,12 @@ class ColumnMap:
     joints: tuple[JointColumns, ...]
     units: tuple[tuple[str, str], ...] = ()  # (quantity, unit) pairs; missing quantities are SI
     joint_units: tuple[tuple[str, str, str], ...] = ()  # (joint, quantity, unit): overrides ``units`` per joint
+    base: BaseColumns | None = None  # a floating base's pose (and twist) columns (dualid.data.floating_columns)
+    wrenches: tuple[WrenchColumns, ...] = ()  # external wrenches on named frames
 
     def __post_init__(self) -> None:
         joints = tuple(self.joints)
-        if not joints:
+        if not joints and self.base is None:
             raise DataError("column map: no joints given")
         names = [j.name for j in joints]
         dup = sorted({n for n in names if names.count(n) > 1})
@@ -141,9 +145,16 @@ class ColumnMap:
         effort: tau_meas1}, ...}, units: {position: rad}}."""
         if not isinstance(d, Mapping):
             raise DataError(f"column map must be a mapping with keys time, joints, units; got {type(d).__name__}")
-        unknown = sorted(set(d) - {"time", "joints", "units"})
+        allowed = ["time", "joints", "units", "base", "wrenches"]
+        unknown = sorted(set(d) - set(allowed))
         if unknown:
-            raise DataError(f"column map: unknown keys {unknown}; allowed: ['time', 'joints', 'units']")
+            raise DataError(f"column map: unknown keys {unknown}; allowed: {allowed}")
+        base = None if d.get("base") is None else BaseColumns.from_dict(d["base"])
+        wrenches = d.get("wrenches") or {}
+        if not isinstance(wrenches, Mapping):
+            raise DataError(f"column map: 'wrenches' must map names to {{frame, reference, force, torque}}, got {wrenches!r}")
+        if base is not None and d.get("joints") is None:
+            d = {**d, "joints": {}}
         if "joints" not in d or not isinstance(d["joints"], Mapping):
             raise DataError("column map: 'joints' must map each joint name to {position, velocity, acceleration, effort}")
         joints = []
@@ -153,10 +164,15 @@ class ColumnMap:
             bad = sorted(set(cols) - set(_JOINT_KEYS))
             if bad:
                 raise DataError(f"column map: joint {name!r} has unknown keys {bad}; allowed: {list(_JOINT_KEYS)}")
-            missing = [k for k in ("position", "effort") if not cols.get(k)]
+            missing = [k for k in ("position", "effort") if cols.get(k) is None or cols.get(k) == ""]
             if missing:
                 raise DataError(f"column map: joint {name!r} needs columns for {missing}")
             cols = dict(cols)
+            if not isinstance(cols["effort"], (str, Mapping)):  # a number: 0 marks a passive (unactuated) joint
+                if isinstance(cols["effort"], bool) or cols["effort"] != 0:
+                    raise DataError(f"column map: joint {name!r} effort: expected a column name, a motor current or 0 "
+                                    f"(a passive joint), got {cols['effort']!r}")
+                cols["effort"] = None
             motor = _motor(name, cols["effort"]) if isinstance(cols["effort"], Mapping) else ()
             if motor:
                 cols["effort"] = cols["effort"]["current"]
@@ -165,7 +181,8 @@ class ColumnMap:
         units = d.get("units") or {}
         if not isinstance(units, Mapping):
             raise DataError(f"column map: 'units' must be a mapping quantity -> unit, got {units!r}")
-        return ColumnMap(time=str(d.get("time", "time")), joints=tuple(joints), units=tuple(units.items()))
+        return ColumnMap(time=str(d.get("time", "time")), joints=tuple(joints), units=tuple(units.items()), base=base,
+                         wrenches=tuple(WrenchColumns.from_dict(k, w) for k, w in wrenches.items()))
 
     @staticmethod
     def pattern(
@@ -210,16 +227,19 @@ class ColumnMap:
 
     def columns(self) -> list[str]:
         """Every column the map reads (time first)."""
-        out = [self.time]
+        out = [self.time] + ([] if self.base is None else self.base.columns())
         for j in self.joints:
             out += [c for c in (j.position, j.velocity, j.acceleration, j.effort) if c is not None]
-        return out
+        return out + [c for w in self.wrenches for c in w.columns()]
 
     def to_dict(self) -> dict:
         """The YAML form (inverse of from_dict)."""
         joints = {
             j.name: {k: getattr(j, k) for k in _JOINT_KEYS if getattr(j, k) is not None} for j in self.joints
         }
+        for j in self.joints:
+            if j.effort is None:
+                joints[j.name]["effort"] = 0
         for j in self.joints:
             if j.motor:
                 joints[j.name]["effort"] = {"current": j.effort, **dict(j.motor)}
@@ -228,7 +248,12 @@ class ColumnMap:
             if not isinstance(units[q], dict):
                 units[q] = {n: units[q] for n in self.joint_names}
             units[q][j] = u
-        return {"time": self.time, "joints": joints, "units": units}
+        out = {"time": self.time, "joints": joints, "units": units}
+        if self.base is not None:
+            out["base"] = self.base.to_dict()
+        if self.wrenches:
+            out["wrenches"] = {w.name: w.to_dict() for w in self.wrenches}
+        return out
 
 
 def load_log(
@@ -255,6 +280,8 @@ def load_log(
         joints = cmap.joint_names
     else:
         joints = tuple(joints)
+        if cmap.base is not None:  # the free flyer's coordinates come from the base columns
+            joints = tuple(j for j in joints if j not in BASE_COORDINATES)
         extra = [j for j in cmap.joint_names if j not in joints]
         if extra:
             raise DataError(f"column map names joints {extra} that are not in the model; model joints: {list(joints)}")
@@ -264,10 +291,13 @@ def load_log(
     by_name = {j.name: j for j in cmap.joints}
     jcols = [by_name[j] for j in joints]
     has_v = [j.velocity is not None for j in jcols]
+    if cmap.base is not None:
+        has_v.append(bool(cmap.base.twist))
     if any(has_v) and not all(has_v):
         raise DataError(
             f"column map names velocity columns for some joints only (missing for "
-            f"{[j.name for j in jcols if j.velocity is None]}); map all or none"
+            f"{[j.name for j in jcols if j.velocity is None] + (['base twist'] if cmap.base and not has_v[-1] else [])}); "
+            "map all or none"
         )
     if not any(has_v) and velocity == "logged":
         raise DataError(
@@ -287,8 +317,11 @@ def load_log(
         raise DataError(f"{path}: unknown log format {path.suffix!r}; expected one of {', '.join(FORMATS)}")
     data, available = read_table(path)
     needed = [cmap.time]
+    if cmap.base is not None:
+        needed += [c for c in cmap.base.columns() if velocity == "logged" or c not in cmap.base.twist]
     for j in jcols:
         needed += [c for c in (j.position, j.velocity if velocity == "logged" else None, j.acceleration, j.effort) if c]
+    needed += [c for w in cmap.wrenches for c in w.columns()]
     missing = [c for c in dict.fromkeys(needed) if c not in data]
     if missing:
         raise DataError(f"{path}: missing columns {missing}; available columns: {available}")
@@ -316,20 +349,30 @@ def load_log(
     def stack(key: str, quantity: str):
         cols = []
         for j in jcols:
+            if key == "effort" and j.effort is None:  # a passive joint
+                cols.append(np.zeros(T))
+                continue
             scale = j.effort_scale if key == "effort" and j.motor else UNITS[quantity][cmap.unit(quantity, j.name)]
             x = column(getattr(j, key)) * scale
             check_magnitude(path, getattr(j, key), x)
             cols.append(x)
-        return np.stack(cols, axis=1)
+        return np.stack(cols, axis=1) if cols else np.zeros((T, 0))
 
     q = stack("position", "position")
     tau = stack("effort", "effort")
-    a = stack("acceleration", "acceleration") if all(has_a) else None
+    a = stack("acceleration", "acceleration") if has_a and all(has_a) else None
     if velocity == "logged":
         v = stack("velocity", "velocity")
         check_velocity(path, t, q, v, joints)
     else:
         v = np.gradient(q, t, axis=0, edge_order=2)
+    extra: dict = {}
+    if cmap.base is not None:  # free flyer first, Pinocchio's layout (dualid.data.lie)
+        q, v, tau, extra["base"] = with_base(cmap.base, column, str(path), t, q, v, tau, a, velocity == "logged")
+        joints = BASE_COORDINATES + tuple(joints)
+    wrench = read_wrenches(cmap.wrenches, column, T) if cmap.wrenches else None
+    if cmap.wrenches:
+        extra["wrenches"] = [w.spec for w in cmap.wrenches]
     logged = ["q", "tau"] + (["v"] if velocity == "logged" else []) + (["a"] if a is not None else [])
     meta = {
         "source": str(path),
@@ -337,9 +380,11 @@ def load_log(
         "units": cmap.to_dict()["units"],
         "logged": logged,
     }
+    meta.update(extra)
     if velocity == "gradient":
         meta["steps"] = [{"load_velocity": {"method": "gradient"}}]
-    return Trajectory(t=t, q=q, v=v, tau=tau, a=a, coordinates=tuple(joints), name=name or path.stem, meta=meta)
+    return Trajectory(t=t, q=q, v=v, tau=tau, a=a, coordinates=tuple(joints), name=name or path.stem, meta=meta,
+                      wrench=wrench)
 
 
 def load_logs(

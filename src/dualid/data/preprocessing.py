@@ -13,6 +13,7 @@ from dataclasses import replace
 import numpy as np
 from scipy import interpolate, signal
 
+from dualid.data import lie
 from dualid.data.checks import check_gaps, check_upsampling
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError, DualidWarning
@@ -69,12 +70,17 @@ def savgol_derivatives(x: np.ndarray, fs: float, window: float, polyorder: int =
 # meta["steps"]. All but ``resample`` and ``trim`` need uniform time stamps (see ``sample_rate``).
 # --------------------------------------------------------------------------------------------------
 
-_FIELDS = ("q", "v", "tau", "a")
+_FIELDS = ("q", "v", "tau", "a", "wrench")
 
 
 def _has_quaternion(traj: Trajectory) -> bool:
     """True when q is not a plain vector of the velocity coordinates (floating base: nq = n + 1)."""
     return traj.q.shape[1] != traj.v.shape[1]
+
+
+def _floating(traj: Trajectory) -> bool:
+    """True when q holds a free-flyer root (dualid.data.lie): processed on its Lie group."""
+    return lie.is_floating(traj.q, traj.v)
 
 
 def _velocity_logged(traj: Trajectory) -> bool:
@@ -88,19 +94,20 @@ def resample(traj: Trajectory, rate: float, method: str = "linear") -> Trajector
     """Interpolate every channel onto the uniform grid t0, t0 + 1/rate, ... ≤ t_end [Hz].
 
     method: "linear" (no overshoot) or "cubic" (not-a-knot cubic spline, smooth derivatives).
-    A floating-base q (with a unit quaternion) is refused: component-wise interpolation would leave
-    the unit sphere; resample such runs with SE(3) interpolation before building the Trajectory.
+    A floating-base q (with a unit quaternion) is interpolated on its Lie group ("linear" only: along
+    the geodesic between samples, ``lie.interpolate_on_group``); the other channels as vectors.
     """
     if not (np.isfinite(rate) and rate > 0):
         raise DataError(f"resample: rate must be a positive number of Hz, got {rate!r}")
     if method not in ("linear", "cubic"):
         raise DataError(f"resample: method must be 'linear' or 'cubic', got {method!r}")
-    if _has_quaternion(traj):
-        raise DataError(
-            f"resample: q has {traj.q.shape[1]} columns for {traj.n} velocity coordinates (a floating base "
-            "with a quaternion); component-wise interpolation would break the unit norm. Resample the "
-            "configuration with SE(3) interpolation (e.g. pinocchio.interpolate) before building the Trajectory"
-        )
+    floating = _floating(traj)
+    if floating and method != "linear":
+        raise DataError("resample: method 'cubic' is not defined for a floating base's configuration (a Lie group); "
+                        "use method 'linear' (geodesic interpolation between samples)")
+    if _has_quaternion(traj) and not floating:
+        raise DataError(f"resample: q has {traj.q.shape[1]} columns for {traj.n} velocity coordinates; only a "
+                        "floating base (free flyer first, nq = n + 1) is supported")
     t = traj.t
     check_gaps(t)
     check_upsampling(t, rate)
@@ -117,26 +124,35 @@ def resample(traj: Trajectory, rate: float, method: str = "linear") -> Trajector
             return np.stack([np.interp(t_new, t, x[:, j]) for j in range(x.shape[1])], axis=1)
         return interpolate.CubicSpline(t, x, axis=0)(t_new)
 
-    changes = {key: interp(getattr(traj, key)) for key in _FIELDS}
+    changes = {key: interp(getattr(traj, key)) for key in _FIELDS if not (key == "q" and floating)}
+    if floating:
+        changes["q"] = lie.interpolate_on_group(t, traj.q, traj.n, t_new)
     step = {"resample": {"rate": float(rate), "method": method}}
     return traj.with_step(step, t=t_new, **changes)
 
 
 def filter_lowpass(traj: Trajectory, cutoff: float, fields=("q", "v", "tau"), order: int = 4) -> Trajectory:
-    """Zero-phase Butterworth low-pass (``lowpass``) of the named fields at ``cutoff`` Hz."""
+    """Zero-phase Butterworth low-pass (``lowpass``) of the named fields at ``cutoff`` Hz. A floating-base
+    q is filtered in the tangent space about each sample (``lie.lowpass_on_group``); "tau" also filters
+    the external wrenches (``wrench``), measured forces alike."""
     fields = (fields,) if isinstance(fields, str) else tuple(fields)
+    if "tau" in fields and "wrench" not in fields and traj.wrench is not None:
+        fields += ("wrench",)
     unknown = [f for f in fields if f not in _FIELDS]
     if unknown:
         raise DataError(f"filter_lowpass: unknown fields {unknown}; allowed: {list(_FIELDS)}")
     if "a" in fields and traj.a is None:
         raise DataError("filter_lowpass: field 'a' requested but the trajectory has no acceleration")
-    if "q" in fields and _has_quaternion(traj):
-        raise DataError(
-            "filter_lowpass: cannot filter q of a floating base (it holds a unit quaternion); "
-            "filter fields=('v', 'tau') instead"
-        )
+    if "wrench" in fields and traj.wrench is None:
+        raise DataError("filter_lowpass: field 'wrench' requested but the trajectory has no external wrenches")
+    floating = _floating(traj)
+    if "q" in fields and _has_quaternion(traj) and not floating:
+        raise DataError(f"filter_lowpass: q has {traj.q.shape[1]} columns for {traj.n} velocity coordinates; only a "
+                        "floating base (free flyer first, nq = n + 1) is supported")
     fs = sample_rate(traj.t)
-    changes = {f: lowpass(getattr(traj, f), fs, cutoff, order) for f in fields}
+    changes = {f: lowpass(getattr(traj, f), fs, cutoff, order) for f in fields if not (f == "q" and floating)}
+    if "q" in fields and floating:
+        changes["q"] = lie.lowpass_on_group(traj.q, traj.n, fs, cutoff, order)
     step = {"filter_lowpass": {"cutoff": float(cutoff), "fields": list(fields), "order": int(order)}}
     return traj.with_step(step, **changes)
 
@@ -156,15 +172,16 @@ def differentiate(
     cutoff: if given, q is first low-passed (zero-phase) at this frequency [Hz].
     velocity: replace v by dq/dt? None (default) = only when v was not logged (meta['logged']
     from the loader lacks "v"); True = always; False = keep v. ``a`` is always computed from q.
-    q itself is left unchanged.
+    q itself is left unchanged. A floating-base q is differentiated on its Lie group, in the tangent
+    space about each sample with the same filters (``lie.differentiate_on_group``): v is the body
+    velocity (LOCAL) and a its rate, as Pinocchio's free flyer expects.
     """
     if method not in ("savgol", "central"):
         raise DataError(f"differentiate: method must be 'savgol' or 'central', got {method!r}")
-    if _has_quaternion(traj):
-        raise DataError(
-            f"differentiate: q has {traj.q.shape[1]} columns for {traj.n} velocity coordinates (a floating "
-            "base with a quaternion); differentiate its configuration on the Lie group (pinocchio.difference)"
-        )
+    floating = _floating(traj)
+    if _has_quaternion(traj) and not floating:
+        raise DataError(f"differentiate: q has {traj.q.shape[1]} columns for {traj.n} velocity coordinates; only a "
+                        "floating base (free flyer first, nq = n + 1) is supported")
     if method == "savgol" and not (np.isfinite(window) and window > 0):
         raise DataError(f"differentiate: window must be a positive number of seconds, got {window!r}")
     if isinstance(polyorder, bool) or not isinstance(polyorder, (int, np.integer)) or polyorder < 2:
@@ -174,10 +191,16 @@ def differentiate(
         warnings.warn(f"differentiate: a {window:g} s window is {window * fs:.2g} samples at {fs:.4g} Hz, fewer than "
                       f"polyorder + 1 = {polyorder + 1}; it was widened to {_savgol_samples(window, fs, polyorder)} samples",
                       DualidWarning, stacklevel=2)
-    q = traj.q if cutoff is None else lowpass(traj.q, fs, cutoff)
-    if method == "savgol":
+    if floating:
+        n_win = _savgol_samples(window, fs, polyorder) if method == "savgol" else 3
+        if n_win > traj.T:
+            raise DataError(f"Savitzky–Golay window of {n_win} samples is longer than the signal ({traj.T} samples)")
+        _, dq, ddq = lie.differentiate_on_group(traj.q, traj.n, fs, method, n_win, polyorder, cutoff)
+    elif method == "savgol":
+        q = traj.q if cutoff is None else lowpass(traj.q, fs, cutoff)
         _, dq, ddq = savgol_derivatives(q, fs, window, polyorder)
     else:
+        q = traj.q if cutoff is None else lowpass(traj.q, fs, cutoff)
         dt = 1.0 / fs
         dq = np.gradient(q, dt, axis=0, edge_order=2)
         ddq = np.gradient(dq, dt, axis=0, edge_order=2)
@@ -186,6 +209,8 @@ def differentiate(
     if replace_v:
         changes["v"] = dq
     params = {"method": method, "cutoff": None if cutoff is None else float(cutoff), "velocity": replace_v}
+    if floating:
+        params["on"] = "Lie group (tangent space about each sample)"
     if method == "savgol":
         params.update(window=float(window), polyorder=int(polyorder))
     return traj.with_step({"differentiate": params}, **changes)
@@ -213,8 +238,8 @@ def trim(traj: Trajectory, start: float | None = None, stop: float | None = None
 def downsample(traj: Trajectory, factor: int, cutoff: float | None = None, order: int = 4) -> Trajectory:
     """Keep every ``factor``-th sample after a zero-phase anti-aliasing low-pass.
 
-    cutoff defaults to 0.8 × the new Nyquist frequency (0.4 · fs / factor). Every vector channel is
-    filtered; a floating-base q (with a quaternion) is decimated without filtering.
+    cutoff defaults to 0.8 × the new Nyquist frequency (0.4 · fs / factor). Every channel is filtered;
+    a floating-base q on its Lie group (``lie.lowpass_on_group``).
     """
     if isinstance(factor, bool) or not isinstance(factor, (int, np.integer)) or factor < 1:
         raise DataError(f"downsample: factor must be a positive integer, got {factor!r}")
@@ -229,9 +254,14 @@ def downsample(traj: Trajectory, factor: int, cutoff: float | None = None, order
             f"downsample: cutoff {cutoff} Hz is not below the new Nyquist frequency {fs / (2 * factor):.4g} Hz "
             f"(fs={fs:.4g} Hz, factor={factor}); aliasing would follow"
         )
-    fields = [f for f in _FIELDS if getattr(traj, f) is not None and not (f == "q" and _has_quaternion(traj))]
+    floating = _floating(traj)
+    fields = [f for f in _FIELDS if getattr(traj, f) is not None and not (f == "q" and _has_quaternion(traj)
+                                                                           and not floating)]
     if factor > 1:
-        traj = replace(traj, **{f: lowpass(getattr(traj, f), fs, cutoff, order) for f in fields})
+        changes = {f: lowpass(getattr(traj, f), fs, cutoff, order) for f in fields if not (f == "q" and floating)}
+        if floating:
+            changes["q"] = lie.lowpass_on_group(traj.q, traj.n, fs, cutoff, order)
+        traj = replace(traj, **changes)
     step = {"downsample": {"factor": factor, "cutoff": float(cutoff), "order": int(order), "filtered": fields}}
     return traj.take(slice(0, None, factor)).with_step(step)
 

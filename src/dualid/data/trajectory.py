@@ -25,6 +25,7 @@ class Trajectory:
     coordinates: tuple[str, ...] = ()  # names of the n velocity coordinates
     name: str = ""
     meta: dict = field(default_factory=dict)  # provenance: source file, processing steps, units
+    wrench: np.ndarray | None = None  # (T, 6k) external wrenches [N, N m], one 6-block per meta["wrenches"] entry
 
     def __post_init__(self) -> None:
         t = np.asarray(self.t, dtype=float)
@@ -36,7 +37,7 @@ class Trajectory:
             raise DataError(
                 f"trajectory {self.name!r}: time must be strictly increasing; t[{k}]={t[k]} then t[{k + 1}]={t[k + 1]}"
             )
-        arrays = {"q": self.q, "v": self.v, "tau": self.tau, "a": self.a}
+        arrays = {"q": self.q, "v": self.v, "tau": self.tau, "a": self.a, "wrench": self.wrench}
         n = None
         for key, value in arrays.items():
             if value is None:
@@ -47,7 +48,9 @@ class Trajectory:
             if not np.all(np.isfinite(arr)):
                 bad = np.argwhere(~np.isfinite(arr))[0].tolist()
                 raise DataError(f"trajectory {self.name!r}: {key} has non-finite values (NaN or inf), first at {bad}")
-            if key != "q":
+            if key == "wrench" and arr.shape[1] % 6:
+                raise DataError(f"trajectory {self.name!r}: wrench must have 6 columns per wrench, got {arr.shape[1]}")
+            if key not in ("q", "wrench"):
                 if n is not None and arr.shape[1] != n:
                     raise DataError(f"trajectory {self.name!r}: {key} has {arr.shape[1]} columns, expected {n}")
                 n = arr.shape[1]
@@ -80,6 +83,7 @@ class Trajectory:
             v=self.v[idx],
             tau=self.tau[idx],
             a=None if self.a is None else self.a[idx],
+            wrench=None if self.wrench is None else self.wrench[idx],
             meta=dict(self.meta),
         )
 

@@ -12,6 +12,7 @@ Two comparisons per run and joint, each scored by RMSE and by the normalized cro
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,12 +65,14 @@ class Validation:
     def mean(self, key: str) -> np.ndarray:
         """Mean over runs of a per-joint score: "tau_rmse", "tau_ncc", "a_rmse" or "a_ncc"."""
         x = self._stack(key)
-        with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # a joint with NaN in every run (e.g. a passive one's τ NCC)
             return np.nanmean(x, axis=0) if np.isfinite(x).any() else np.full(len(self.coordinates), np.nan)
 
     def std(self, key: str) -> np.ndarray:
         x = self._stack(key)
-        with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
             return np.nanstd(x, axis=0) if np.isfinite(x).any() else np.full(len(self.coordinates), np.nan)
 
     def as_dict(self) -> dict:

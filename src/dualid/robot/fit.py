@@ -40,6 +40,7 @@ from dualid.estimators.methods import method as method_entry
 from dualid.estimators.statistics import energy_statistics, statistics
 from dualid.evaluation.validation import Validation, validate
 from dualid.linalg import pinv_psd
+from dualid.model.external_wrench import apply_wrenches
 from dualid.model.joint_terms import JointTermsModel, with_joint_terms
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.model.urdf_check import read_urdf
@@ -47,7 +48,7 @@ from dualid.problem import Identifiability, IdentificationProblem, build_problem
 from dualid.robot.config import FitConfig
 from dualid.robot.defaults import adaptive_preprocessing, warn_far_from_data
 from dualid.robot.files import read_mapping
-from dualid.robot.inputs import array_column_map, check_runs_differ, check_units
+from dualid.robot.inputs import array_column_map, check_floating, check_runs_differ, check_units
 
 NOT_IDENTIFIABLE = "not identifiable"
 
@@ -88,12 +89,16 @@ def choose_preprocessing(steps, first_log: Path, cmap: ColumnMap, joints: tuple[
 
 
 def velocity_source(cmap: ColumnMap) -> str:
-    """"logged" when the map names a velocity column for every joint, else "gradient" (v from dq/dt)."""
-    return "logged" if all(j.velocity for j in cmap.joints) else "gradient"
+    """"logged" when the map names a velocity column for every joint (and the base twist of a floating
+    base), else "gradient" (v from dq/dt)."""
+    base_twist = cmap.base is None or bool(cmap.base.twist)
+    return "logged" if all(j.velocity for j in cmap.joints) and base_twist else "gradient"
 
 
-def load_runs(paths, cmap: ColumnMap, joints: tuple[str, ...], steps) -> list[Trajectory]:
-    """Load and preprocess each log; the runs must end with accelerations (a 'differentiate' step)."""
+def load_runs(paths, cmap: ColumnMap, joints: tuple[str, ...], steps, rigid: RigidBodyModel | None = None
+              ) -> list[Trajectory]:
+    """Load and preprocess each log; the runs must end with accelerations (a 'differentiate' step).
+    External wrenches (the map's ``wrenches``) are folded into τ with ``rigid``'s frame Jacobians."""
     runs = []
     velocity = velocity_source(cmap)
     for p in paths:
@@ -103,6 +108,10 @@ def load_runs(paths, cmap: ColumnMap, joints: tuple[str, ...], steps) -> list[Tr
                 f"{p}: no accelerations after preprocessing; add a 'differentiate' step (e.g. "
                 "{differentiate: {method: savgol, window: 0.05}})"
             )
+        if traj.wrench is not None:
+            if rigid is None:
+                raise DataError(f"{p}: external wrench columns need the rigid-body model to apply them")
+            traj = apply_wrenches(rigid, traj)
         runs.append(traj)
     return runs
 
@@ -115,7 +124,8 @@ def build_model(config: FitConfig) -> tuple[RigidBodyModel, JointTermsModel | Ri
         unknown = [j for j in jt.joints if j not in rigid.coordinates]
         if unknown:
             raise DataError(f"joint_terms.joints: joints {unknown} are not in the model; model joints: {list(rigid.coordinates)}")
-    if not (jt.viscous or jt.coulomb or jt.armature):
+    no_joints = jt.joints is None and len(rigid.coordinates) == len(rigid.base_coordinates)  # a single floating body
+    if not (jt.viscous or jt.coulomb or jt.armature) or no_joints:
         return rigid, rigid
     return rigid, with_joint_terms(rigid, jt.viscous, jt.coulomb, jt.armature, jt.joints, jt.coulomb_velocity)
 
@@ -325,8 +335,9 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
         read_mapping(config.prior.source.partition("#")[0], "prior.source parameters file")  # bad input: before fitting
     _say(progress, f"loading {len(config.train)} training and {len(config.test)} test logs")
     steps, steps_note = choose_preprocessing(config.preprocessing, config.train[0], cmap, joints)
-    train = load_runs(config.train, cmap, joints, steps)
-    test = load_runs(config.test, cmap, joints, steps)
+    check_floating(config.model.floating_base, cmap)
+    train = load_runs(config.train, cmap, joints, steps, rigid)
+    test = load_runs(config.test, cmap, joints, steps, rigid)
     _say(progress, "building regressors")
     problem = with_bounds(build_problem(model, train), config.bounds)
     ident = problem.identifiability()

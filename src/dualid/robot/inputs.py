@@ -42,6 +42,16 @@ def check_units(rigid: RigidBodyModel, cmap: ColumnMap) -> None:
                 raise DataError(f"column map: joint {name!r} is prismatic but its {quantity} unit is {unit!r} (angular)")
 
 
+def check_floating(floating_base: bool, cmap: ColumnMap) -> None:
+    """DataError when model.floating_base and the column map's 'base' section disagree."""
+    if floating_base and cmap.base is None:
+        raise DataError("model.floating_base is true but the column map has no 'base' section: map the base pose "
+                        "(columns.base: {position: [x, y, z], quaternion: [qx, qy, qz, qw]} or {matrix: [16 columns]})")
+    if cmap.base is not None and not floating_base:
+        raise DataError("the column map has a 'base' section but model.floating_base is false; set "
+                        "model.floating_base: true (a free-flyer root joint)")
+
+
 def check_runs_differ(train, test) -> None:
     """DualidWarning when a log is used twice in training, or a held-out log is also a training log
     (same file, or a file with the same bytes): the held-out scores would not be held out."""

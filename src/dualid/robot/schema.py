@@ -35,7 +35,8 @@ class MotorEffort(_Section):
 
 class JointColumnsSection(_Section):
     position: str
-    effort: str | MotorEffort = Field(description="an effort column, or a motor current: τ = I·kt·N·η")
+    effort: str | MotorEffort | Literal[0] = Field(
+        description="an effort column, a motor current (τ = I·kt·N·η), or 0 for a passive joint")
     velocity: str | None = None
     acceleration: str | None = None
 
@@ -43,9 +44,35 @@ class JointColumnsSection(_Section):
 UnitSpec = str | dict[str, str]  # one unit, or {joint: unit}
 
 
+Column = str | Literal[0]  # a column name, or 0: a component known to be zero
+
+
+class BaseSection(_Section):
+    position: list[str] | None = Field(None, min_length=3, max_length=3, description="[m] x, y, z of the base in the world")
+    quaternion: list[str] | None = Field(None, min_length=4, max_length=4,
+                                         description="world_R_base as a unit quaternion, columns in quaternion_order")
+    quaternion_order: Literal["xyzw", "wxyz"] = Field("xyzw", description="xyzw (Pinocchio, ROS, scipy) or wxyz")
+    matrix: list[str] | None = Field(None, min_length=16, max_length=16,
+                                     description="instead of position + quaternion: world_T_base (4×4) row by row")
+    twist: list[str] | None = Field(None, min_length=6, max_length=6, description="[m/s, rad/s] vx vy vz wx wy wz")
+    twist_frame: Literal["local", "local_world_aligned"] = Field(
+        "local", description="local: base-frame axes (Pinocchio's free flyer); local_world_aligned: world axes")
+
+
+class WrenchSection(_Section):
+    frame: str = Field(description="a frame of the model (URDF link or joint) the wrench acts on")
+    reference: Literal["local", "local_world_aligned", "world"] = Field(
+        "local", description="where the wrench is expressed (Pinocchio's ReferenceFrame)")
+    force: list[Column] = Field(min_length=3, max_length=3, description="[N] columns (or 0)")
+    torque: list[Column] = Field(min_length=3, max_length=3, description="[N m] columns (or 0)")
+
+
 class ColumnsSection(_Section):
     time: str = "time"
-    joints: dict[str, JointColumnsSection] = Field(description="model joint name -> its columns; 'q[k]' is column k of an array q")
+    joints: dict[str, JointColumnsSection] = Field(default_factory=dict,
+                                                   description="model joint name -> its columns; 'q[k]' is column k of an array q")
+    base: BaseSection | None = Field(None, description="a floating base's pose and twist (model.floating_base: true)")
+    wrenches: dict[str, WrenchSection] | None = Field(None, description="external wrenches: τ = rnea − Σ J_fᵀ f")
     units: dict[Literal["time", "position", "velocity", "acceleration", "effort"], UnitSpec] = Field(default_factory=dict)
 
 

@@ -16,7 +16,7 @@ from dualid.robot.fit import choose_preprocessing, column_map, load_runs, urdf_j
 
 def validate_urdf(urdf, data, columns=None, preprocessing=None, xcorr_window: float = 0.02,
                   coulomb_velocity: float = 0.01, gravity=None, floating_base: bool = False,
-                  label: str | None = None) -> tuple[JointTermsModel, np.ndarray, Validation]:
+                  label: str | None = None) -> tuple[JointTermsModel | RigidBodyModel, np.ndarray, Validation]:
     """Validate a URDF as it stands (e.g. one written by ``dualid fit``) on logs.
 
     θ: the URDF's inertials, plus per joint viscous damping and Coulomb friction from
@@ -29,8 +29,8 @@ def validate_urdf(urdf, data, columns=None, preprocessing=None, xcorr_window: fl
         raise DataError("validate: no log files given")
     rigid = RigidBodyModel.from_urdf(urdf, floating_base, gravity)
     joints = tuple(j for j in rigid.coordinates if j not in rigid.base_coordinates)
-    model = with_joint_terms(rigid, True, True, True, joints, coulomb_velocity)
     terms = urdf_joint_terms(urdf, joints)
+    model = with_joint_terms(rigid, True, True, True, joints, coulomb_velocity) if joints else rigid  # no joint: a single body
     theta = np.concatenate([
         rigid.nominal,
         [terms[j]["damping"] for j in joints],
@@ -39,5 +39,5 @@ def validate_urdf(urdf, data, columns=None, preprocessing=None, xcorr_window: fl
     ])
     cmap = column_map(columns, tuple(rigid.coordinates), data[0])
     steps, _ = choose_preprocessing(preprocessing, data[0], cmap, tuple(rigid.coordinates))
-    runs = load_runs(data, cmap, tuple(rigid.coordinates), steps)
+    runs = load_runs(data, cmap, tuple(rigid.coordinates), steps, rigid)
     return model, theta, validate(model, theta, runs, label or urdf.stem, xcorr_window)
