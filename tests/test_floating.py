@@ -61,7 +61,7 @@ def test_group_is_the_models_configuration_space():
         np.testing.assert_allclose(G.difference(q0, q1), pin.difference(model, q0, q1), atol=1e-12)
         np.testing.assert_allclose(G.integrate(q0, q1[:7].sum() * np.ones(7)),
                                    pin.integrate(model, q0, q1[:7].sum() * np.ones(7)), atol=1e-12)
-    assert lie.BASE_COORDINATES == FREE_FLYER_COORDINATES
+    assert lie.BASE_COORDINATES is FREE_FLYER_COORDINATES
 
 
 @pytest.mark.parametrize("kw", [{}, {"cutoff": 5.0}, {"method": "central"}, {"window": 0.15, "polyorder": 4}])

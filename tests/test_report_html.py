@@ -302,3 +302,10 @@ def test_the_git_commit_is_dualids_own_or_none(tmp_path):
     subprocess.run([*git, "commit", "-q", "-m", "x"], check=True)
     assert git_commit(pkg) is None
     assert git_commit(tmp_path) is None  # not a repository at all
+
+
+def test_floating_base_translations_are_labelled_in_newtons_and_metres():
+    from dualid.report.signals import unit_of
+
+    assert [unit_of("tau", c) for c in ("vx", "wz", "Joint1")] == ["N", "N m", "N m"]
+    assert [unit_of("a", c) for c in ("vz", "wx", "Joint1")] == ["m/s²", "rad/s²", "rad/s²"]

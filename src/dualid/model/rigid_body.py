@@ -23,13 +23,14 @@ from typing import ClassVar
 import numpy as np
 import pinocchio as pin
 
+from dualid.data.lie import BASE_COORDINATES
 from dualid.errors import DataError, MissingFileError, ModelError
 from dualid.model.base import Kind
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.parameters import ParameterSpace, rigid_body_space
 from dualid.model.urdf_check import read_urdf
 
-FREE_FLYER_COORDINATES = ("vx", "vy", "vz", "wx", "wy", "wz")
+FREE_FLYER_COORDINATES = BASE_COORDINATES  # one home: data.lie
 
 
 @lru_cache(maxsize=1)

@@ -22,8 +22,17 @@ SIGNALS = {
     "tau": ("effort", "N m", "measured", "effort: inverse dynamics Y(q,v,a)θ̂"),
     "a": ("acceleration", "rad/s²", "differentiated (measured q)", "acceleration: forward dynamics M̂⁻¹(τ−ĥ)"),
 }
+LINEAR_BASE = ("vx", "vy", "vz")  # a free-flyer's translational coordinates (data.lie.BASE_COORDINATES[:3])
 WIDEN = 1.0  # predictions may widen the axes by this fraction of the measured span on either side
 MARGIN = 0.05  # blank margin, fraction of the axis span
+
+
+def unit_of(signal: str, coordinate: str) -> str:
+    """The unit of ``signal`` on ``coordinate``: force and linear acceleration on a floating base's
+    translational coordinates, torque and angular acceleration elsewhere."""
+    if coordinate in LINEAR_BASE:
+        return "N" if signal == "tau" else "m/s²"
+    return SIGNALS[signal][1]
 
 
 def color(label: str, k: int):
@@ -76,7 +85,7 @@ def signal_plot(validations: dict[str, Validation], run: int, signal: str = "tau
     first = next(iter(validations.values()))
     coords = first.coordinates
     meas_run = first.runs[run]
-    stem, unit, measured_label, what = SIGNALS[signal]
+    stem, _, measured_label, what = SIGNALS[signal]
     fig, axes = new_figure(len(coords), 1, figsize=(11, 2.4 * len(coords) + 0.4), sharex=True)
     measured = meas_run.tau if signal == "tau" else meas_run.a
     clipped: list[str] = []
@@ -89,6 +98,7 @@ def signal_plot(validations: dict[str, Validation], run: int, signal: str = "tau
                 continue
             r = val.runs[run]
             score = (r.tau_rmse if signal == "tau" else r.a_rmse)[j]
+            unit = unit_of(signal, coords[j])
             ax.plot(r.t, pred[:, j], color=color(label, k), lw=0.8, alpha=0.85,
                     label=f"{label}: RMSE {score:.3g} {unit}")
             preds.append((label, pred[:, j]))
@@ -96,7 +106,7 @@ def signal_plot(validations: dict[str, Validation], run: int, signal: str = "tau
         ax.set_ylim(lo, hi)
         clipped += [f"{label} ({coords[j]})" for label, p in preds
                     if np.nanmin(p) < lo or np.nanmax(p) > hi or not np.isfinite(p).all()]
-        ax.set_ylabel(f"{coords[j]} [{unit}]")
+        ax.set_ylabel(f"{coords[j]} [{unit_of(signal, coords[j])}]")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False, title=coords[j],
                   title_fontsize=7)
