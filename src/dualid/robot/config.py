@@ -287,7 +287,8 @@ class FitConfig:
             "train": [str(p) for p in self.train],
             "test": [str(p) for p in self.test],
             "preprocessing": None if self.preprocessing is None else [dict(s) for s in self.preprocessing],
-            "joint_terms": {"viscous": self.joint_terms.viscous, "coulomb": self.joint_terms.coulomb,
+            "joint_terms": None if self.model.kind == "drag" else {  # a drag model damps its joints in model.drag
+                            "viscous": self.joint_terms.viscous, "coulomb": self.joint_terms.coulomb,
                             "coulomb_velocity": self.joint_terms.coulomb_velocity,
                             "armature": self.joint_terms.armature,
                             "joints": None if self.joint_terms.joints is None else list(self.joint_terms.joints)},
