@@ -34,12 +34,14 @@ def write_run(path: Path, log: dict) -> None:
     pd.DataFrame(table).to_csv(path, index=False, float_format="%.7g")
 
 
-def make(out: Path, seed: int = 0) -> dict[str, Path]:
+def make(out: Path, seed: int = 0, effects: sw.TrueEffects = sw.TrueEffects(), exact: bool = False) -> dict[str, Path]:
+    """Write the example into ``out``; ``effects``: what the true system has beyond the model; ``exact``: the
+    exact states and efforts (no sensor noise)."""
     out.mkdir(parents=True, exist_ok=True)
     urdf = out / "swimmer.urdf"
     urdf.write_text(sw.swimmer_urdf())
     model = DragModel.from_urdf(urdf, DragSpec.from_dict(sw.TRUE_DRAG))
-    true = sw.TrueSwimmer(model, model.nominal, sw.TrueEffects())
+    true = sw.TrueSwimmer(model, model.nominal, effects)
     rng = np.random.default_rng(seed)
     written = {"swimmer.urdf": urdf}
     runs = [(f"train_{k}", sw.excitation(rng), TRAIN_SECONDS) for k in range(3)]
@@ -47,7 +49,7 @@ def make(out: Path, seed: int = 0) -> dict[str, Path]:
     for name, reference, seconds in runs:
         t, q, v, tau = sw.simulate(true, reference, seconds, RATE)
         path = out / f"{name}.csv"
-        write_run(path, sw.measure(t, q, v, tau, rng))
+        write_run(path, {"t": t, "q": q, "v": v, "tau": tau} if exact else sw.measure(t, q, v, tau, rng))
         written[path.name] = path
     return written
 
