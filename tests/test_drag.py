@@ -296,3 +296,17 @@ def test_cli_fits_the_example_swimmer(tmp_path):
     ncc = dm["validation"]["mean"]["a_ncc"]
     assert min(ncc.values()) > 0.99, ncc  # the forward prediction v̂ = D̂⁻¹τ on held-out gaits
     assert "Velocity NCC" in (out / "report.md").read_text()
+
+
+def test_cli_bad_drag_spec_is_bad_input_with_the_key_named(tmp_path):
+    raw = yaml.safe_load((EXAMPLE / "drag.yaml").read_text())
+    raw["model"]["urdf"] = str(EXAMPLE / "swimmer.urdf")
+    raw["train"] = [str(EXAMPLE / p) for p in raw["train"]]
+    raw["test"] = []
+    raw["model"]["drag"]["bodies"]["link2"]["frame"] = "fin"
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    result = CliRunner().invoke(app, ["fit", "--config", str(path), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2
+    text = " ".join((result.output + (result.stderr if result.stderr_bytes is not None else "")).split())
+    assert "swimmer.urdf: model.drag.bodies.link2.frame: no frame named 'fin'; frames: [" in text, text
