@@ -310,3 +310,22 @@ def test_cli_bad_drag_spec_is_bad_input_with_the_key_named(tmp_path):
     assert result.exit_code == 2
     text = " ".join((result.output + (result.stderr if result.stderr_bytes is not None else "")).split())
     assert "swimmer.urdf: model.drag.bodies.link2.frame: no frame named 'fin'; frames: [" in text, text
+
+
+def test_a_base_length_logged_in_degrees_is_refused():
+    from dualid.errors import DataError
+    from dualid.robot.drag_fit import fit_drag
+
+    raw = yaml.safe_load((EXAMPLE / "drag.yaml").read_text())
+    raw["columns"]["units"]["position"]["x"] = "deg"
+    with pytest.raises(DataError) as info:
+        fit_drag(FitConfig.from_dict(raw, EXAMPLE))
+    assert str(info.value) == "column map: coordinate 'x' is a length but its position unit is 'deg' (angular)"
+
+
+def test_a_urdf_welded_to_an_undeclared_world_link_loads(tmp_path):
+    path = tmp_path / "welded.urdf"
+    path.write_text(ARM_URDF.replace('<link name="base"/>', '<link name="base"/>\n  <joint name="weld" type="fixed">'
+                                     '<parent link="world"/><child link="base"/></joint>'))
+    model = DragModel.from_urdf(path, DragSpec.from_dict({"bodies": {"tool": {"frame": "c", "diagonal": 6}}}))
+    assert model.coordinates == ("j1", "j2", "j3") and model.linear_coordinates == ("j3",)

@@ -32,7 +32,7 @@ from dualid.model.base import Kind
 from dualid.model.drag_spec import MOTION_ROWS, DragSpec
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.parameters import ParameterBlock, ParameterSpace, diagonal_basis, symmetric_basis
-from dualid.model.urdf_check import read_urdf
+from dualid.model.rigid_body import _with_implicit_world
 
 _ONE_DOF = ("JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned", "JointModelPX",
             "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned")
@@ -143,10 +143,10 @@ class DragModel:
         path = Path(path)
         if not path.is_file():
             raise MissingFileError(f"URDF not found: {path}")
-        read_urdf(path)  # values checked before Pinocchio sees them
+        xml = _with_implicit_world(path)  # values checked before Pinocchio sees them; an undeclared "world" added
         try:
             root = (pin.JointModelPlanar(),) if spec.base == "planar" else ()
-            model = pin.buildModelFromUrdf(str(path), *root)
+            model = pin.buildModelFromUrdf(str(path), *root) if xml is None else pin.buildModelFromXML(xml, *root)
         except (RuntimeError, ValueError) as exc:
             raise ModelError(f"{path}: Pinocchio could not build a model from this URDF: {exc}") from None
         return cls(model, spec, str(path))
@@ -168,6 +168,12 @@ class DragModel:
     @property
     def n(self) -> int:
         return len(self.coordinates)
+
+    @property
+    def linear_coordinates(self) -> tuple[str, ...]:
+        """The coordinates measured in metres (a planar joint's x, y; prismatic joints); the others are angles."""
+        return tuple(cs[k] for _, short, _, _, cs in self._layout for k in range(len(cs))
+                     if short in _PRISMATIC or (short == "JointModelPlanar" and k < 2))
 
     def check_configuration(self, q) -> np.ndarray:
         q = np.atleast_2d(np.asarray(q, dtype=float))

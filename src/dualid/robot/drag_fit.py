@@ -21,10 +21,10 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
-from dualid.data.io import ColumnMap, load_log
+from dualid.data.io import LINEAR_UNITS, SI_UNITS, ColumnMap, load_log
 from dualid.data.preprocessing import preprocess
 from dualid.data.trajectory import Trajectory
-from dualid.errors import ConfigError, DualidError, DualidWarning
+from dualid.errors import ConfigError, DataError, DualidError, DualidWarning
 from dualid.estimators.methods import method as method_entry
 from dualid.evaluation.validation import validate
 from dualid.model.drag import DragModel
@@ -47,6 +47,20 @@ def build_drag_model(config: FitConfig) -> DragModel:
     if config.model.kind != "drag" or config.model.drag is None:
         raise ConfigError(f"model.kind: fit_drag needs a drag model (model.kind: drag), got {config.model.kind!r}")
     return DragModel.build(config.model.drag, config.model.urdf)
+
+
+def check_drag_units(model: DragModel, cmap: ColumnMap) -> None:
+    """DataError when a coordinate's unit does not fit it: a linear unit (m, mm, N, …) on an angle, or a
+    non-SI angular one (deg, N mm, …) on a length (a planar base's x, y; a prismatic joint)."""
+    linear_coords = set(model.linear_coordinates)
+    for name in cmap.joint_names:
+        for quantity in ("position", "velocity", "acceleration", "effort"):
+            unit = cmap.unit(quantity, name)
+            linear = unit in LINEAR_UNITS
+            if name in linear_coords and not linear and unit != SI_UNITS[quantity]:
+                raise DataError(f"column map: coordinate {name!r} is a length but its {quantity} unit is {unit!r} (angular)")
+            if name not in linear_coords and linear:
+                raise DataError(f"column map: coordinate {name!r} is an angle but its {quantity} unit is {unit!r} (linear)")
 
 
 def load_drag_runs(paths, cmap: ColumnMap, coordinates: tuple[str, ...], steps) -> list[Trajectory]:
@@ -96,6 +110,7 @@ def _fit_drag(config: FitConfig, say: Progress) -> DragFitOutcome:
     model = build_drag_model(config)
     coords = model.coordinates
     cmap = column_map(config.columns, coords, config.train[0])
+    check_drag_units(model, cmap)
     check_runs_differ(config.train, config.test)
     say(f"loading {len(config.train)} training and {len(config.test)} test logs")
     steps, steps_note = choose_preprocessing(config.preprocessing, config.train[0], cmap, coords)
