@@ -329,3 +329,17 @@ def test_a_urdf_welded_to_an_undeclared_world_link_loads(tmp_path):
                                      '<parent link="world"/><child link="base"/></joint>'))
     model = DragModel.from_urdf(path, DragSpec.from_dict({"bodies": {"tool": {"frame": "c", "diagonal": 6}}}))
     assert model.coordinates == ("j1", "j2", "j3") and model.linear_coordinates == ("j3",)
+
+
+def test_the_chain_config_fits_the_example_logs_like_the_urdf():
+    from dualid.robot.drag_fit import fit_drag
+
+    raw = yaml.safe_load((EXAMPLE / "drag.yaml").read_text())
+    raw.update(methods=["ols"], test=[])
+    by_urdf = fit_drag(FitConfig.from_dict(raw, EXAMPLE)).fits["ols"].result.theta
+    del raw["model"]["urdf"]
+    raw["model"]["drag"]["chain"] = [sw.LINK_LENGTH] * sw.N_LINKS
+    for body in raw["model"]["drag"]["bodies"].values():
+        del body["xyz"]  # the chain's link frames are at the link centres
+    by_chain = fit_drag(FitConfig.from_dict(raw, EXAMPLE)).fits["ols"].result.theta
+    np.testing.assert_allclose(by_chain, by_urdf, rtol=1e-6, atol=1e-8)
