@@ -15,9 +15,10 @@ YAML form (relative paths are relative to the YAML file's folder)::
     references: {lab: lab_parameters.yml}
     out: results/robot
 
-Only ``model.urdf`` and ``train`` are required. A drag-dominated system is ``model: {kind: drag, urdf: …,
-drag: …}`` (``dualid.robot.drag_config``; no accelerations needed, no joint_terms). ``columns`` may be omitted when the logs carry the
+Only ``model.urdf`` and ``train`` are required. ``columns`` may be omitted when the logs carry the
 DFKI double-pendulum columns (time, pos_meas{i}, vel_meas{i}, tau_meas{i}; see ``fit.column_map``).
+A drag-dominated system is ``model: {kind: drag, urdf: …, drag: …}`` (``dualid.robot.drag_config``;
+no accelerations needed, no joint_terms).
 """
 
 from __future__ import annotations
