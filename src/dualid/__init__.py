@@ -3,7 +3,7 @@
 The user's whole path, without private imports::
 
     logs  → load_log / ColumnMap → preprocess → Trajectory
-    model → RigidBodyModel (URDF or Pinocchio) / with_joint_terms / LandSalpModel (drag)
+    model → RigidBodyModel (URDF or Pinocchio) / with_joint_terms / DragModel + DragSpec (drag) / LandSalpModel
     build_problem(model, runs) → IdentificationProblem
     OLS / WLS / EnergyLS / RegularizedWLS / DualMetric (or make_estimator(key) from METHODS) .fit
     predict / forward_dynamics / validate / scores → write_urdf
@@ -45,6 +45,8 @@ from dualid.model import (
     RigidBodyModel,
     with_joint_terms,
 )
+from dualid.model.drag import DragModel
+from dualid.model.drag_spec import DragSpec
 from dualid.model.extra_terms import with_base_drag
 from dualid.model.joint_terms import JointTermsModel
 from dualid.model.landsalp import LandSalpModel
@@ -59,6 +61,7 @@ __all__ = [
     "differentiate", "filter_lowpass", "preprocess", "resample", "trim",
     # models
     "Model", "RigidBodyModel", "JointTermsModel", "with_joint_terms", "with_base_drag", "LandSalpModel",
+    "DragModel", "DragSpec",
     "AffineMetric", "MetricTerm", "ParameterBlock", "ParameterSpace",
     # problem
     "IdentificationProblem", "Identifiability", "build_problem",

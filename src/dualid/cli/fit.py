@@ -56,7 +56,8 @@ def fit(
     out: Optional[Path] = typer.Option(None, "--out", help="output directory"),
     force: bool = typer.Option(False, "--force", metavar=FLAG, help="write into an existing non-empty output directory"),
 ) -> None:
-    """Identify a robot's inertial parameters, joint friction and armature from a URDF and logs."""
+    """Identify a robot's inertial parameters, joint friction and armature from a URDF and logs (or a drag
+    model's drag and damping: model.kind: drag in the config)."""
     import warnings
     from dataclasses import replace
 
@@ -77,6 +78,10 @@ def fit(
     if cfg.out is None:
         fail("no output directory: pass --out DIR (or set 'out' in the config)")
     output_dir(cfg.out, force)
+    if cfg.model.kind == "drag":  # a drag-dominated model: its own workflow and report
+        from dualid.cli.drag import fit_drag_command
+
+        return fit_drag_command(cfg, force)
     with Progress(SpinnerColumn(), TextColumn("{task.description}", markup=False), TimeElapsedColumn(), console=console) as bar:
         task = bar.add_task("starting", total=None)
         with warnings.catch_warnings(record=True) as caught:  # recorded in the outcome by fit_robot

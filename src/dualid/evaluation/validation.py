@@ -8,6 +8,8 @@ Two comparisons per run and joint, each scored by RMSE and by the normalized cro
 - acceleration: the forward-dynamics prediction â = M̂(q)⁻¹ (τ − ĥ(q, v)) from measured q, v, τ,
   against the differentiated accelerations a [rad/s²] (the paper's score). Differentiated a is
   noisy: its RMSE is dominated by differentiation noise, its NCC much less.
+  For a drag model (τ = D(q)v) the forward prediction is v̂ = D̂(q)⁻¹τ against the measured velocity v:
+  the fields ``a``/``a_pred``/``a_*`` then hold velocities (no accelerations are needed).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import numpy as np
 
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError, MetricError
-from dualid.evaluation.prediction import forward_dynamics
+from dualid.evaluation.prediction import forward_dynamics, measured_signal
 from dualid.evaluation.scores import max_normalized_xcorr, rmse
 from dualid.model.base import Model
 
@@ -98,8 +100,9 @@ class Validation:
 
 
 def validate_run(model: Model, theta: np.ndarray, traj: Trajectory, xcorr_window: float = 0.02) -> RunValidation:
-    """Effort and acceleration predictions of θ̂ on one run (which must carry accelerations)."""
-    if traj.a is None:
+    """Effort and acceleration predictions of θ̂ on one run (which must carry accelerations; for a drag
+    model: effort and velocity predictions)."""
+    if model.kind == "inertia" and traj.a is None:
         raise DataError(
             f"validate: run {traj.name!r} has no accelerations; differentiate it first (preprocessing step "
             "'differentiate')"
@@ -110,10 +113,11 @@ def validate_run(model: Model, theta: np.ndarray, traj: Trajectory, xcorr_window
     dt = float(np.median(np.diff(traj.t)))
     max_shift = int(round(xcorr_window / dt))
     tau_pred = model.regressor(traj.q, traj.v, traj.a) @ theta
+    signal = measured_signal(model, traj)  # a (inertia) or v (drag)
     note = ""
     try:
         a_pred = forward_dynamics(model, theta, traj.q, traj.v, traj.tau)
-        a_rmse, a_ncc = rmse(a_pred, traj.a), _ncc(a_pred, traj.a, max_shift)
+        a_rmse, a_ncc = rmse(a_pred, signal), _ncc(a_pred, signal, max_shift)
     except MetricError as exc:
         a_pred, note = None, str(exc)
         a_rmse = a_ncc = np.full(traj.n, np.nan)
@@ -122,7 +126,7 @@ def validate_run(model: Model, theta: np.ndarray, traj: Trajectory, xcorr_window
         t=traj.t,
         tau=traj.tau,
         tau_pred=tau_pred,
-        a=traj.a,
+        a=signal,
         a_pred=a_pred,
         tau_rmse=rmse(tau_pred, traj.tau),
         tau_ncc=_ncc(tau_pred, traj.tau, max_shift),

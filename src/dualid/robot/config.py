@@ -17,6 +17,8 @@ YAML form (relative paths are relative to the YAML file's folder)::
 
 Only ``model.urdf`` and ``train`` are required. ``columns`` may be omitted when the logs carry the
 DFKI double-pendulum columns (time, pos_meas{i}, vel_meas{i}, tau_meas{i}; see ``fit.column_map``).
+A drag-dominated system is ``model: {kind: drag, urdf: …, drag: …}`` (``dualid.robot.drag_config``;
+no accelerations needed, no joint_terms).
 """
 
 from __future__ import annotations
@@ -30,12 +32,14 @@ import numpy as np
 from dualid.errors import ConfigError
 from dualid.estimators.methods import METHODS, make_estimator
 from dualid.estimators.methods import method as method_entry  # the one list of method names
+from dualid.model.drag_spec import DragSpec
+from dualid.robot.drag_config import check_kind, drag_spec
 
 _TOP_KEYS = (
     "model", "columns", "train", "test", "preprocessing", "joint_terms", "bounds", "methods", "solver", "prior",
     "validation", "references", "out",
 )
-_MODEL_KEYS = ("urdf", "floating_base", "gravity")
+_MODEL_KEYS = ("urdf", "floating_base", "gravity", "kind", "drag")
 _JOINT_TERM_KEYS = ("viscous", "coulomb", "coulomb_velocity", "armature", "joints")
 _PRIOR_KEYS = ("source", "gamma", "per_equation")
 _VALIDATION_KEYS = ("xcorr_window",)
@@ -86,9 +90,11 @@ def _bool(x, where: str) -> bool:
 
 @dataclass(frozen=True)
 class ModelConfig:
-    urdf: Path
+    urdf: Path | None  # None only for a drag model built from model.drag.chain
     floating_base: bool = False
     gravity: tuple[float, float, float] | None = None  # [m/s²]; None: the URDF/Pinocchio default (0, 0, −9.81)
+    kind: str = "inertia"  # "inertia" (rigid bodies) or "drag" (dualid.robot.drag_config)
+    drag: DragSpec | None = None  # the drag model's spec (kind "drag")
 
 
 @dataclass(frozen=True)
@@ -162,6 +168,10 @@ class FitConfig:
         if isinstance(m, (str, Path)):
             m = {"urdf": m}
         m = _check_keys(m, _MODEL_KEYS, "model")
+        if check_kind(m) == "drag":
+            spec = drag_spec(m)
+            urdf = None if m.get("urdf") is None else _path(m["urdf"], base, "model.urdf")
+            return FitConfig._from_dict(d, base, ModelConfig(urdf, kind="drag", drag=spec))
         if not m.get("urdf"):
             raise ConfigError("model: missing required key 'urdf'")
         gravity = m.get("gravity")
@@ -173,7 +183,12 @@ class FitConfig:
             if len(gravity) != 3:
                 raise ConfigError(f"model.gravity: expected 3 numbers [m/s²], got {m.get('gravity')!r}")
         model = ModelConfig(_path(m["urdf"], base, "model.urdf"), _bool(m.get("floating_base", False), "model.floating_base"), gravity)
+        return FitConfig._from_dict(d, base, model)
 
+    @staticmethod
+    def _from_dict(d: Mapping, base: Path | None, model: ModelConfig) -> "FitConfig":
+        if model.kind == "drag" and d.get("joint_terms") is not None:
+            raise ConfigError("joint_terms: not used by a drag model (model.kind: drag); damp joints with model.drag.damping")
         jt = _check_keys(d.get("joint_terms"), _JOINT_TERM_KEYS, "joint_terms")
         joints = jt.get("joints")
         if joints is not None:
@@ -265,13 +280,16 @@ class FitConfig:
     def as_dict(self) -> dict:
         """The YAML form (paths as strings), for the record written next to the results."""
         return {
-            "model": {"urdf": str(self.model.urdf), "floating_base": self.model.floating_base,
-                      "gravity": None if self.model.gravity is None else list(self.model.gravity)},
+            "model": {"urdf": None if self.model.urdf is None else str(self.model.urdf),
+                      "floating_base": self.model.floating_base,
+                      "gravity": None if self.model.gravity is None else list(self.model.gravity),
+                      **({"kind": "drag", "drag": self.model.drag.as_dict()} if self.model.kind == "drag" else {})},
             "columns": None if self.columns is None else dict(self.columns),
             "train": [str(p) for p in self.train],
             "test": [str(p) for p in self.test],
             "preprocessing": None if self.preprocessing is None else [dict(s) for s in self.preprocessing],
-            "joint_terms": {"viscous": self.joint_terms.viscous, "coulomb": self.joint_terms.coulomb,
+            "joint_terms": None if self.model.kind == "drag" else {  # a drag model damps its joints in model.drag
+                            "viscous": self.joint_terms.viscous, "coulomb": self.joint_terms.coulomb,
                             "coulomb_velocity": self.joint_terms.coulomb_velocity,
                             "armature": self.joint_terms.armature,
                             "joints": None if self.joint_terms.joints is None else list(self.joint_terms.joints)},

@@ -12,6 +12,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from dualid.errors import ConfigError
 from dualid.estimators.methods import METHODS
+from dualid.robot.drag_schema import DragSection
 
 Method = Literal[tuple(METHODS)]  # type: ignore[valid-type]
 
@@ -21,9 +22,12 @@ class _Section(BaseModel):
 
 
 class ModelSection(_Section):
-    urdf: str = Field(description="the robot's URDF (relative to the config file)")
+    urdf: str | None = Field(None, description="the robot's URDF (relative to the config file); required unless "
+                                               "kind is drag with drag.chain")
     floating_base: bool = Field(False, description="add a free-flyer root joint")
     gravity: list[float] | None = Field(None, min_length=3, max_length=3, description="[m/s²]; default (0, 0, -9.81)")
+    kind: Literal["inertia", "drag"] = Field("inertia", description="inertia: τ = M(q)a + h(q, v); drag: τ = D(q)v")
+    drag: DragSection | None = Field(None, description="the drag model (kind: drag)")
 
 
 class MotorEffort(_Section):

@@ -1,0 +1,184 @@
+"""Writing a drag-model fit (``model.kind: drag``): parameters.yaml/json, identifiability.txt, report.md
+and PNGs, under the output-directory policy (``report.outdir``).
+
+- parameters.yaml/json: the drag spec, data and preprocessing, identifiability, and per method its
+  status, solver, parameters (name, unit, value, standard error), per-body drag matrices with their
+  eigenvalues (physical consistency: all ≥ 0) and held-out scores;
+- report.md: fits, held-out scores (effort τ̂ = D̂v and velocity v̂ = D̂⁻¹τ per coordinate), parameters;
+- velocity_<run>.png (forward prediction v̂ against measured v) for every held-out run, scores.png.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import yaml
+from matplotlib.figure import Figure
+
+from dualid.estimators.methods import color as method_color
+from dualid.estimators.methods import method as method_entry
+from dualid.evaluation.validation import Validation
+from dualid.report.figures import cycle_color, new_figure, save_figure
+from dualid.report.io import jsonable, markdown_table, to_json, write_json
+from dualid.report.outdir import write_output
+from dualid.robot.drag_fit import DragFitOutcome
+
+
+def _color(label: str, k: int):
+    return method_color(label) or cycle_color(k)
+
+
+def _cell(m: float, s: float, digits: int = 3) -> str:
+    return "—" if not np.isfinite(m) else f"{m:.{digits}g} ± {s:.1g}" if np.isfinite(s) and s > 0 else f"{m:.{digits}g}"
+
+
+def score_table(validations: dict[str, Validation], key: str) -> list[str]:
+    """Markdown rows: per method, a held-out score per coordinate (mean ± std over runs)."""
+    coords = next(iter(validations.values())).coordinates
+    rows = [[label] + [_cell(m, s) for m, s in zip(v.mean(key), v.std(key))] for label, v in validations.items()]
+    return markdown_table(["method", *coords], rows)
+
+
+def velocity_plot(validations: dict[str, Validation], run: int, units: tuple[str, ...]) -> Figure:
+    """Measured vs predicted velocity v̂ = D̂⁻¹τ on one held-out run, one panel per coordinate."""
+    first = next(iter(validations.values()))
+    meas = first.runs[run]
+    n = len(first.coordinates)
+    fig, axes = new_figure(n, 1, figsize=(10, 2.0 * n), sharex=True)
+    for j, ax in enumerate(axes[:, 0]):
+        ax.plot(meas.t, meas.a[:, j], color="black", lw=1.2, label="measured")
+        for k, (label, val) in enumerate(validations.items()):
+            r = val.runs[run]
+            if r.a_pred is not None:
+                ax.plot(r.t, r.a_pred[:, j], color=_color(label, k), lw=0.8, alpha=0.85,
+                        label=f"{label} (NCC {r.a_ncc[j]:.3f})")
+        lo, hi = np.percentile(meas.a[:, j], [0.5, 99.5])  # axes follow the measured signal
+        pad = 0.25 * max(hi - lo, 1e-12)
+        ax.set_ylim(lo - pad, hi + pad)
+        ax.set_ylabel(f"{first.coordinates[j]} [{units[j]}]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=6, ncol=4, loc="upper right")
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle(f"held-out run {meas.run}: velocity v̂ = D̂(q)⁻¹τ from measured q, τ", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def parameters_record(outcome: DragFitOutcome) -> dict:
+    P = outcome.problem.parameters
+    methods = {}
+    for m, f in outcome.fits.items():
+        if not f.ok:
+            methods[m] = {"description": method_entry(m).description, "error": f.error}
+            continue
+        r = f.result
+        methods[m] = {
+            "description": method_entry(m).description,
+            "status": r.status,
+            "solver": r.solver,
+            "solver_chain": r.info.get("solver_chain", r.solver),
+            "fallback_used": bool(r.info.get("fallback_used", False)),
+            "solve_time_s": r.solve_time,
+            "objective": r.objective,
+            "physically_consistent": bool(r.is_consistent),
+            "parameters": [{"name": n, "unit": u, "value": float(x), "std_error": se}
+                           for n, u, x, se in zip(P.names, P.units, r.theta, f.uncertainty)],
+            "drag_matrices": {name: {"matrix": C, "eigenvalues": np.linalg.eigvalsh(C)}
+                              for name, C in outcome.model.drag_matrices(r.theta).items()},
+            "validation": None if f.validation is None else f.validation.as_dict(),
+        }
+    cfg = outcome.config
+    ident = outcome.identifiability
+    return jsonable({
+        "complete": outcome.complete,
+        "warnings": list(outcome.warnings),
+        "model": {"kind": "drag", "urdf": cfg.model.urdf, "coordinates": list(outcome.model.coordinates),
+                  "drag": cfg.model.drag.as_dict()},
+        "data": {"train": list(cfg.train), "test": list(cfg.test), "columns": outcome.columns.to_dict(),
+                 "preprocessing": outcome.steps, "samples": outcome.problem.N},
+        "identifiability": {"rank": ident.rank, "n_params": ident.n_params,
+                            "condition_number": ident.condition_number,
+                            "not_identifiable": list(ident.unidentifiable)},
+        "prior": {"theta0": outcome.prior or None, "gamma": cfg.prior.gamma, "per_equation": cfg.prior.per_equation},
+        "validation_note": "a_rmse/a_ncc: the forward prediction v̂ = D̂⁻¹τ against the measured velocity",
+        "methods": methods,
+    })
+
+
+def write_drag_fit(outcome: DragFitOutcome, out: str | Path, force: bool = False) -> dict[str, Path]:
+    return write_output(out, force, lambda d: _write(outcome, d))
+
+
+def _write(outcome: DragFitOutcome, out: Path) -> dict[str, Path]:
+    written: dict[str, Path] = {}
+    record = parameters_record(outcome)
+    (out / "parameters.yaml").write_text(yaml.safe_dump(record, sort_keys=False, allow_unicode=True))
+    written["parameters.yaml"] = out / "parameters.yaml"
+    written["parameters.json"] = write_json(out / "parameters.json", record)
+    (out / "identifiability.txt").write_text(outcome.identifiability.describe(max_items=len(outcome.problem.parameters.names)) + "\n")
+    written["identifiability.txt"] = out / "identifiability.txt"
+    validations = {m: f.validation for m, f in outcome.fits.items() if f.ok and f.validation is not None}
+    units = tuple(outcome.columns.unit("velocity", c) for c in outcome.model.coordinates)
+    figures = []
+    for k, run in enumerate(outcome.test if validations else ()):
+        name = f"velocity_{run.name}.png"
+        written[name] = save_figure(velocity_plot(validations, k, units), out / name, bbox_inches="tight")
+        figures.append(name)
+    (out / "report.md").write_text(_report_md(outcome, validations, figures))
+    written["report.md"] = out / "report.md"
+    return written
+
+
+def _report_md(outcome: DragFitOutcome, validations: dict[str, Validation], figures: list[str]) -> str:
+    cfg, P = outcome.config, outcome.problem.parameters
+    source = cfg.model.urdf.name if cfg.model.urdf is not None else f"chain {list(cfg.model.drag.chain)}"
+    lines = [f"# Drag-model identification ({source})", ""]
+    failed = [m for m, f in outcome.fits.items() if not f.ok]
+    if failed:
+        lines += [f"**Incomplete: {len(failed)} of {len(outcome.fits)} requested methods failed ({', '.join(failed)}).**", ""]
+    lines += [
+        f"- model: τ = D(q, θ)v, coordinates {', '.join(outcome.model.coordinates)}, base {cfg.model.drag.base}; "
+        f"{len(cfg.model.drag.bodies)} drag bodies, {len(cfg.model.drag.damping)} damped joints; p = {P.p}",
+        f"- training runs: {', '.join(p.name for p in cfg.train)}; held-out: {', '.join(p.name for p in cfg.test) or '(none)'}",
+        f"- samples: {outcome.problem.N} × {outcome.problem.n} coordinates",
+        "- preprocessing:",
+        *[f"  - {to_json(s, indent=None)}" for s in outcome.steps],
+        *([f"- preprocessing {outcome.preprocessing_note}"] if outcome.preprocessing_note else []),
+        f"- identifiability: {outcome.identifiability.describe(max_items=6)}",
+        *([f"- prior of logdet/pullback: {outcome.prior}"] if outcome.prior else []),
+        "",
+    ]
+    if outcome.warnings:
+        lines += ["## Warnings", ""] + [f"- {w}" for w in outcome.warnings] + [""]
+    rows = []
+    for m, f in outcome.fits.items():
+        if f.ok:
+            r = f.result
+            fallback = r.info.get("solver_chain", "") if r.info.get("fallback_used") else "no"
+            mins = min(float(np.linalg.eigvalsh(C)[0]) for C in outcome.model.drag_matrices(r.theta).values())
+            rows.append([m, r.status, r.solver, fallback, f"{r.solve_time:.2f}", r.is_consistent, f"{mins:.3g}"])
+        else:
+            rows.append([m, f"failed: {f.error}", "", "", "", "", ""])
+    lines += ["## Fits", ""]
+    lines += markdown_table(["method", "status", "solver", "fallback", "time [s]", "consistent", "min eig(C_b)"], rows)
+    if validations:
+        lines += ["", "## Held-out validation", "",
+                  f"Mean ± std over {len(outcome.test)} held-out runs. NCC: normalized cross-correlation, maximum over "
+                  f"shifts within ±{cfg.xcorr_window} s (NaN where a signal is constant, e.g. a passive coordinate's zero "
+                  "effort).", "", "Velocity NCC (forward prediction v̂ = D̂(q)⁻¹τ vs measured v):", ""]
+        lines += score_table(validations, "a_ncc")
+        lines += ["", "Velocity RMSE:", ""] + score_table(validations, "a_rmse")
+        lines += ["", "Effort RMSE (τ̂ = D̂(q)v vs measured τ):", ""] + score_table(validations, "tau_rmse")
+        lines += [""] + [f"![{f}]({f})" for f in figures]
+    ok = [m for m, f in outcome.fits.items() if f.ok]
+    lines += ["", "## Parameters", "", "(± standard error of the quadratic estimators; see parameters.yaml)", ""]
+    prows = []
+    for k, (n, u) in enumerate(zip(P.names, P.units)):
+        cells = [n, u]
+        for m in ok:
+            se = outcome.fits[m].uncertainty[k] if outcome.fits[m].uncertainty else None
+            cells.append(f"{outcome.fits[m].result.theta[k]:.4g}" + (f" ± {se:.2g}" if isinstance(se, float) else ""))
+        prows.append(cells)
+    lines += markdown_table(["parameter", "unit", *ok], prows)
+    return "\n".join(lines) + "\n"
