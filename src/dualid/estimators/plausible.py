@@ -136,6 +136,30 @@ def _pullback_term(theta, idx, V, C0, theta0):
     return cp.sum_squares(F.T @ (theta[idx] - theta0[idx]))
 
 
+def _min_margin(P, theta: np.ndarray) -> float:
+    """Smallest eigenvalue over the blocks, each relative to its largest (scale-free)."""
+    out = np.inf
+    for b in P.blocks:
+        C = b.constraint_matrix(theta)
+        if C is not None:
+            lam = np.linalg.eigvalsh(C)
+            out = min(out, lam[0] / max(abs(lam[-1]), 1e-300))
+    return float(out)
+
+
+def _clear_boundary(theta_p: np.ndarray, theta_hat: np.ndarray, P) -> tuple[np.ndarray, float]:
+    """θ_p, or the first point θ_p + t(θ̂ − θ_p), t = 1e-8 … 1, with every block's constraint matrix ⪰ 0
+    (both ends have θ̂'s predictions, so every point between does): a solver's 1e-10-size violation
+    would make the URDF writer refuse the body. Returns (θ, t)."""
+    if _min_margin(P, theta_p) >= 0:
+        return theta_p, 0.0
+    for t in 10.0 ** np.arange(-8, 1):
+        theta = theta_p + t * (theta_hat - theta_p)
+        if _min_margin(P, theta) >= 0:
+            return theta, float(t)
+    return theta_p, 0.0
+
+
 def _bounds(theta, P) -> list:
     lo = np.full(P.p, -np.inf) if P.lower is None else np.asarray(P.lower)
     hi = np.full(P.p, np.inf) if P.upper is None else np.asarray(P.upper)
@@ -220,8 +244,10 @@ def plausible_parameters(problem: IdentificationProblem, theta_hat, theta0, solv
     constraints = [C >> 0 for C, _ in scaled] + _bounds(theta, P)
     chain: list[str] = []
 
-    def usable(z_value) -> bool:  # an inaccurate point is kept only when consistent
-        return P.is_consistent(centre + NG @ z_value, tol=1e-7)
+    def usable(z_value) -> bool:  # an inaccurate point is kept only when consistent (log-det: strictly)
+        th = centre + NG @ z_value
+        strict = objective == "pullback" or np.isfinite(regularizer_value("logdet", P, th, theta0))
+        return strict and P.is_consistent(th, tol=1e-7)
 
     objective = "logdet"
     logdet = sum(-cp.log_det(C) + cp.sum(cp.multiply(C0inv, C)) for C, C0inv in scaled)
@@ -235,7 +261,9 @@ def plausible_parameters(problem: IdentificationProblem, theta_hat, theta0, solv
     if solved is None:
         raise SolverError(f"plausible_parameters: no physically consistent θ with the training predictions of θ̂ "
                           f"was found: {' → '.join(chain)}", status="all_solvers_failed")
-    theta_p = centre + NG @ solved.value
+    theta_p, pulled = _clear_boundary(centre + NG @ solved.value, theta_hat, P)
+    if pulled:
+        chain.append(f"moved {pulled:.1e} of the way back to θ̂ to clear a rounding-size violation of consistency")
     A = problem.Y.reshape(-1, P.p)
     change = float(np.linalg.norm(A @ (theta_p - theta_hat)) / max(np.linalg.norm(A @ theta_hat), 1e-300))
     return PlausibleParameters(

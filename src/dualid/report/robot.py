@@ -4,7 +4,8 @@ Files in the output folder:
 - parameters.yaml, parameters.json: every method's parameters (name, unit, value, standard error or
   "not identifiable"), body physical quantities, solver status/time, held-out scores, and the data
   files, column map and preprocessing steps used;
-- <method>.urdf: the URDF with the identified inertials and <dynamics damping friction>;
+- <method>.urdf, <method>.xml: the URDF and MJCF with the identified (plausible) parameters
+  (report/model_files.py);
 - identifiability.txt; report.md; effort_<run>.png (predicted vs measured effort on a held-out
   run), acceleration_<run>.png (forward dynamics) and scores.png (per-joint RMSE/NCC per method).
 """
@@ -18,15 +19,13 @@ import numpy as np
 import yaml
 from matplotlib.figure import Figure
 
-from dualid.errors import DualidError
 from dualid.estimators.methods import color as method_color
 from dualid.estimators.methods import method as method_entry
 from dualid.evaluation.validation import Validation
-from dualid.model.joint_terms import JointTermsModel
 from dualid.report.figures import cycle_color, new_figure, save_figure
 from dualid.report.io import jsonable, to_json, write_json
+from dualid.report.model_files import plausible_lines, plausible_record, write_model_files
 from dualid.report.outdir import write_output
-from dualid.report.urdf import write_urdf
 from dualid.robot.fit import FitOutcome
 
 UNCERTAINTY_NOTE = (
@@ -39,14 +38,6 @@ UNCERTAINTY_NOTE = (
 
 def _color(label: str, k: int) -> str:
     return method_color(label) or cycle_color(k)
-
-
-def _friction(model, theta) -> dict[str, tuple[float, float]]:
-    return model.friction(theta) if isinstance(model, JointTermsModel) else {}
-
-
-def _armature(model, theta) -> dict[str, float]:
-    return model.armature_values(theta) if isinstance(model, JointTermsModel) else {}
 
 
 def _guard_cell(info: dict) -> str:
@@ -156,7 +147,7 @@ def _param_table(outcome: FitOutcome) -> str:
 
 
 # --- writers ----------------------------------------------------------------------------------
-def parameters_record(outcome: FitOutcome, urdfs: dict[str, str]) -> dict:
+def parameters_record(outcome: FitOutcome, urdfs: dict[str, str], files: dict[str, dict] | None = None) -> dict:
     """The content of parameters.yaml / parameters.json."""
     P = outcome.problem.parameters
     ident = outcome.identifiability
@@ -179,6 +170,10 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str]) -> dict:
             "objective": r.objective,
             "physically_consistent": bool(r.is_consistent),
             "urdf": urdfs.get(m),
+            "mjcf": (files or {}).get(m, {}).get("mjcf"),
+            "model_files_theta": (files or {}).get(m, {}).get("theta"),
+            "mjcf_notes": (files or {}).get(m, {}).get("mjcf_notes"),
+            "plausible": plausible_record(f),
             "parameters": [
                 {"name": n, "unit": u, "value": float(x), "std_error": se}
                 for n, u, x, se in zip(P.names, P.units, r.theta, f.uncertainty)
@@ -216,22 +211,9 @@ def write_fit(outcome: FitOutcome, out: str | Path, force: bool = False) -> dict
 
 
 def _write_fit(outcome: FitOutcome, out: Path) -> dict[str, Path]:
-    written: dict[str, Path] = {}
-    urdfs: dict[str, str] = {}
-    p0 = outcome.rigid.parameters.p
-    for m, f in outcome.fits.items():
-        if not f.ok:
-            continue
-        try:
-            path = write_urdf(outcome.config.model.urdf, outcome.rigid, f.result.theta[:p0], out / f"{m}.urdf",
-                              overwrite=True, friction=_friction(outcome.model, f.result.theta),
-                              armature=_armature(outcome.model, f.result.theta))
-        except (DualidError, ValueError) as exc:  # e.g. a fit on the consistency boundary the URDF writer refuses
-            urdfs[m] = f"not written: {exc}"
-            continue
-        urdfs[m] = path.name
-        written[f"{m}.urdf"] = path
-    record = parameters_record(outcome, urdfs)
+    written, files = write_model_files(outcome, out)
+    urdfs = {m: e["urdf"] for m, e in files.items()}
+    record = parameters_record(outcome, urdfs, files)
     (out / "parameters.yaml").write_text(yaml.safe_dump(record, sort_keys=False, allow_unicode=True))
     write_json(out / "parameters.json", record)
     written["parameters.yaml"], written["parameters.json"] = out / "parameters.yaml", out / "parameters.json"
@@ -314,6 +296,7 @@ def _report_md(outcome: FitOutcome, validations, urdfs, figures) -> str:
     if outcome.prior:
         weight = f"γ = {cfg.prior.gamma} per equation (γ·N·n)" if cfg.prior.per_equation else f"γ = {cfg.prior.gamma}"
         lines += ["", f"Prior of logdet/pullback ({weight}): {outcome.prior}."]
+    lines += [""] + plausible_lines(outcome)
     lines += ["", "## Parameters", "", "(n.i.: not identifiable on its own; ± standard error, see parameters.yaml)", "",
               _param_table(outcome), ""]
     return "\n".join(lines)
