@@ -24,11 +24,13 @@ from dualid.report.mjcf import write_mjcf
 from dualid.report.urdf import write_urdf
 
 PENDUBOT = Path(__file__).resolve().parents[1] / "examples" / "dfki" / "data" / "pendubot_model_2.1.urdf"
+CUBE = "\n".join([f"v {x} {y} {z}" for x in (-0.05, 0.05) for y in (-0.05, 0.05) for z in (-0.05, 0.05)]
+                 + ["f 1 2 4 3", "f 5 7 8 6", "f 1 5 6 2", "f 3 4 8 7", "f 1 3 7 5", "f 2 6 8 4"])
 ARM = """<robot name="arm">
   <link name="base"><inertial><mass value="2"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
   <link name="l1"><inertial><origin xyz="0.02 0.01 0.15" rpy="0.2 0.1 0"/><mass value="1.5"/>
     <inertia ixx="0.02" ixy="0.001" ixz="0" iyy="0.025" iyz="0" izz="0.01"/></inertial>
-    <collision><geometry><box size="0.05 0.05 0.3"/></geometry></collision></link>
+    <collision><geometry><mesh filename="meshes/cube.obj"/></geometry></collision></link>
   <link name="l2"><inertial><origin xyz="0 0.1 0"/><mass value="0.8"/>
     <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.004" iyz="0" izz="0.01"/></inertial></link>
   <link name="l3"><inertial><origin xyz="0.05 0 0"/><mass value="0.3"/>
@@ -108,10 +110,13 @@ def _mujoco_dynamics(path, names, q, v, a):
 
 
 @pytest.mark.parametrize("source", ["pendubot", "arm"])
-def test_files_reproduce_dualid_dynamics(tmp_path, source):
+def test_files_reproduce_dualid_dynamics(tmp_path, source, monkeypatch):
     urdf = PENDUBOT if source == "pendubot" else tmp_path / "arm.urdf"
-    if source == "arm":
+    if source == "arm":  # a collision mesh: both files must find it from their own folder, whatever the cwd
         urdf.write_text(ARM)
+        (tmp_path / "meshes").mkdir()
+        (tmp_path / "meshes" / "cube.obj").write_text(CUBE)
+        monkeypatch.chdir("/")
     rigid, model, theta = _setup(urdf, seed=1)
     u, x = _write_both(urdf, tmp_path / "out", rigid, model, theta)
     names, vc = model.coordinates, model.coulomb_velocity
@@ -142,6 +147,9 @@ def test_files_reproduce_dualid_dynamics(tmp_path, source):
         np.testing.assert_allclose(tau, (model.regressor(q, v, a) @ no_arm)[0], atol=1e-9 * scale, rtol=0)
         assert not np.allclose(M, M_ref, atol=1e-6)  # the armature is what the URDF loses
     assert pin_urdf.armature.tolist() == [0.0] * rigid.nv
+    if source == "arm":
+        assert 'file="../meshes/cube.obj"' in x.read_text() and 'filename="../meshes/cube.obj"' in u.read_text()
+        assert mujoco.MjModel.from_xml_path(str(x)).nmesh == 1
 
 
 def test_mjcf_is_written_at_full_precision(tmp_path):

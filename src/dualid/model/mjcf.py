@@ -141,9 +141,11 @@ def identified_mjcf(
         raise ModelError(f"write_mjcf: MuJoCo refused the identified model of {source_urdf}: {exc}") from None
     notes = ["visual geoms dropped (MuJoCo's URDF import discards them)",
              "links welded by fixed joints fused into their moving body"]
-    if out_dir is not None:
+    if out_dir is not None:  # relative to the output folder, where MuJoCo resolves them when it loads the file
+        out_dir = Path(out_dir).resolve()
         for mesh in spec.meshes:
-            mesh.file = os.path.relpath(mesh.file, Path(out_dir).resolve())
+            mesh.file = os.path.relpath(mesh.file, out_dir)
+        spec.modelfiledir = str(out_dir)  # to_xml compiles again: resolve them from there too
     with _xml_precision(FULL_PRECISION) as digits:
         xml = spec.to_xml()
     if digits < FULL_PRECISION:
