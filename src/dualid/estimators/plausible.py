@@ -153,11 +153,13 @@ def _clear_boundary(theta_p: np.ndarray, theta_hat: np.ndarray, P) -> tuple[np.n
     would make the URDF writer refuse the body. Returns (θ, t)."""
     if _min_margin(P, theta_p) >= 0:
         return theta_p, 0.0
-    for t in 10.0 ** np.arange(-8, 1):
+    for t in 10.0 ** np.arange(-8, 0):
         theta = theta_p + t * (theta_hat - theta_p)
         if _min_margin(P, theta) >= 0:
             return theta, float(t)
-    return theta_p, 0.0
+    raise SolverError("plausible_parameters: the solution violates physical consistency (smallest constraint "
+                      f"eigenvalue {_min_margin(P, theta_p):.3g} relative) and so does every point within 10 % of the "
+                      "way back to θ̂", status="inconsistent")
 
 
 def _bounds(theta, P) -> list:
@@ -261,7 +263,10 @@ def plausible_parameters(problem: IdentificationProblem, theta_hat, theta0, solv
     if solved is None:
         raise SolverError(f"plausible_parameters: no physically consistent θ with the training predictions of θ̂ "
                           f"was found: {' → '.join(chain)}", status="all_solvers_failed")
-    theta_p, pulled = _clear_boundary(centre + NG @ solved.value, theta_hat, P)
+    try:
+        theta_p, pulled = _clear_boundary(centre + NG @ solved.value, theta_hat, P)
+    except SolverError as exc:
+        raise SolverError(f"{exc} ({' → '.join(chain)})", status=exc.status) from None
     if pulled:
         chain.append(f"moved {pulled:.1e} of the way back to θ̂ to clear a rounding-size violation of consistency")
     A = problem.Y.reshape(-1, P.p)
