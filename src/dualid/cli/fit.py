@@ -91,7 +91,7 @@ def fit(
     if validations:
         typer.echo(score_table(validations))
     failed = [m for m, f in outcome.fits.items() if not f.ok]
-    console.print(f"wrote parameters, URDFs and report.md to {cfg.out}"
+    console.print(f"wrote parameters, URDF and MJCF files and report.md to {cfg.out}"
                   + (" (incomplete: see report.md)" if failed else ""), markup=False)
     for m in failed:
         print_error(f"{m}: failed: {outcome.fits[m].error}")
