@@ -223,4 +223,19 @@ def test_dfki_files_give_dualids_held_out_scores(tmp_path):
     # the URDF: the same inertials and friction, no armature (no loader reads it): joint 2 is off
     np.testing.assert_allclose(scores["urdf pinocchio"], scores["urdf mujoco"], atol=1e-6, rtol=0)
     assert np.all(np.abs(scores["urdf pinocchio"][:, 1] - ours[:, 1]) > 1e-3)
-    print({k: v.mean(axis=0).round(4).tolist() for k, v in scores.items()}, "dualid", ours.mean(axis=0).round(4).tolist())
+    # dualid validate reads both files whole (the URDF's armature from dualid's own attribute)
+    from dualid.robot.validate import validate_urdf
+
+    for path in ("dm.xml", "dm.urdf"):
+        _, _, val = validate_urdf(tmp_path / "out" / path, config.test, columns=config.columns,
+                                  preprocessing=config.preprocessing, coulomb_velocity=vc)
+        np.testing.assert_allclose([r.tau_rmse for r in val.runs], ours, atol=1e-6, rtol=0)
+
+
+def test_validate_names_a_missing_mjcf(tmp_path):
+    from dualid.errors import MissingFileError
+    from dualid.robot.validate import validate_urdf
+
+    with pytest.raises(MissingFileError) as err:
+        validate_urdf(tmp_path / "dm.xml", [tmp_path / "run.csv"])
+    assert str(err.value) == f"validate: no MJCF file at {tmp_path / 'dm.xml'}"

@@ -101,7 +101,7 @@ def fit(
 
 @app.command()
 def validate(
-    model: Path = typer.Option(..., "--model", help="an (identified) URDF; friction from <dynamics>"),
+    model: Path = typer.Option(..., "--model", help="an (identified) URDF (friction from <dynamics>) or MJCF (.xml)"),
     data: List[Path] = typer.Option(..., "--data", help="log to validate on; repeatable"),
     config: Optional[Path] = typer.Option(None, "--config", help="fit.yaml for columns, preprocessing, gravity"),
     out: Optional[Path] = typer.Option(None, "--out", help="write validation.json, report.md and PNGs here"),
