@@ -87,7 +87,8 @@ class PlausibleParameters:
     def as_dict(self) -> dict:
         return {
             "status": self.status, "solver": self.solver, "solver_chain": self.solver_chain,
-            "fallback_used": self.fallback_used, "objective": self.objective, "rank": self.rank, "null_dimension": int(self.null_space.shape[1]),
+            "fallback_used": self.fallback_used, "objective": self.objective, "rank": self.rank,
+            "null_dimension": int(self.null_space.shape[1]),
             "prediction_change": self.prediction_change, "predictions_unchanged": self.predictions_unchanged,
             "consistent": self.consistent, "divergence_raw": self.divergence_hat, "divergence": self.divergence,
         }
@@ -233,10 +234,10 @@ def plausible_parameters(problem: IdentificationProblem, theta_hat, theta0, solv
     common = dict(theta_hat=theta_hat, theta0=theta0, names=P.names, prior_share=share, determined_by=determined,
                   null_space=N, rank=rank, divergence_hat=regularizer_value("logdet", P, theta_hat, theta0))
     if N.shape[1] == 0:
-        return PlausibleParameters(theta_hat, status="full rank", solver="none", solver_chain="full rank: nothing to choose",
-                                   fallback_used=False, objective="none", prediction_change=0.0, predictions_unchanged=True,
-                                   consistent=P.is_consistent(theta_hat, tol=1e-7), divergence=common["divergence_hat"],
-                                   **common)
+        return PlausibleParameters(
+            theta_hat, status="full rank", solver="none", solver_chain="full rank: nothing to choose",
+            fallback_used=False, objective="none", prediction_change=0.0, predictions_unchanged=True,
+            consistent=P.is_consistent(theta_hat, tol=1e-7), divergence=common["divergence_hat"], **common)
     # centre: the point of the slice nearest θ₀ in G, constraints ignored. Solving for a small offset from it
     # keeps the bodies the data pin near the consistency boundary accurate (θ̂ itself may be 1e5 away)
     centre = theta_hat - NG @ (NG.T @ (G @ (theta_hat - theta0)))
@@ -263,6 +264,7 @@ def plausible_parameters(problem: IdentificationProblem, theta_hat, theta0, solv
     if solved is None:
         raise SolverError(f"plausible_parameters: no physically consistent θ with the training predictions of θ̂ "
                           f"was found: {' → '.join(chain)}", status="all_solvers_failed")
+    fallback_used = len(chain) > 1  # another solver or objective than the first
     try:
         theta_p, pulled = _clear_boundary(centre + NG @ solved.value, theta_hat, P)
     except SolverError as exc:
@@ -273,7 +275,8 @@ def plausible_parameters(problem: IdentificationProblem, theta_hat, theta0, solv
     change = float(np.linalg.norm(A @ (theta_p - theta_hat)) / max(np.linalg.norm(A @ theta_hat), 1e-300))
     return PlausibleParameters(
         theta_p, status=solved.status, solver=solved.solver, solver_chain=" → ".join(chain),
-        fallback_used=len(chain) > 1, objective=objective, prediction_change=change, predictions_unchanged=change <= PREDICTION_RTOL,
+        fallback_used=fallback_used, objective=objective, prediction_change=change,
+        predictions_unchanged=change <= PREDICTION_RTOL,
         consistent=P.is_consistent(theta_p, tol=1e-7), divergence=regularizer_value("logdet", P, theta_p, theta0),
         **common,
     )
