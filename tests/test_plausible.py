@@ -142,3 +142,23 @@ def test_seven_dof_arm_masses_near_a_cad_prior():
     assert np.all(np.abs(ratio - 1) <= 0.30), ratio
     raw_ratio = raw[masses] / prior[masses]
     assert raw_ratio.max() > 1.3 or raw_ratio.min() < 0.7  # the raw fit's masses, for contrast
+
+
+def test_pullback_when_the_data_pin_a_parameter_on_the_boundary():
+    """Pan–tilt with the tilt never moving (its damping a null direction) and zero pan damping (the data
+    fix b_pan = 0, on the boundary): the log-det divergence is infinite on the whole slice, so the
+    quadratic (pullback) expansion chooses, b_tilt goes to the prior and b_pan stays 0."""
+    model = PanTilt()
+    rng = np.random.default_rng(0)
+    T = 50
+    q = np.column_stack([rng.uniform(-1, 1, T), np.full(T, 0.4)])
+    v = np.column_stack([rng.normal(size=T), np.zeros(T)])
+    a = np.column_stack([rng.normal(size=T), np.zeros(T)])
+    theta = np.array([0.5, 0.0, 0.3])
+    tau = model.regressor(q, v, a) @ theta
+    problem = build_problem(model, Trajectory(np.arange(T) * 0.01, q, v, tau, a, coordinates=model.coordinates))
+    result = plausible_parameters(problem, theta, [0.4, 0.1, 0.2])
+    assert result.objective == "pullback" and result.fallback_used
+    assert result.solver_chain.startswith("logdet CLARABEL") and "pullback CLARABEL optimal" in result.solver_chain
+    np.testing.assert_allclose(result.theta, [0.5, 0.0, 0.2], atol=1e-7)
+    assert result.determined_by == (DATA, DATA, PRIOR) and result.consistent
