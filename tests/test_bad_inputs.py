@@ -488,7 +488,7 @@ def _(tmp):
     return fit(tmp, None, [p, p])
 
 
-@case("good-fit-exits-0", 0, "wrote parameters, URDFs, report.md and report.html to")
+@case("good-fit-exits-0", 0, "wrote parameters, URDF and MJCF files, report.md and report.html to")
 def _(tmp):
     return fit(tmp, None, None, "--test", str(write_log(tmp, good_frame(seed=1), "test.csv")))
 

@@ -49,6 +49,10 @@ def test_fit_and_validate_end_to_end(tmp_path):
                                  "--config", str(cfg), "--out", str(val)])
     assert result.exit_code == 0, _out(result)
     assert (val / "validation.json").is_file() and (val / "report.md").is_file()
+    result = runner.invoke(app, ["validate", "--model", str(out / "ols.xml"), "--data", str(DFKI / "trajectory_05.csv"),
+                                 "--config", str(cfg)])  # the MJCF beside it: armature, damping, frictionloss
+    assert result.exit_code == 0, _out(result)
+    assert "τ RMSE [N m], 1 run" in result.output
 
     # an existing non-empty output directory is refused without --force
     result = runner.invoke(app, ["fit", "--config", str(cfg), "--method", "ols", "--out", str(out)])

@@ -104,7 +104,7 @@ def fit(
     if validations:
         typer.echo(score_table(validations))
     failed = [m for m, f in outcome.fits.items() if not f.ok]
-    console.print(f"wrote parameters, URDFs, report.md and report.html to {cfg.out}"
+    console.print(f"wrote parameters, URDF and MJCF files, report.md and report.html to {cfg.out}"
                   + (" (incomplete: see report.html)" if failed else ""), markup=False)
     for m in failed:
         print_error(f"{m}: failed: {outcome.fits[m].error}")
@@ -114,7 +114,7 @@ def fit(
 
 @app.command()
 def validate(
-    model: Path = typer.Option(..., "--model", help="an (identified) URDF; friction from <dynamics>"),
+    model: Path = typer.Option(..., "--model", help="an (identified) URDF (friction from <dynamics>) or MJCF (.xml)"),
     data: List[Path] = typer.Option(..., "--data", help="log to validate on; repeatable"),
     config: Optional[Path] = typer.Option(None, "--config", help="fit.yaml for columns, preprocessing, gravity"),
     out: Optional[Path] = typer.Option(None, "--out", help="write validation.json, report.md/.html and PNGs here"),

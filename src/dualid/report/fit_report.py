@@ -31,6 +31,7 @@ from dualid.report.document import (
     runs_phrase,
 )
 from dualid.report.metadata import metadata_items
+from dualid.report.model_files import plausible_section
 from dualid.report.render import table_markdown
 from dualid.report.signals import score_bars, signal_plot
 from dualid.report.svgplot import signal_svg
@@ -249,8 +250,12 @@ def _parameters(d: FitReportData) -> Section:
                                        "(solver round-off; exact values in parameters.yaml)."), *parameter_tables(d)))
 
 
+def _plausible(d: FitReportData) -> Section:
+    return plausible_section(d.outcome)
+
+
 FIT_SECTIONS: list[Callable[[FitReportData], Section]] = [
-    _summary, _warnings, _identifiability, _fits, _scores, _figures, _parameters,
+    _summary, _warnings, _identifiability, _fits, _scores, _figures, _plausible, _parameters,
 ]
 
 

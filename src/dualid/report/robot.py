@@ -5,7 +5,8 @@ Files in the output folder of a fit:
   line, SHA-256 of every input file), every method's parameters (name, unit, value, standard error or
   "not identifiable"), body physical quantities, solver status/time/fallback/guard, training and
   held-out scores, and the data files, column map and preprocessing steps used;
-- <method>.urdf: the URDF with the identified inertials and <dynamics damping friction>;
+- <method>.urdf, <method>.xml: the URDF and MJCF with the identified parameters (the plausible ones when
+  a prior exists; report/model_files.py);
 - identifiability.txt; report.md with effort_<run>.png / acceleration_<run>.png for every held-out
   run and scores.png; report.html: the same report (``report.fit_report``, one value rendered twice by
   ``report.render``) as one self-contained file with the figures embedded.
@@ -17,17 +18,15 @@ from pathlib import Path
 
 import yaml
 
-from dualid.errors import DualidError
 from dualid.estimators.methods import method as method_entry
 from dualid.evaluation.validation import Validation
-from dualid.model.joint_terms import JointTermsModel
 from dualid.report.document import Report
 from dualid.report.fit_report import fit_report, report_data, score_table, validation_report
 from dualid.report.io import jsonable, write_json
 from dualid.report.metadata import run_metadata
+from dualid.report.model_files import plausible_record, write_model_files
 from dualid.report.outdir import write_output
 from dualid.report.render import to_html, to_markdown
-from dualid.report.urdf import write_urdf
 from dualid.robot.fit import FitOutcome
 
 UNCERTAINTY_NOTE = (
@@ -41,18 +40,11 @@ UNCERTAINTY_NOTE = (
 __all__ = ["parameters_record", "score_table", "write_fit", "write_validation"]
 
 
-def _friction(model, theta) -> dict[str, tuple[float, float]]:
-    return model.friction(theta) if isinstance(model, JointTermsModel) else {}
-
-
-def _armature(model, theta) -> dict[str, float]:
-    return model.armature_values(theta) if isinstance(model, JointTermsModel) else {}
-
-
 def parameters_record(outcome: FitOutcome, urdfs: dict[str, str], meta: dict | None = None,
-                      train: dict[str, Validation] | None = None) -> dict:
+                      train: dict[str, Validation] | None = None, files: dict[str, dict] | None = None) -> dict:
     """The content of parameters.yaml / parameters.json; ``meta``: the run metadata
-    (``report.metadata.run_metadata``), ``train``: the scores on the training runs per label."""
+    (``report.metadata.run_metadata``), ``train``: the scores on the training runs per label, ``files``: the
+    model files each method wrote (``report.model_files.write_model_files``)."""
     train = train or {}
     P = outcome.problem.parameters
     ident = outcome.identifiability
@@ -75,6 +67,10 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str], meta: dict | N
             "objective": r.objective,
             "physically_consistent": bool(r.is_consistent),
             "urdf": urdfs.get(m),
+            "mjcf": (files or {}).get(m, {}).get("mjcf"),
+            "model_files_theta": (files or {}).get(m, {}).get("theta"),
+            "mjcf_notes": (files or {}).get(m, {}).get("mjcf_notes"),
+            "plausible": plausible_record(f),
             "parameters": [
                 {"name": n, "unit": u, "value": float(x), "std_error": se}
                 for n, u, x, se in zip(P.names, P.units, r.theta, f.uncertainty)
@@ -140,23 +136,10 @@ def _write_report(report: Report, out: Path, written: dict[str, Path]) -> None:
 
 
 def _write_fit(outcome: FitOutcome, out: Path, meta: dict) -> dict[str, Path]:
-    written: dict[str, Path] = {}
-    urdfs: dict[str, str] = {}
-    p0 = outcome.rigid.parameters.p
-    for m, f in outcome.fits.items():
-        if not f.ok:
-            continue
-        try:
-            path = write_urdf(outcome.config.model.urdf, outcome.rigid, f.result.theta[:p0], out / f"{m}.urdf",
-                              overwrite=True, friction=_friction(outcome.model, f.result.theta),
-                              armature=_armature(outcome.model, f.result.theta))
-        except (DualidError, ValueError) as exc:  # e.g. a fit on the consistency boundary the URDF writer refuses
-            urdfs[m] = f"not written: {exc}"
-            continue
-        urdfs[m] = path.name
-        written[f"{m}.urdf"] = path
+    written, files = write_model_files(outcome, out)
+    urdfs = {m: e["urdf"] for m, e in files.items()}
     data = report_data(outcome, urdfs, meta)
-    record = parameters_record(outcome, urdfs, meta, data.train)
+    record = parameters_record(outcome, urdfs, meta, data.train, files)
     (out / "parameters.yaml").write_text(yaml.safe_dump(record, sort_keys=False, allow_unicode=True))
     write_json(out / "parameters.json", record)
     written["parameters.yaml"], written["parameters.json"] = out / "parameters.yaml", out / "parameters.json"

@@ -10,7 +10,7 @@ YAML form (relative paths are relative to the YAML file's folder)::
     joint_terms: {viscous: true, coulomb: true, coulomb_velocity: 0.01, armature: true, joints: [Joint1]}
     bounds: {Joint1.b: [0, 1]}
     methods: [ols, wls, energy, logdet, pullback, dm]
-    prior: {source: urdf, gamma: 0.1, per_equation: true}
+    prior: {source: urdf, gamma: 0.1, per_equation: true, plausible: true}
     validation: {xcorr_window: 0.02}
     references: {lab: lab_parameters.yml}
     out: results/robot
@@ -41,7 +41,7 @@ _TOP_KEYS = (
 )
 _MODEL_KEYS = ("urdf", "floating_base", "gravity", "kind", "drag")
 _JOINT_TERM_KEYS = ("viscous", "coulomb", "coulomb_velocity", "armature", "joints")
-_PRIOR_KEYS = ("source", "gamma", "per_equation")
+_PRIOR_KEYS = ("source", "gamma", "per_equation", "plausible")
 _VALIDATION_KEYS = ("xcorr_window",)
 
 
@@ -111,6 +111,7 @@ class PriorConfig:
     source: str = "urdf"  # "urdf" (the URDF's inertials) or a parameters.yaml/json file (from a previous fit)
     gamma: float = 0.1  # weight of the prior: per equation (γ·N·n, the study's convention) or absolute
     per_equation: bool = True
+    plausible: bool = True  # written URDF/MJCF: the θ with θ̂'s predictions closest to the prior (estimators.plausible)
 
 
 @dataclass(frozen=True)
@@ -208,7 +209,8 @@ class FitConfig:
         if source != "urdf":
             source = str(_path(source, base, "prior.source"))
         prior = PriorConfig(source, _float(pr.get("gamma", 0.1), "prior.gamma"),
-                            _bool(pr.get("per_equation", True), "prior.per_equation"))
+                            _bool(pr.get("per_equation", True), "prior.per_equation"),
+                            _bool(pr.get("plausible", True), "prior.plausible"))
 
         bounds_in = d.get("bounds") or {}
         if not isinstance(bounds_in, Mapping):
@@ -296,7 +298,8 @@ class FitConfig:
             "bounds": {n: [lo, hi] for n, lo, hi in self.bounds},
             "methods": list(self.methods),
             "solver": {m: dict(o) for m, o in self.solver},
-            "prior": {"source": self.prior.source, "gamma": self.prior.gamma, "per_equation": self.prior.per_equation},
+            "prior": {"source": self.prior.source, "gamma": self.prior.gamma, "per_equation": self.prior.per_equation,
+                      "plausible": self.prior.plausible},
             "validation": {"xcorr_window": self.xcorr_window},
             "references": {k: str(v) for k, v in self.references},
             "out": None if self.out is None else str(self.out),

@@ -37,6 +37,7 @@ from dualid.estimators.guards import guard_info
 from dualid.estimators.least_squares import covariance_weight
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.methods import method as method_entry
+from dualid.estimators.plausible import PlausibleParameters, plausible_parameters
 from dualid.estimators.statistics import energy_statistics, statistics
 from dualid.evaluation.validation import Validation, validate
 from dualid.linalg import pinv_psd
@@ -253,6 +254,8 @@ class MethodFit:
     uncertainty: tuple[float | str | None, ...] = ()
     validation: Validation | None = None
     error: str = ""
+    plausible: PlausibleParameters | None = None  # θ with θ̂'s training predictions closest to the prior
+    plausible_error: str = ""  # why there is none although prior.plausible asked for it
 
     @property
     def ok(self) -> bool:
@@ -367,7 +370,15 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
         if test:
             _say(progress, f"validating {method} on {len(test)} held-out runs")
             validation = validate(model, result.theta, test, method, config.xcorr_window)
-        fits[method] = MethodFit(method, result, uncertainty, validation)
+        plausible, plausible_error = None, ""
+        if config.prior.plausible:
+            _say(progress, f"choosing {method}'s plausible parameters (closest to the prior, same predictions)")
+            try:
+                plausible = plausible_parameters(problem, result.theta, prior_theta(config, rigid, model, result.theta)[0])
+            except DualidError as exc:  # recorded: the files then carry θ̂, and the report says why
+                plausible_error = f"{type(exc).__name__}: {exc}"
+        fits[method] = MethodFit(method, result, uncertainty, validation, plausible=plausible,
+                                 plausible_error=plausible_error)
 
     references = {}
     for label, path in config.references:

@@ -92,6 +92,8 @@ class PriorSection(_Section):
     source: str = Field("urdf", description="'urdf' or a parameters.yaml/json of a previous fit ('file#method')")
     gamma: float = Field(0.1, ge=0)
     per_equation: bool = Field(True, description="γ·N·n (the study's convention) instead of an absolute γ")
+    plausible: bool = Field(True, description="write URDF/MJCF with the parameters closest to the prior among those "
+                                              "with the fit's training predictions")
 
 
 class ValidationSection(_Section):

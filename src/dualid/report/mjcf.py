@@ -1,0 +1,31 @@
+"""Writing identified MJCF files (the text comes from ``dualid.model.mjcf.identified_mjcf``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from dualid.errors import OutputError
+from dualid.model.mjcf import MjcfText, identified_mjcf
+from dualid.model.rigid_body import RigidBodyModel
+
+
+def write_mjcf(
+    source_urdf: str | Path,
+    model: RigidBodyModel,
+    theta: np.ndarray,
+    out_path: str | Path,
+    overwrite: bool = False,
+    friction: dict[str, tuple[float, float]] | None = None,
+    armature: dict[str, float] | None = None,
+) -> tuple[Path, MjcfText]:
+    """Write ``identified_mjcf(source_urdf, model, θ, ...)`` to ``out_path``; refuses an existing file
+    unless overwrite=True. Returns the written path and the MjcfText (its notes say what MuJoCo dropped)."""
+    out_path = Path(out_path)
+    if out_path.exists() and not overwrite:
+        raise OutputError(f"write_mjcf: {out_path} already exists; pass overwrite=True to replace it")
+    mjcf = identified_mjcf(source_urdf, model, theta, out_path.parent, friction=friction, armature=armature)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    out_path.write_text(mjcf.xml)
+    return out_path, mjcf

@@ -1,0 +1,109 @@
+"""The model files of a real-robot fit, one pair per fitted method, and their record in parameters.yaml.
+
+- <method>.urdf: the source URDF with the identified inertials and <dynamics damping friction>
+  (armature as dualid's non-standard <dynamics armature>: no URDF loader keeps it);
+- <method>.xml: MJCF through MuJoCo's MjSpec, with armature, damping and frictionloss.
+
+Both carry θ_plausible (``estimators.plausible``) when the fit has one, else the raw θ̂; the record
+says which. A file that cannot be written (e.g. a fit on the consistency boundary) is recorded as
+"not written: <why>", the other files are still written.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from dualid.errors import DualidError
+from dualid.model.joint_terms import JointTermsModel
+from dualid.report.document import Bullets, Section, Text
+from dualid.report.mjcf import write_mjcf
+from dualid.report.urdf import write_urdf
+from dualid.robot.fit import FitOutcome, MethodFit
+
+RAW, PLAUSIBLE = "raw θ̂ (the fit's own values)", "θ_plausible (closest to the prior with θ̂'s predictions)"
+
+
+def written_theta(fit: MethodFit) -> tuple[np.ndarray, str]:
+    """(θ the files carry, which one it is)."""
+    if fit.plausible is not None:
+        return fit.plausible.theta, PLAUSIBLE
+    return fit.result.theta, RAW
+
+
+def write_model_files(outcome: FitOutcome, out: Path) -> tuple[dict[str, Path], dict[str, dict[str, str]]]:
+    """({file name: path}, {method: {"urdf": name or "not written: …", "mjcf": …, "theta": RAW | PLAUSIBLE,
+    "mjcf_notes": …}})."""
+    written: dict[str, Path] = {}
+    record: dict[str, dict[str, str]] = {}
+    p0 = outcome.rigid.parameters.p
+    model = outcome.model
+    for m, f in outcome.fits.items():
+        if not f.ok:
+            continue
+        theta, which = written_theta(f)
+        friction = model.friction(theta) if isinstance(model, JointTermsModel) else {}
+        armature = model.armature_values(theta) if isinstance(model, JointTermsModel) else {}
+        entry = {"theta": which}
+        try:
+            path = write_urdf(outcome.config.model.urdf, outcome.rigid, theta[:p0], out / f"{m}.urdf", overwrite=True,
+                              friction=friction, armature=armature)
+            entry["urdf"] = written.setdefault(path.name, path).name
+        except (DualidError, ValueError) as exc:  # e.g. a fit on the consistency boundary the URDF writer refuses
+            entry["urdf"] = f"not written: {exc}"
+        try:
+            path, mjcf = write_mjcf(outcome.config.model.urdf, outcome.rigid, theta[:p0], out / f"{m}.xml",
+                                    overwrite=True, friction=friction, armature=armature)
+            entry["mjcf"] = written.setdefault(path.name, path).name
+            entry["mjcf_notes"] = "; ".join(mjcf.notes)
+        except (DualidError, ValueError) as exc:
+            entry["mjcf"] = f"not written: {exc}"
+        record[m] = entry
+    return written, record
+
+
+def plausible_record(fit: MethodFit) -> dict | None:
+    """parameters.yaml's "plausible" entry of one method: how θ_plausible was chosen, and per parameter its
+    value, the prior's and who determined it ("data" or "prior", with the prior's share)."""
+    p = fit.plausible
+    if p is None:
+        return {"error": fit.plausible_error} if fit.plausible_error else None
+    return {
+        **p.as_dict(),
+        "parameters": [
+            {"name": n, "value": float(x), "prior": float(x0), "determined_by": d, "prior_share": float(s)}
+            for n, x, x0, d, s in zip(p.names, p.theta, p.theta0, p.determined_by, p.prior_share)
+        ],
+    }
+
+
+def plausible_lines(outcome: FitOutcome) -> list[str]:
+    """report.md: per method, how θ_plausible was chosen and the moving masses raw → plausible (prior)."""
+    lines = []
+    masses = [k for k, n in enumerate(outcome.rigid.parameters.names) if n.endswith(".m")]
+    for m, f in outcome.fits.items():
+        if not f.ok or (f.plausible is None and not f.plausible_error):
+            continue
+        if f.plausible is None:
+            lines.append(f"- {m}: no plausible parameters ({f.plausible_error}); the model files carry θ̂")
+            continue
+        p = f.plausible
+        cells = ", ".join(f"{p.names[k].removesuffix('.m')} {p.theta_hat[k]:.4g} → {p.theta[k]:.4g} "
+                          f"({p.theta0[k]:.4g}, {p.determined_by[k]})" for k in masses)
+        lines.append(f"- {m}: {p.objective} divergence {p.divergence_hat:.4g} → {p.divergence:.4g}, "
+                     f"training predictions changed by {p.prediction_change:.1e} (relative), {p.solver_chain}; "
+                     f"masses [kg] raw → plausible (prior, determined by): {cells}")
+    return lines
+
+
+PLAUSIBLE_INTRO = ("The model files carry, for each method, the parameters closest to the prior (log-det divergence "
+                   "of the pseudo-inertias) among those with the fit's own training predictions; parameters.yaml "
+                   "keeps the raw θ̂ and lists θ_plausible with who determined each parameter.")
+
+
+def plausible_section(outcome: FitOutcome) -> Section:
+    """The report's 'Plausible parameters' section (empty, hence not shown, when no method has them)."""
+    items = plausible_lines(outcome)
+    return Section("Plausible parameters", (Text(PLAUSIBLE_INTRO), Bullets(tuple(i.removeprefix("- ") for i in items)))
+                   if items else ())
