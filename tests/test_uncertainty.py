@@ -123,12 +123,16 @@ def test_active_bound_makes_the_interval_conditional():
     est = OLS()
     result = est.fit(problem)
     assert abs(result.theta[2]) < 1e-6
-    u = base_uncertainty(problem, result, est)
-    assert u.active == ("friction (1 zero eigenvalue)",)
+    u = base_uncertainty(problem, result, est, constraints="project")
+    assert u.active == ("friction (1 zero eigenvalue)",) and u.conditional
     assert u.std_error[2] < 1e-6 * u.std_error[0]  # no freedom left along x2
     assert u.summary().endswith("conditional on 1 active constraints (friction (1 zero eigenvalue))")
-    free = base_uncertainty(problem, result, est, constraints=False)
-    assert free.active == () and free.std_error[2] > 0.1 * free.std_error[0]
+    free = base_uncertainty(problem, result, est)  # the default: detected, recorded, not used
+    assert free.active == ("friction (1 zero eigenvalue)",) and not free.conditional
+    assert free.std_error[2] > 0.1 * free.std_error[0]
+    assert "1 constraints active at the estimate (friction (1 zero eigenvalue)), not used" in free.summary()
+    with pytest.raises(ConfigError, match=r"^constraints: expected 'ignore' or 'project', got True$"):
+        base_uncertainty(problem, result, est, constraints=True)
 
 
 def test_bootstrap_is_seeded_and_counts_failures():
