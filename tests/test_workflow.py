@@ -76,7 +76,11 @@ def test_uncertainty_is_reported_only_for_identifiable_parameters(outcome):
         assert se[name] == "not identifiable"
     assert isinstance(se["Joint2.Ixx"], float) and se["Joint2.Ixx"] > 0  # planar: the distal axial inertia is
     assert se["Joint1.Ixx"] == "not identifiable"  # … but Joint1.Ixx is lumped with the joint-1 armature
-    assert all(u is None for u in outcome.fits["dm"].uncertainty)
+    for f in outcome.fits.values():  # every method has intervals on its base parameters now, dm included
+        assert f.base is not None, f.base_error
+        assert np.all(f.base.lower <= f.base.values) and np.all(f.base.values <= f.base.upper)
+        assert np.all(f.base.std_error > 0)
+        assert dict(zip(names, f.uncertainty))["Joint2.Ixx"] > 0
 
 
 def test_outputs_and_urdf_round_trip(outcome, written):

@@ -77,11 +77,14 @@ class BaseParameter:
     terms: tuple[tuple[str, float, str], ...]  # (dependent name, coefficient, coefficient unit)
 
     def expression(self, digits: int = 4) -> str:
-        """e.g. "Link1.Izz + 0.09 m²·Link2.m + 1·Joint1.Ia"."""
+        """e.g. "Link1.Izz + 0.09 m²·Link2.m + Joint1.Ia"."""
         parts = [self.name]
         for dep, c, u in self.terms:
             sign = "−" if c < 0 else "+"
-            parts.append(f"{sign} {abs(c):.{digits}g}{' ' + u if u else ''}·{dep}")
+            if not u and abs(abs(c) - 1.0) < 1e-9:  # "+ Joint1.Ia", not "+ 1·Joint1.Ia"
+                parts.append(f"{sign} {dep}")
+            else:
+                parts.append(f"{sign} {abs(c):.{digits}g}{' ' + u if u else ''}·{dep}")
         return " ".join(parts)
 
 

@@ -2,7 +2,7 @@
 
 Files in the output folder:
 - parameters.yaml, parameters.json: every method's parameters (name, unit, value, standard error or
-  "not identifiable"), body physical quantities, solver status/time, held-out scores, and the data
+  "not identifiable"), its base parameters with 95 % intervals, body physical quantities, solver status/time, held-out scores, and the data
   files, column map and preprocessing steps used;
 - <method>.urdf: the URDF with the identified inertials and <dynamics damping friction>;
 - identifiability.txt; report.md; effort_<run>.png (predicted vs measured effort on a held-out
@@ -23,18 +23,12 @@ from dualid.estimators.methods import color as method_color
 from dualid.estimators.methods import method as method_entry
 from dualid.evaluation.validation import Validation
 from dualid.model.joint_terms import JointTermsModel
+from dualid.report.base_parameters import UNCERTAINTY_NOTE, base_section, definitions, method_record
 from dualid.report.figures import cycle_color, new_figure, save_figure
 from dualid.report.io import jsonable, to_json, write_json
 from dualid.report.outdir import write_output
 from dualid.report.urdf import write_urdf
 from dualid.robot.fit import FitOutcome
-
-UNCERTAINTY_NOTE = (
-    "std_error: σ̂·sqrt((H⁺)_kk) of the quadratic estimators (ols, wls, energy), H their normal matrix, "
-    "σ̂² the residual objective per degree of freedom; valid for parameters whose unit vector lies in the "
-    "range of H, otherwise 'not identifiable'. Textbook errors under white residuals, ignoring active "
-    "constraints: optimistic on real data. null: not computed for this method."
-)
 
 
 def _color(label: str, k: int) -> str:
@@ -185,6 +179,7 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str]) -> dict:
             ],
             "bodies": [b.as_dict() for b in r.bodies],
             "validation": None if f.validation is None else f.validation.as_dict(),
+            "base_parameters": method_record(f),
         }
     return jsonable({
         "complete": outcome.complete,  # False when a requested method failed (its entry has "error")
@@ -196,7 +191,9 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str]) -> dict:
                  "samples": outcome.problem.N},
         "identifiability": {"rank": ident.rank, "n_params": ident.n_params,
                             "condition_number": ident.condition_number,
-                            "not_identifiable": list(ident.unidentifiable)},
+                            "not_identifiable": list(ident.unidentifiable),
+                            "base_parameters": definitions(ident.base) if ident.base is not None else [],
+                            "no_effect": [P.names[j] for j in (ident.base.no_effect if ident.base else ())]},
         "prior": {"source": outcome.config.prior.source, "gamma": outcome.config.prior.gamma,
                   "per_equation": outcome.config.prior.per_equation, "theta0": outcome.prior},
         "uncertainty_note": UNCERTAINTY_NOTE,
@@ -314,6 +311,7 @@ def _report_md(outcome: FitOutcome, validations, urdfs, figures) -> str:
     if outcome.prior:
         weight = f"γ = {cfg.prior.gamma} per equation (γ·N·n)" if cfg.prior.per_equation else f"γ = {cfg.prior.gamma}"
         lines += ["", f"Prior of logdet/pullback ({weight}): {outcome.prior}."]
+    lines += ["", *base_section(outcome)]
     lines += ["", "## Parameters", "", "(n.i.: not identifiable on its own; ± standard error, see parameters.yaml)", "",
               _param_table(outcome), ""]
     return "\n".join(lines)
