@@ -10,10 +10,12 @@ Cases:
 - white: Gaussian noise, σ_j = NOISE × rms(τ_j), independent samples; sandwich with one sample per block,
   for ols/wls also the textbook form (kind="model"), and for ols the intervals projected on the active
   constraints (constraints="project", conditional; the default ignores them);
+- white, ols_unconstrained: the sandwich without constraints (is it calibrated, rms z ≈ 1?);
+- white, bootstrap (--bootstrap R): block bootstrap of ols over 50 contiguous segments, percentile intervals;
 - ar1: the same noise filtered by an AR(1) with ρ = 0.9 (correlated over ~10–20 samples, as after low-pass
   filtering); sandwich with one sample per block (expected to under-cover) and with 50 contiguous blocks.
 
-    python benchmarks/coverage.py                      # 100 repetitions, writes benchmarks/coverage/results.{md,json}
+    python benchmarks/coverage.py --bootstrap 50       # 100 repetitions, writes benchmarks/coverage/results.{md,json}
     python benchmarks/coverage.py --reps 10 --out /tmp/cov   # smoke run
 
 Coverage per method: the fraction of (repetition, base parameter) pairs whose interval holds the truth, its
@@ -45,7 +47,7 @@ sys.path.insert(0, str(ROOT / "src"))
 from dualid.bench import arms  # noqa: E402
 from dualid.data.trajectory import Trajectory  # noqa: E402
 from dualid.estimators.methods import make_estimator  # noqa: E402
-from dualid.estimators.uncertainty import base_uncertainty  # noqa: E402
+from dualid.estimators.uncertainty import base_uncertainty, bootstrap  # noqa: E402
 from dualid.problem import build_problem  # noqa: E402
 
 NOISE = 0.05
@@ -55,7 +57,8 @@ AR_BLOCKS = 50
 ROWS = (
     ("white", "ols", "sandwich", None), ("white", "ols", "model", None),
     ("white", "wls", "sandwich", None), ("white", "wls", "model", None),
-    ("white", "ols", "sandwich, projected", None),
+    ("white", "ols", "sandwich, projected", None), ("white", "ols_unconstrained", "sandwich", None),
+    ("white", "ols", "bootstrap", AR_BLOCKS),
     ("white", "dm", "sandwich", None), ("white", "dm-paper", "sandwich", None),
     ("ar1", "ols", "sandwich", None), ("ar1", "ols", "sandwich", AR_BLOCKS),
     ("ar1", "dm", "sandwich", None), ("ar1", "dm", "sandwich", AR_BLOCKS),
@@ -82,13 +85,13 @@ def noise(rng: np.random.Generator, sigma: np.ndarray, N: int, case: str) -> np.
     return e * sigma
 
 
-def run(reps: int, seed: int, seconds: float, methods: tuple[str, ...]) -> dict:
+def run(reps: int, seed: int, seconds: float, methods: tuple[str, ...], resamples: int = 0) -> dict:
     arm, problem = setup(seed, seconds)
     base = problem.identifiability().base
     beta_true = base.values(arm.theta_true)
     tau0 = problem.tau
     sigma = NOISE * np.sqrt(np.mean(tau0**2, axis=0))
-    rows = [r for r in ROWS if r[1] in methods]
+    rows = [r for r in ROWS if r[1] in methods and (resamples or r[2] != "bootstrap")]
     stats = {r: {"hits": np.zeros(base.rank), "z2": [], "ok": 0, "failures": 0, "errors": [], "time": 0.0} for r in rows}
     rng = np.random.default_rng(seed + 1000)
     for rep in range(reps):
@@ -106,8 +109,11 @@ def run(reps: int, seed: int, seconds: float, methods: tuple[str, ...]) -> dict:
                     fits[key] = (prob, est, est.fit(prob))
                 prob, est, result = fits[key]
                 projected = kind.endswith("projected")
-                u = base_uncertainty(prob, result, est, base, blocks=blocks, kind=kind.split(",")[0],
-                                     constraints="project" if projected else "ignore")
+                if kind == "bootstrap":
+                    u = bootstrap(prob, result, est, base, blocks=blocks, resamples=resamples, seed=rep)
+                else:
+                    u = base_uncertainty(prob, result, est, base, blocks=blocks, kind=kind.split(",")[0],
+                                         constraints="project" if projected else "ignore")
             except Exception as exc:  # a benchmark counts failures of any kind
                 st["failures"] += 1
                 st["errors"].append(f"rep {rep}: {type(exc).__name__}: {str(exc)[:200]}")
@@ -156,7 +162,7 @@ def to_markdown(res: dict) -> str:
     ]
     for r in res["rows"]:
         lines.append(f"| {r['case']} | {r['method']} | {r['kind']} | {r['blocks']} | **{r['coverage']:.3f}** | "
-                     f"{r['coverage_min']:.2f}–{r['coverage_max']:.2f} | {r['rms_z']:.2f} ({r['rms_z_max_param']:.2f}) | "
+                     f"{r['coverage_min']:.2f}–{r['coverage_max']:.2f} | {r['rms_z']:.3g} ({r['rms_z_max_param']:.3g}) | "
                      f"{r['fits']} | {r['failures']} | {r['time_s']:.0f} |")
     errors = [(r["method"], e) for r in res["rows"] for e in r["errors"]]
     if errors:
@@ -170,17 +176,19 @@ def main(argv=None) -> int:
     ap.add_argument("--reps", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--seconds", type=float, default=5.0, help="length of the excitation [s] at 200 Hz")
-    ap.add_argument("--methods", default="ols,wls,dm,dm-paper")
+    ap.add_argument("--methods", default="ols,ols_unconstrained,wls,dm,dm-paper")
+    ap.add_argument("--bootstrap", type=int, default=0, metavar="R",
+                    help="also a block bootstrap of ols with R resamples of 50 segments (refits: costly)")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "coverage"))
     args = ap.parse_args(argv)
     t0 = time.time()
-    res = run(args.reps, args.seed, args.seconds, tuple(args.methods.split(",")))
+    res = run(args.reps, args.seed, args.seconds, tuple(args.methods.split(",")), args.bootstrap)
     try:
         commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
                                 text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         commit = "unknown"
-    res.update(command="python benchmarks/coverage.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+    res.update(command=" ".join(["python benchmarks/coverage.py", *(argv if argv is not None else sys.argv[1:])]),
                commit=commit, machine=f"{platform.machine()}, {os.cpu_count()} cores", wall_s=time.time() - t0)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
