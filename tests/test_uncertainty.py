@@ -173,3 +173,32 @@ def test_error_messages():
         base_uncertainty(problem, type(result)("x", result.theta, result.parameters, 0.0, "", "", 0.0), bfp)
     with pytest.raises(ConfigError, match=r"^resamples: expected an integer ≥ 10, got 5$"):
         bootstrap(problem, result, est, resamples=5)
+
+
+def test_fit_config_uncertainty_section():
+    from dualid.robot.config import FitConfig
+    from dualid.robot.uncertainty import UncertaintyConfig, method_uncertainty
+
+    base = {"model": {"urdf": "robot.urdf"}, "train": ["a.csv"]}
+    assert FitConfig.from_dict(base).uncertainty == UncertaintyConfig()
+    cfg = FitConfig.from_dict({**base, "uncertainty": {"method": "bootstrap", "blocks": "runs", "resamples": 50}})
+    assert cfg.uncertainty == UncertaintyConfig("bootstrap", "runs", None, 50, 0)
+    assert cfg.as_dict()["uncertainty"]["method"] == "bootstrap"
+    with pytest.raises(ConfigError, match=r"^uncertainty\.method: expected 'sandwich', 'bootstrap' or 'none', "
+                                          r"got 'jackknife'$"):
+        FitConfig.from_dict({**base, "uncertainty": {"method": "jackknife"}})
+    with pytest.raises(ConfigError, match=r"^uncertainty: unknown keys \['level'\]; known keys: "):
+        FitConfig.from_dict({**base, "uncertainty": {"level": 0.9}})
+    with pytest.raises(ConfigError, match=r"^uncertainty\.resamples: expected an integer ≥ 10, got 3$"):
+        UncertaintyConfig(resamples=3)
+    problem, *_ = linear_problem(N=60)
+    est = OLS(constrained=False)
+    result = est.fit(problem)
+    base_params = problem.identifiability().base
+    unc, why = method_uncertainty(problem, result, est, base_params, [30, 30], UncertaintyConfig(method="none"))
+    assert unc is None and why == "not requested (uncertainty.method: none)"
+    unc, why = method_uncertainty(problem, result, est, base_params, [30, 30], UncertaintyConfig(blocks="runs"))
+    assert unc is None and why.startswith("ConfigError: uncertainty: 2 blocks for 3 base parameters")
+    unc, why = method_uncertainty(problem, result, est, base_params, [30, 30],
+                                  UncertaintyConfig("bootstrap", "segments", 5, 20, 1))
+    assert why == "" and unc.kind == "bootstrap" and unc.blocks == 10 and unc.resamples == 20

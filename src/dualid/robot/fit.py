@@ -325,7 +325,8 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
             ols_theta = result.theta
         result = _guarded(result, problem, rigid, model)
         _say(progress, f"uncertainty of {method}'s base parameters")
-        base_unc, base_error = method_uncertainty(problem, result, est, ident.base, [len(t.t) for t in train])
+        base_unc, base_error = method_uncertainty(problem, result, est, ident.base, [len(t.t) for t in train],
+                                                  config.uncertainty)
         validation = None
         if test:
             _say(progress, f"validating {method} on {len(test)} held-out runs")
