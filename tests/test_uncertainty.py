@@ -202,3 +202,15 @@ def test_fit_config_uncertainty_section():
     unc, why = method_uncertainty(problem, result, est, base_params, [30, 30],
                                   UncertaintyConfig("bootstrap", "segments", 5, 20, 1))
     assert why == "" and unc.kind == "bootstrap" and unc.blocks == 10 and unc.resamples == 20
+
+
+def test_a_strong_prior_shrinks_the_intervals():
+    # the estimating equation is Σ_b g_b + γ∇R = 0: B is the spread of the g_b around their mean, not around
+    # zero (the mean is the prior's pull); uncentred, a strong prior would inflate B by (γ∇R)(γ∇R)ᵀ/K
+    problem, theta_true = drag_problem(np.random.default_rng(4), N=200, noise=0.1)
+    wls = WLS()
+    u_wls = base_uncertainty(problem, wls.fit(problem), wls)
+    for gamma, most in ((1e-3, 1.5), (1e5, 0.1)):  # data Hessian ≈ 2e6, γ·N·n·∇²R ≈ 6e7 at 1e5
+        est = RegularizedWLS(theta0=theta_true * 1.5, gamma=gamma)
+        u = base_uncertainty(problem, est.fit(problem), est)
+        assert np.all(u.std_error < most * u_wls.std_error), (gamma, u.std_error / u_wls.std_error)

@@ -2,9 +2,10 @@
 
 Every estimator minimises f(θ) = Σ_i f_i(θ) (+ γ R(θ) for logdet/pullback). At θ̂ the sandwich
 
-    cov(β̂) ≈ H⁻¹ B H⁻¹ · K/(K − r),     B = Σ_b g_b g_bᵀ,   g_b = Σ_{i ∈ block b} ∇f_i(θ̂)
+    cov(β̂) ≈ H⁻¹ B H⁻¹ · K/(K − r),     B = Σ_b (g_b − ḡ)(g_b − ḡ)ᵀ,   g_b = Σ_{i ∈ block b} ∇f_i(θ̂)
 
-with H the objective's Hessian, is taken in the coordinates x = (β, u): θ = θ̂ + E β + Z u with E a right
+with H the objective's Hessian and ḡ the mean block gradient (zero at an interior unregularised optimum;
+−γ∇R/K with a prior, the multipliers' share with active constraints), is taken in the coordinates x = (β, u): θ = θ̂ + E β + Z u with E a right
 inverse of C and Z a basis of C's null space (both in column-scaled units). When H has no curvature
 along u (the data terms of every method: u does not change the predictions) the u-coordinates drop out;
 a regulariser curves u, and then H⁻¹'s β-block is the inverse of the Schur complement (the prior's
@@ -15,7 +16,9 @@ sample per block is the heteroscedasticity-robust form. The Hessian and per-samp
   ∇f_i = 2 Y_iᵀW_i r_i, H = 2 Σ Y_iᵀW_i Y_i, with the weight the estimator used (recorded in its result);
 - dm-paper: f_i = r_iᵀM_i(θ)⁻¹r_i, ∇f_i = 2 Y_iᵀw_i − [w_iᵀM_ik w_i]_k (w_i = M_i⁻¹r_i), H the exact
   Hessian 2 Σ D_iᵀM_i⁻¹D_i, D_i = Y_i − [M_ik w_i]_k (estimators.newton.objective);
-- logdet: + γ tr(C⁻¹V_k C⁻¹V_l) per block; pullback: + 2γ g_b.
+- logdet: + γ tr(C⁻¹V_k C⁻¹V_l) per block; pullback: + 2γ g_b; the data term's per-sample gradients are
+  taken at its own (unregularised) minimiser, where the residuals are the noise: at θ̂ they would also
+  carry the prior's systematic pull, which is not sampling variation for a fixed design.
 
 Active constraints: a block whose constraint matrix C_b(θ̂) has eigenvalues ≤ ACTIVE_TOL·λ_max (for
 scalar blocks, nonnegative and diagonal drag, λ_max is at least ‖τ‖/‖A_k‖, the value that alone would explain
@@ -187,7 +190,20 @@ def derivatives(problem: IdentificationProblem, result: IdentificationResult, es
             np.add.at(G, labels[rows], g)
         return d.hess, G, d.f
     chart, W, L = _weights(problem, result, est)
-    H = np.zeros((problem.p, problem.p))
+    H, f = _quadratic_pass(chart, W, L, theta, labels, G, chunk)
+    if isinstance(est, RegularizedWLS):
+        # the per-sample gradients at the data term's own minimiser (one Newton step on the quadratic): there the
+        # residuals are the noise, whereas at θ̂ they also carry the prior's systematic pull (fixed design)
+        theta_data = theta - pinv_psd(H)[0] @ G.sum(axis=0)
+        G[:] = 0.0
+        _quadratic_pass(chart, W, L, theta_data, labels, G, chunk)
+        H = H + float(result.info["gamma"]) * _regularizer_hessian(est, problem, theta)
+    return 0.5 * (H + H.T), G, f
+
+
+def _quadratic_pass(chart, W, L, theta, labels, G, chunk) -> tuple[np.ndarray, float]:
+    """(H = 2 Σ Y_iᵀW_iY_i, f = Σ r_iᵀW_i r_i) at θ; the per-sample gradients 2 Y_iᵀW_i r_i added to G by block."""
+    H = np.zeros((chart.p, chart.p))
     f = 0.0
     for start in range(0, chart.N, chunk):
         rows = slice(start, start + chunk)
@@ -209,9 +225,7 @@ def derivatives(problem: IdentificationProblem, result: IdentificationResult, es
             g = 2.0 * np.einsum("nap,na->np", Y, Wr)
             f += float(np.sum(r * Wr))
         np.add.at(G, labels[rows], g)
-    if isinstance(est, RegularizedWLS):
-        H = H + float(result.info["gamma"]) * _regularizer_hessian(est, problem, theta)
-    return 0.5 * (H + H.T), G, f
+    return H, f
 
 
 def _regularizer_hessian(est: RegularizedWLS, problem: IdentificationProblem, theta: np.ndarray) -> np.ndarray:
@@ -290,6 +304,8 @@ def sandwich(H: np.ndarray, G: np.ndarray, base: BaseParameters, scale: np.ndarr
         cov_y = Hy_pinv
     else:
         Gy = Gx @ Q
+        Gy = Gy - Gy.mean(axis=0)  # the estimating equation's fluctuation: Σ_b g_b = −γ∇R (prior) or the
+        # constraints' multipliers at θ̂, not zero, and not noise
         cov_y = Hy_pinv @ (Gy.T @ Gy) @ Hy_pinv
     cov = (Q @ cov_y @ Q.T)[:r, :r]
     return 0.5 * (cov + cov.T) / np.outer(s_ind, s_ind)
