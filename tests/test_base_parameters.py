@@ -48,7 +48,7 @@ def test_planar_arm_has_the_classic_six_base_parameters(vertical):
     # the pivoting calls dependent (d), every other one k absorbs it with c_kd = −z_k / z_d
     z = {"j1.Izz": L1**2, "j1.mc_x": L1, "j2.m": -1.0}
     (d,) = [names[j] for j in base.dependent]
-    assert d in z
+    assert d == "j2.m"  # the classic choice: the mass is lumped onto the inertia and first moment (lead_preference)
     for k in set(z) - {d}:
         row = base.names.index(k)
         assert base.C[row, names.index(d)] == pytest.approx(-z[k] / z[d], rel=1e-10)
@@ -66,6 +66,7 @@ def test_armature_regroups_with_the_axial_inertia():
     assert base.rank == 9
     w = {"j1.Izz": 1.0, "j1.Ia": 1.0, "j2.m": L1**2}
     (lead,) = set(w) & set(base.names)
+    assert lead == "j1.Izz"
     for d in set(w) - {lead}:
         assert base.C[base.names.index(lead), names.index(d)] == pytest.approx(w[d] / w[lead], rel=1e-10)
     assert {"j2.Ia", "j2.Izz", "j2.mc_x", "j2.mc_y", "j1.b", "j2.b", "j1.fc", "j2.fc"} <= set(base.names)

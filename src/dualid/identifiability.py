@@ -2,7 +2,8 @@
 
 With A the stacked regressor (N·n, p) and s its column norms, the column-scaled A_s = A / s is
 factored by a QR with column pivoting, A_s P = Q [R₁₁ R₁₂], whose first r pivots (r the rank under
-dualid.linalg's rule) are independent columns. Every other column is a combination of them,
+dualid.linalg's rule) are independent columns (the columns are weighted by ``lead_preference`` first, so
+among dependent columns an inertia or a first moment leads; s below includes that weight). Every other column is a combination of them,
 A_s,dep = A_s,ind K with K = R₁₁⁻¹ R₁₂, so
 
     A θ = A_ind β,     β_k = θ_k + Σ_j c_kj θ_j,   c_kj = K_kj s_j / s_k   (unit: unit(θ_k)/unit(θ_j))
@@ -163,6 +164,16 @@ class BaseParameters:
         return "\n".join(lines)
 
 
+def lead_preference(name: str) -> float:
+    """Column weight in the pivoting: 4 for inertias, 2 for first moments, 1 for masses and the rest, so that
+    among dependent columns the lead is, as in the classic regrouping (Khalil & Gautier), an inertia or a first
+    moment, which absorbs the masses and rotor inertias (armature) that act like it."""
+    last = name.rsplit(".", 1)[-1]
+    if last in ("Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz"):
+        return 4.0
+    return 2.0 if last.startswith("mc_") else 1.0
+
+
 def base_parameters(A: np.ndarray, parameters: ParameterSpace, rank: int | None = None) -> BaseParameters:
     """The regrouping of ``parameters`` by the stacked regressor A (N·n, p) (module docstring); ``rank``:
     the rank under dualid.linalg's rule when the caller has it already."""
@@ -173,6 +184,7 @@ def base_parameters(A: np.ndarray, parameters: ParameterSpace, rank: int | None 
     s = np.linalg.norm(A, axis=0)
     zero = s <= 1e-300
     s[zero] = 1.0
+    s = s / np.array([lead_preference(name) for name in parameters.names])
     As = A / s
     if As.shape[0] > 4 * p:  # the column geometry of A is that of R (AᵀA = RᵀR): factor the small R
         As = np.linalg.qr(As, mode="r")
