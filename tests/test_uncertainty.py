@@ -214,3 +214,29 @@ def test_a_strong_prior_shrinks_the_intervals():
         est = RegularizedWLS(theta0=theta_true * 1.5, gamma=gamma)
         u = base_uncertainty(problem, est.fit(problem), est)
         assert np.all(u.std_error < most * u_wls.std_error), (gamma, u.std_error / u_wls.std_error)
+
+
+def test_rank_deficient_problem_reduces_to_its_base_regressor():
+    # a planar 2R arm (rank 6 of 20): the textbook covariance of β equals σ̂²(Y_bᵀY_b)⁻¹ of the base regressor
+    # Y_b = Y[:, independent] (closed form), and the dm-paper sandwich is finite, symmetric and positive
+    from dualid import RigidBodyModel, build_problem
+    from dualid.data.trajectory import Trajectory
+    from tests.test_base_parameters import planar_2r
+
+    rng = np.random.default_rng(5)
+    model = RigidBodyModel(planar_2r(), gravity=(0.0, -9.81, 0.0))
+    T = 400
+    q, v, a = rng.uniform(-3, 3, (T, 2)), rng.normal(size=(T, 2)), rng.normal(size=(T, 2))
+    tau = model.regressor(q, v, a) @ model.nominal + 0.05 * rng.normal(size=(T, 2))
+    problem = build_problem(model, Trajectory(t=np.arange(T) * 0.01, q=q, v=v, a=a, tau=tau,
+                                              coordinates=model.coordinates))
+    base = problem.identifiability().base
+    est = OLS(constrained=False, allow_unidentifiable=True)
+    result = est.fit(problem)
+    u = base_uncertainty(problem, result, est, base, kind="model")
+    Yb = base.regressor(problem.Y).reshape(-1, base.rank)
+    e = problem.residual(result.theta).reshape(-1)
+    np.testing.assert_allclose(u.covariance, float(e @ e) / (e.size - 6) * np.linalg.inv(Yb.T @ Yb), rtol=1e-7)
+    dm = DualMetric(allow_unidentifiable=True)
+    c = base_uncertainty(problem, dm.fit(problem), dm, base).covariance
+    assert np.all(np.isfinite(c)) and np.allclose(c, c.T) and np.linalg.eigvalsh(c)[0] > 0

@@ -56,7 +56,8 @@ from dualid.model.consistency import prior_blocks, pullback_metric
 from dualid.problem import IdentificationProblem
 
 LEVEL = 0.95
-ACTIVE_TOL = 1e-6  # constraint eigenvalue / block scale at or below which a constraint counts as active
+ACTIVE_TOL = 1e-6
+FLAT_RTOL = 1e-11  # eigenvalue of H along the null space, relative to H's largest, below which it is roundoff  # constraint eigenvalue / block scale at or below which a constraint counts as active
 KINDS = ("sandwich", "model", "bootstrap")
 
 
@@ -289,16 +290,18 @@ def sandwich(H: np.ndarray, G: np.ndarray, base: BaseParameters, scale: np.ndarr
     Hx = T.T @ H @ T
     Gx = None if G is None else G @ T
     Ax = np.zeros((0, p)) if A is None or not len(A) else A @ T
-    flat_u = np.linalg.norm(Hx[r:, :]) <= 1e-12 * max(np.linalg.norm(Hx[:r, :r]), 1e-300)
-    if flat_u:  # no curvature along u: u only absorbs the constraints' u-components
-        Ab, Au = Ax[:, :r], Ax[:, r:]
-        if Au.size:
-            Uu = scipy.linalg.orth(Au)
-            Ab = Ab - Uu @ (Uu.T @ Ab)
-        Q = scipy.linalg.null_space(Ab, rcond=1e-9) if len(Ab) and np.abs(Ab).max() > 0 else np.eye(r)
-        Q = np.vstack([Q, np.zeros((p - r, Q.shape[1]))])
-    else:
-        Q = scipy.linalg.null_space(Ax, rcond=1e-9) if len(Ax) else np.eye(p)
+    # split u into curved directions (a prior, or a metric that sees them) and flat ones (the data's null
+    # space: eigenvalues of H_uu at roundoff level relative to H); flat ones only absorb the constraints
+    w, U = np.linalg.eigh(0.5 * (Hx[r:, r:] + Hx[r:, r:].T)) if r < p else (np.zeros(0), np.zeros((0, 0)))
+    curved = w > FLAT_RTOL * max(float(np.abs(np.linalg.eigvalsh(0.5 * (Hx + Hx.T))).max()), 1e-300)
+    R = np.zeros((p, r + int(curved.sum())))  # (β, u_curved) → x
+    R[:r, :r] = np.eye(r)
+    R[r:, r:] = U[:, curved]
+    Ac, Af = Ax @ R, Ax[:, r:] @ U[:, ~curved]
+    if Af.size and np.abs(Af).max() > 0:  # a constraint a flat direction can satisfy restricts nothing
+        Uf = scipy.linalg.orth(Af)
+        Ac = Ac - Uf @ (Uf.T @ Ac)
+    Q = R @ (scipy.linalg.null_space(Ac, rcond=1e-9) if len(Ac) and np.abs(Ac).max() > 0 else np.eye(R.shape[1]))
     Hy_pinv, _ = pinv_psd(Q.T @ Hx @ Q)
     if Gx is None:
         cov_y = Hy_pinv
