@@ -5,11 +5,11 @@ Every estimator minimises f(θ) = Σ_i f_i(θ) (+ γ R(θ) for logdet/pullback).
     cov(β̂) ≈ H⁻¹ B H⁻¹ · K/(K − r),     B = Σ_b (g_b − ḡ)(g_b − ḡ)ᵀ,   g_b = Σ_{i ∈ block b} ∇f_i(θ̂)
 
 with H the objective's Hessian and ḡ the mean block gradient (zero at an interior unregularised optimum;
-−γ∇R/K with a prior, the multipliers' share with active constraints), is taken in the coordinates x = (β, u): θ = θ̂ + E β + Z u with E a right
-inverse of C and Z a basis of C's null space (both in column-scaled units). When H has no curvature
-along u (the data terms of every method: u does not change the predictions) the u-coordinates drop out;
-a regulariser curves u, and then H⁻¹'s β-block is the inverse of the Schur complement (the prior's
-profile). Blocks (contiguous segments or runs) let the residuals be correlated within a block; one
+−γ∇R/K with a prior, the multipliers' share with active constraints), is taken in the coordinates
+x = (β, u): θ = θ̂ + E β + Z u with E a right inverse of C and Z a basis of C's null space (both in
+column-scaled units). Directions of u without curvature (eigenvalues of H_uu below FLAT_RTOL × H's
+largest: the data terms do not see u) drop out; a regulariser curves u, and then H⁻¹'s β-block is the
+inverse of the Schur complement (the prior's profile). Blocks (contiguous segments or runs) let the residuals be correlated within a block; one
 sample per block is the heteroscedasticity-robust form. The Hessian and per-sample gradients are:
 
 - quadratic (ols, wls, energy, dm = FeasibleGLS, logdet/pullback data term): f_i = r_iᵀW_i r_i,
@@ -56,8 +56,8 @@ from dualid.model.consistency import prior_blocks, pullback_metric
 from dualid.problem import IdentificationProblem
 
 LEVEL = 0.95
-ACTIVE_TOL = 1e-6
-FLAT_RTOL = 1e-11  # eigenvalue of H along the null space, relative to H's largest, below which it is roundoff  # constraint eigenvalue / block scale at or below which a constraint counts as active
+ACTIVE_TOL = 1e-6  # constraint eigenvalue / block scale at or below which a constraint counts as active
+FLAT_RTOL = 1e-11  # eigenvalue of H along the null space, relative to H's largest, below which it is roundoff
 KINDS = ("sandwich", "model", "bootstrap")
 
 
