@@ -111,3 +111,5 @@ def test_identifiability_report_is_complete():
     text = ident.describe()
     assert "6 base parameters" in text and text.count("  β") == 6 and "more" not in text
     assert "… and 3 more" in ident.describe(max_items=3)
+    assert ident.describe(max_items=0).splitlines()[1] == (
+        "6 base parameters, 13 parameters with no effect (listed in full by describe(); in a fit: identifiability.txt)")

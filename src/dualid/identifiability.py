@@ -238,7 +238,10 @@ class Identifiability:
             f"rank {self.rank} of {self.n_params}: {self.n_params - self.rank} unidentifiable "
             f"direction(s); condition number of the identifiable part {self.condition_number:.3g}"
         ]
-        if self.base is not None:
+        if self.base is not None and max_items == 0:  # the summary alone
+            lines.append(f"{self.base.rank} base parameters, {len(self.base.no_effect)} parameters with no effect "
+                         "(listed in full by describe(); in a fit: identifiability.txt)")
+        elif self.base is not None:
             lines.append(f"{self.base.rank} base parameters (QR with column pivoting; β = the named parameter + "
                          "the dependent ones it absorbs):")
             lines.append(self.base.describe(max_items=max_items))
