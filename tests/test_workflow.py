@@ -108,6 +108,21 @@ def test_outputs_and_urdf_round_trip(outcome, written):
     )
 
 
+def test_base_parameters_and_intervals_are_written(outcome, written):
+    record = yaml.safe_load((written / "parameters.yaml").read_text())
+    definitions = record["identifiability"]["base_parameters"]
+    assert len(definitions) == outcome.identifiability.rank == 11
+    assert {"name": "Joint1.Ixx", "unit": "kg m²", "definition": "Joint1.Ixx + 0.09 m²·Joint2.m + Joint1.Ia"} in definitions
+    for m, f in outcome.fits.items():
+        values = record["methods"][m]["base_parameters"]["values"]
+        assert [v["name"] for v in values] == [d["name"] for d in definitions]
+        np.testing.assert_allclose([v["value"] for v in values], f.base.values)
+        assert all(v["lower"] < v["value"] < v["upper"] for v in values)
+    report = (written / "report.md").read_text()
+    assert "## Base parameters" in report and "`Joint1.Ixx + 0.09 m²·Joint2.m + Joint1.Ia`" in report
+    assert "more" not in (written / "identifiability.txt").read_text()  # complete, never truncated
+
+
 def test_dfki_reference_matches_the_lab_closed_form():
     """The lab's M(q), C, G and friction (plant.py) against our regressor with the converted θ."""
     rigid = RigidBodyModel.from_urdf(URDF)
