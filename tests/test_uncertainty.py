@@ -169,7 +169,10 @@ def test_error_messages():
     with pytest.raises(ConfigError, match=r"^kind: expected 'sandwich' or 'model' \(bootstrap: "):
         base_uncertainty(problem, result, est, kind="jackknife")
     bfp = BoundedFixedPoint()
-    with pytest.raises(ConfigError, match=r"^uncertainty: no sandwich for estimator BoundedFixedPoint \(method 'x'\); "):
+    with pytest.raises(ConfigError, match=r"^uncertainty: no sandwich for estimator BoundedFixedPoint \(method 'x'\); "
+                                          r"supported: OLS, WLS, EnergyLS, RegularizedWLS, FeasibleGLS \(dm\), DualMetric "
+                                          r"\(dm-paper\); use the block bootstrap \(dualid\.bootstrap; in a fit config: "
+                                          r"uncertainty: \{method: bootstrap\}\)$"):
         base_uncertainty(problem, type(result)("x", result.theta, result.parameters, 0.0, "", "", 0.0), bfp)
     with pytest.raises(ConfigError, match=r"^resamples: expected an integer ≥ 10, got 5$"):
         bootstrap(problem, result, est, resamples=5)

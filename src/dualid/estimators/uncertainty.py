@@ -167,7 +167,7 @@ def _weights(problem: IdentificationProblem, result: IdentificationResult, est):
         return sensor, None, np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 1, 2)))
     raise ConfigError(f"uncertainty: no sandwich for estimator {type(est).__name__} (method {result.method!r}); "
                            "supported: OLS, WLS, EnergyLS, RegularizedWLS, FeasibleGLS (dm), DualMetric (dm-paper); "
-                           "use kind='bootstrap'")
+                           "use the block bootstrap (dualid.bootstrap; in a fit config: uncertainty: {method: bootstrap})")
 
 
 def derivatives(problem: IdentificationProblem, result: IdentificationResult, estimator,
