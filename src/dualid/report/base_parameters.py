@@ -10,7 +10,7 @@ UNCERTAINTY_NOTE = (
     "method's own objective (H its Hessian in base coordinates, B the outer products of its gradients summed "
     "over segments of the training runs), Student-t with (segments − base parameters) degrees of freedom. "
     "Constraints active at the estimate are listed, not used: the intervals are those of the unconstrained "
-    "local fit. They cover sampling noise only: model error and a biased objective (dm-paper) are not in them. "
+    "local fit, so an interval may reach past a bound (below 0 for a friction fitted at 0). They cover sampling noise only: model error and a biased objective (dm-paper) are not in them. "
     "std_error of a parameter: its base parameter's, when it is a base parameter on its own; otherwise "
     "'not identifiable'; null: no uncertainty (see the method's base_parameters.error)."
 )
