@@ -92,7 +92,8 @@ def run(reps: int, seed: int, seconds: float, methods: tuple[str, ...], resample
     tau0 = problem.tau
     sigma = NOISE * np.sqrt(np.mean(tau0**2, axis=0))
     rows = [r for r in ROWS if r[1] in methods and (resamples or r[2] != "bootstrap")]
-    stats = {r: {"hits": np.zeros(base.rank), "z2": [], "ok": 0, "failures": 0, "errors": [], "time": 0.0} for r in rows}
+    stats = {r: {"hits": np.zeros(base.rank), "z2": [], "ok": 0, "failures": 0, "errors": [], "time": 0.0}
+             for r in rows}
     rng = np.random.default_rng(seed + 1000)
     for rep in range(reps):
         draws = {case: noise(rng, sigma, problem.N, case) for case in ("white", "ar1")}

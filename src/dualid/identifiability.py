@@ -2,9 +2,9 @@
 
 With A the stacked regressor (N·n, p) and s its column norms, the column-scaled A_s = A / s is
 factored by a QR with column pivoting, A_s P = Q [R₁₁ R₁₂], whose first r pivots (r the rank under
-dualid.linalg's rule) are independent columns (the columns are weighted by ``lead_preference`` first, so
-among dependent columns an inertia or a first moment leads; s below includes that weight). Every other column is a combination of them,
-A_s,dep = A_s,ind K with K = R₁₁⁻¹ R₁₂, so
+dualid.linalg's rule) are independent columns (the columns are weighted by ``lead_preference`` first,
+so among dependent columns an inertia or a first moment leads; s below includes that weight). Every
+other column is a combination of them, A_s,dep = A_s,ind K with K = R₁₁⁻¹ R₁₂, so
 
     A θ = A_ind β,     β_k = θ_k + Σ_j c_kj θ_j,   c_kj = K_kj s_j / s_k   (unit: unit(θ_k)/unit(θ_j))
 

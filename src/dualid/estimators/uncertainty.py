@@ -9,8 +9,9 @@ with H the objective's Hessian and ḡ the mean block gradient (zero at an inter
 x = (β, u): θ = θ̂ + E β + Z u with E a right inverse of C and Z a basis of C's null space (both in
 column-scaled units). Directions of u without curvature (eigenvalues of H_uu below FLAT_RTOL × H's
 largest: the data terms do not see u) drop out; a regulariser curves u, and then H⁻¹'s β-block is the
-inverse of the Schur complement (the prior's profile). Blocks (contiguous segments or runs) let the residuals be correlated within a block; one
-sample per block is the heteroscedasticity-robust form. The Hessian and per-sample gradients are:
+inverse of the Schur complement (the prior's profile). Blocks (contiguous segments or runs) let the
+residuals be correlated within a block; one sample per block is the heteroscedasticity-robust form.
+The Hessian and per-sample gradients are:
 
 - quadratic (ols, wls, energy, dm = FeasibleGLS, logdet/pullback data term): f_i = r_iᵀW_i r_i,
   ∇f_i = 2 Y_iᵀW_i r_i, H = 2 Σ Y_iᵀW_i Y_i, with the weight the estimator used (recorded in its result);
@@ -167,7 +168,8 @@ def _weights(problem: IdentificationProblem, result: IdentificationResult, est):
         return sensor, None, np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 1, 2)))
     raise ConfigError(f"uncertainty: no sandwich for estimator {type(est).__name__} (method {result.method!r}); "
                            "supported: OLS, WLS, EnergyLS, RegularizedWLS, FeasibleGLS (dm), DualMetric (dm-paper); "
-                           "use the block bootstrap (dualid.bootstrap; in a fit config: uncertainty: {method: bootstrap})")
+                           "use the block bootstrap (dualid.bootstrap; in a fit config: "
+                           "uncertainty: {method: bootstrap})")
 
 
 def derivatives(problem: IdentificationProblem, result: IdentificationResult, estimator,
@@ -327,7 +329,8 @@ def base_uncertainty(problem: IdentificationProblem, result: IdentificationResul
     docstring). base: the regrouping (default: the problem's own); blocks: see ``block_labels``;
     constraints: "ignore" or "project" on the tangent of the active constraints (module docstring)."""
     if kind not in ("sandwich", "model"):
-        raise ConfigError(f"kind: expected 'sandwich' or 'model' (bootstrap: dualid.estimators.bootstrap), got {kind!r}")
+        raise ConfigError(f"kind: expected 'sandwich' or 'model' (bootstrap: dualid.estimators.bootstrap), "
+                          f"got {kind!r}")
     if constraints not in ("ignore", "project"):
         raise ConfigError(f"constraints: expected 'ignore' or 'project', got {constraints!r}")
     if not 0 < level < 1:
@@ -383,6 +386,6 @@ def bootstrap(problem: IdentificationProblem, result: IdentificationResult, esti
     betas = np.array(betas)
     alpha = 100 * (1 - level) / 2
     lo, hi = np.percentile(betas, [alpha, 100 - alpha], axis=0)
-    return BaseUncertainty(result.method, base, base.values(result.theta), np.cov(betas.T).reshape(base.rank, base.rank),
-                           lo, hi, "bootstrap", len(groups), level, resamples=int(resamples), failures=failures,
-                           note="percentile intervals")
+    cov = np.cov(betas.T).reshape(base.rank, base.rank)
+    return BaseUncertainty(result.method, base, base.values(result.theta), cov, lo, hi, "bootstrap", len(groups),
+                           level, resamples=int(resamples), failures=failures, note="percentile intervals")

@@ -10,7 +10,8 @@ UNCERTAINTY_NOTE = (
     "method's own objective (H its Hessian in base coordinates, B the outer products of its gradients summed "
     "over segments of the training runs), Student-t with (segments − base parameters) degrees of freedom. "
     "Constraints active at the estimate are listed, not used: the intervals are those of the unconstrained "
-    "local fit, so an interval may reach past a bound (below 0 for a friction fitted at 0). They cover sampling noise only: model error and a biased objective (dm-paper) are not in them. "
+    "local fit, so an interval may reach past a bound (below 0 for a friction fitted at 0). They cover "
+    "sampling noise only: model error and a biased objective (dm-paper) are not in them. "
     "std_error of a parameter: its base parameter's, when it is a base parameter on its own; otherwise "
     "'not identifiable'; null: no uncertainty (see the method's base_parameters.error)."
 )
@@ -58,11 +59,12 @@ def base_section(outcome) -> list[str]:
         "|" + " --- |" * len(head),
     ]
     for k, b in enumerate(base.items):
-        lines.append("| " + " | ".join([f"β{k + 1}", b.unit, f"`{b.expression()}`"] + [_cell(f, k) for f in ok.values()])
-                     + " |")
+        cells = [f"β{k + 1}", b.unit, f"`{b.expression()}`"] + [_cell(f, k) for f in ok.values()]
+        lines.append("| " + " | ".join(cells) + " |")
     if base.no_effect:
         names = base.parameters.names
-        lines += ["", f"No effect on these data ({len(base.no_effect)}): " + ", ".join(names[j] for j in base.no_effect)]
+        lines += ["", f"No effect on these data ({len(base.no_effect)}): "
+                  + ", ".join(names[j] for j in base.no_effect)]
     notes = [f"- {m}: {f.base.summary()}" for m, f in ok.items() if f.base is not None]
     notes += [f"- {m}: no intervals ({f.base_error})" for m, f in ok.items() if f.base is None]
     lines += ["", *notes, ""]
