@@ -164,6 +164,9 @@ def _weights(problem: IdentificationProblem, result: IdentificationResult, est):
         sensor = problem.in_sensor_chart()
         C = np.broadcast_to(np.asarray(result.info["sigma"], dtype=float), (sensor.N, sensor.n, sensor.n)).copy()
         if result.info.get("kappa", 0.0) > 0:
+            if result.info.get("theta_ref") is None:
+                raise ConfigError(f"uncertainty: the {result.method!r} result records κ = {result.info['kappa']:.3g} "
+                                  "but not its θ_ref (info['theta_ref']), so its weight cannot be rebuilt")
             C += result.info["kappa"] * sensor.metric.evaluate(np.asarray(result.info["theta_ref"]))
         return sensor, None, np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 1, 2)))
     raise ConfigError(f"uncertainty: no sandwich for estimator {type(est).__name__} (method {result.method!r}); "
