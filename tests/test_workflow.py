@@ -76,7 +76,11 @@ def test_uncertainty_is_reported_only_for_identifiable_parameters(outcome):
         assert se[name] == "not identifiable"
     assert isinstance(se["Joint2.Ixx"], float) and se["Joint2.Ixx"] > 0  # planar: the distal axial inertia is
     assert se["Joint1.Ixx"] == "not identifiable"  # … but Joint1.Ixx is lumped with the joint-1 armature
-    assert all(u is None for u in outcome.fits["dm"].uncertainty)
+    for f in outcome.fits.values():  # every method has intervals on its base parameters now, dm included
+        assert f.base is not None, f.base_error
+        assert np.all(f.base.lower <= f.base.values) and np.all(f.base.values <= f.base.upper)
+        assert np.all(f.base.std_error > 0)
+        assert dict(zip(names, f.uncertainty))["Joint2.Ixx"] > 0
 
 
 def test_outputs_and_urdf_round_trip(outcome, written):
@@ -102,6 +106,21 @@ def test_outputs_and_urdf_round_trip(outcome, written):
     np.testing.assert_allclose(
         model.regressor(q, v, a) @ theta_back, outcome.model.regressor(q, v, a) @ theta, atol=1e-9
     )
+
+
+def test_base_parameters_and_intervals_are_written(outcome, written):
+    record = yaml.safe_load((written / "parameters.yaml").read_text())
+    definitions = record["identifiability"]["base_parameters"]
+    assert len(definitions) == outcome.identifiability.rank == 11
+    assert {"name": "Joint1.Ixx", "unit": "kg m²", "definition": "Joint1.Ixx + 0.09 m²·Joint2.m + Joint1.Ia"} in definitions
+    for m, f in outcome.fits.items():
+        values = record["methods"][m]["base_parameters"]["values"]
+        assert [v["name"] for v in values] == [d["name"] for d in definitions]
+        np.testing.assert_allclose([v["value"] for v in values], f.base.values)
+        assert all(v["lower"] < v["value"] < v["upper"] for v in values)
+    report = (written / "report.md").read_text()
+    assert "## Base parameters" in report and "| Joint1.Ixx + 0.09 m²·Joint2.m + Joint1.Ia |" in report
+    assert "more" not in (written / "identifiability.txt").read_text()  # complete, never truncated
 
 
 def test_dfki_reference_matches_the_lab_closed_form():

@@ -33,9 +33,11 @@ from dualid.estimators import (
     guard_info,
 )
 from dualid.estimators.methods import METHODS, Method, make_estimator
+from dualid.estimators.uncertainty import BaseUncertainty, base_uncertainty, bootstrap
 from dualid.evaluation.prediction import forward_dynamics, predict
 from dualid.evaluation.scores import max_normalized_xcorr, metric_rmse, rmse, score_run
 from dualid.evaluation.validation import Validation, validate
+from dualid.identifiability import BaseParameter, BaseParameters
 from dualid.model import (
     AffineMetric,
     MetricTerm,
@@ -64,10 +66,10 @@ __all__ = [
     "DragModel", "DragSpec",
     "AffineMetric", "MetricTerm", "ParameterBlock", "ParameterSpace",
     # problem
-    "IdentificationProblem", "Identifiability", "build_problem",
+    "IdentificationProblem", "Identifiability", "BaseParameters", "BaseParameter", "build_problem",
     # estimators
     "OLS", "WLS", "EnergyLS", "RegularizedWLS", "DualMetric", "FeasibleGLS", "Guarded", "guard_info",
-    "IdentificationResult",
+    "IdentificationResult", "BaseUncertainty", "base_uncertainty", "bootstrap",
     "METHODS", "Method", "make_estimator",
     # evaluation
     "predict", "forward_dynamics", "validate", "Validation", "max_normalized_xcorr", "metric_rmse", "rmse",

@@ -14,7 +14,7 @@ import numpy as np
 
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError
-from dualid.linalg import rank_from_singular_values
+from dualid.identifiability import Identifiability, identifiability
 from dualid.model.base import Kind, Model
 from dualid.model.metric import AffineMetric
 from dualid.model.parameters import ParameterSpace
@@ -30,38 +30,6 @@ def _frozen(a, name: str, shape: tuple) -> np.ndarray:
         raise DataError(f"{name}: {int(bad.sum())} non-finite values (NaN or inf), first at index {where}")
     a.setflags(write=False)
     return a
-
-
-@dataclass(frozen=True)
-class Identifiability:
-    """What the stacked regressor determines: rank, conditioning and the unidentifiable directions."""
-
-    rank: int
-    n_params: int
-    condition_number: float  # σ_max / σ_min over the identifiable directions (column-scaled)
-    singular_values: np.ndarray  # of the column-scaled stacked regressor
-    null_space: np.ndarray  # (p, p − rank) directions of θ that do not change Yθ
-    unidentifiable: tuple[str, ...]  # parameters that have a component in the null space
-    names: tuple[str, ...]
-
-    @property
-    def full_rank(self) -> bool:
-        return self.rank == self.n_params
-
-    def describe(self, max_items: int = 6) -> str:
-        """A readable account of the null space: its dimension and the main combinations."""
-        if self.full_rank:
-            return f"all {self.n_params} parameters are identifiable (condition number {self.condition_number:.3g})"
-        lines = [
-            f"rank {self.rank} of {self.n_params}: {self.n_params - self.rank} unidentifiable "
-            f"direction(s); condition number of the identifiable part {self.condition_number:.3g}"
-        ]
-        for j in range(min(self.null_space.shape[1], max_items)):
-            z = self.null_space[:, j]
-            order = np.argsort(-np.abs(z))[:4]
-            combo = " ".join(f"{z[k]:+.2f}·{self.names[k]}" for k in order if abs(z[k]) > 1e-3)
-            lines.append(f"  null direction {j + 1}: {combo}")
-        return "\n".join(lines)
 
 
 @dataclass(frozen=True, eq=False)
@@ -140,34 +108,8 @@ class IdentificationProblem:
         return float(np.sum(z * z))
 
     def identifiability(self) -> Identifiability:
-        """Rank and null space of the stacked regressor (columns scaled to unit norm first; the rank
-        rule is dualid.linalg's)."""
-        A = self.Y.reshape(-1, self.p)
-        scale = np.linalg.norm(A, axis=0)
-        scale[scale == 0] = 1.0
-        # SVD of the p×p Gram matrix's Cholesky-free square root: cheap for N·n ≫ p
-        if A.shape[0] > 4 * self.p:
-            _, R = np.linalg.qr(A / scale, mode="reduced")
-            _, s, Vt = np.linalg.svd(R)
-        else:
-            _, s, Vt = np.linalg.svd(A / scale, full_matrices=True)
-        s_full = np.zeros(self.p)
-        s_full[: len(s)] = s
-        rank = rank_from_singular_values(s_full)
-        null = Vt[rank:].T / scale[:, None]  # back to unscaled θ directions
-        if null.size:
-            null = null / np.linalg.norm(null, axis=0)
-        in_null = np.linalg.norm(null, axis=1) > 1e-6 if null.size else np.zeros(self.p, bool)
-        cond = float(s_full[0] / s_full[rank - 1]) if rank > 0 else float("inf")
-        return Identifiability(
-            rank=rank,
-            n_params=self.p,
-            condition_number=cond,
-            singular_values=s_full,
-            null_space=null,
-            unidentifiable=tuple(nm for nm, z in zip(self.parameters.names, in_null) if z),
-            names=self.parameters.names,
-        )
+        """Rank, null space and base parameters of the stacked regressor (dualid.identifiability)."""
+        return identifiability(self.Y.reshape(-1, self.p), self.parameters)
 
     # --- transformations --------------------------------------------------------------------
     def subset(self, idx) -> "IdentificationProblem":

@@ -277,6 +277,7 @@ class FeasibleGLS:
             sigma_diag=np.diag(S).tolist(),
             sigma=S.tolist(),
             feedback=False,  # the weights are fixed before the fit: no dependence on θ̂
+            theta_ref=None if theta_ref is None else np.asarray(theta_ref, dtype=float).tolist(),
         )
         result = fit_weighted(sensor, C, self.name, self._common(), info,
                               what=f"the residual covariance Σ + κ M_i(θ_ref) (κ = {kappa:.3g})")

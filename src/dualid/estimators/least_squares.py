@@ -218,7 +218,8 @@ def covariance_weight(problem: IdentificationProblem, covariance, reference: _Co
             raise DataError(f"covariance: expected shape ({problem.n}, {problem.n}) for this problem's "
                             f"{problem.n} coordinates, got {covariance.shape}")
     W = np.linalg.inv(covariance)
-    return 0.5 * (W + W.T), {"covariance": source, "covariance_diag": covariance.diagonal().tolist()}
+    return 0.5 * (W + W.T), {"covariance": source, "covariance_diag": covariance.diagonal().tolist(),
+                             "covariance_matrix": covariance.tolist()}
 
 
 @dataclass(frozen=True)
@@ -237,7 +238,7 @@ class WLS(_Common):
         return fit_quadratic(
             problem, statistics(problem, W), method=self.name, constrained=self.constrained, solver=self.solver,
             solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
-            info={k: v for k, v in info.items() if k == "covariance"},
+            info={k: v for k, v in info.items() if k in ("covariance", "covariance_matrix")},
         )
 
 
@@ -296,5 +297,5 @@ class RegularizedWLS(_Common):
             problem, statistics(problem, W), method=self.name, constrained=self.constrained, solver=self.solver,
             solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
             regularizer=(self.regularizer, theta0, gamma),
-            info={"covariance": info["covariance"], "gamma": gamma},
+            info={"covariance": info["covariance"], "covariance_matrix": info["covariance_matrix"], "gamma": gamma},
         )

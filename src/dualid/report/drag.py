@@ -19,6 +19,7 @@ from matplotlib.figure import Figure
 from dualid.estimators.methods import color as method_color
 from dualid.estimators.methods import method as method_entry
 from dualid.evaluation.validation import Validation
+from dualid.report.base_parameters import method_record
 from dualid.report.figures import cycle_color, new_figure, save_figure
 from dualid.report.io import jsonable, markdown_table, to_json, write_json
 from dualid.report.outdir import write_output
@@ -84,6 +85,7 @@ def parameters_record(outcome: DragFitOutcome) -> dict:
             "physically_consistent": bool(r.is_consistent),
             "parameters": [{"name": n, "unit": u, "value": float(x), "std_error": se}
                            for n, u, x, se in zip(P.names, P.units, r.theta, f.uncertainty)],
+            "base_parameters": method_record(f),
             "drag_matrices": {name: {"matrix": C, "eigenvalues": np.linalg.eigvalsh(C)}
                               for name, C in outcome.model.drag_matrices(r.theta).items()},
             "validation": None if f.validation is None else f.validation.as_dict(),

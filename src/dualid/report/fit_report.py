@@ -16,6 +16,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from dualid.evaluation.validation import Validation, validate
+from dualid.report.base_parameters import base_section
 from dualid.report.document import (
     Bullets,
     Image,
@@ -250,12 +251,16 @@ def _parameters(d: FitReportData) -> Section:
                                        "(solver round-off; exact values in parameters.yaml)."), *parameter_tables(d)))
 
 
+def _base(d: FitReportData) -> Section:
+    return base_section(d.outcome)
+
+
 def _plausible(d: FitReportData) -> Section:
     return plausible_section(d.outcome)
 
 
 FIT_SECTIONS: list[Callable[[FitReportData], Section]] = [
-    _summary, _warnings, _identifiability, _fits, _scores, _figures, _plausible, _parameters,
+    _summary, _warnings, _identifiability, _fits, _scores, _figures, _base, _plausible, _parameters,
 ]
 
 

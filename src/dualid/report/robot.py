@@ -3,7 +3,7 @@
 Files in the output folder of a fit:
 - parameters.yaml, parameters.json: the run metadata (dualid version, git commit, UTC time, command
   line, SHA-256 of every input file), every method's parameters (name, unit, value, standard error or
-  "not identifiable"), body physical quantities, solver status/time/fallback/guard, training and
+  "not identifiable"), its base parameters with 95 % intervals, body physical quantities, solver status/time/fallback/guard, training and
   held-out scores, and the data files, column map and preprocessing steps used;
 - <method>.urdf, <method>.xml: the URDF and MJCF with the identified parameters (the plausible ones when
   a prior exists; report/model_files.py);
@@ -20,6 +20,7 @@ import yaml
 
 from dualid.estimators.methods import method as method_entry
 from dualid.evaluation.validation import Validation
+from dualid.report.base_parameters import UNCERTAINTY_NOTE, definitions, method_record
 from dualid.report.document import Report
 from dualid.report.fit_report import fit_report, report_data, score_table, validation_report
 from dualid.report.io import jsonable, write_json
@@ -28,14 +29,6 @@ from dualid.report.model_files import plausible_record, write_model_files
 from dualid.report.outdir import write_output
 from dualid.report.render import to_html, to_markdown
 from dualid.robot.fit import FitOutcome
-
-UNCERTAINTY_NOTE = (
-    "std_error: σ̂·sqrt((H⁺)_kk) of the quadratic estimators (ols, wls, energy), H their normal matrix, "
-    "σ̂² the residual objective per degree of freedom; valid for parameters whose unit vector lies in the "
-    "range of H, otherwise 'not identifiable'. Textbook errors under white residuals, ignoring active "
-    "constraints: optimistic on real data. null: not computed for this method."
-)
-
 
 __all__ = ["parameters_record", "score_table", "write_fit", "write_validation"]
 
@@ -78,6 +71,7 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str], meta: dict | N
             "bodies": [b.as_dict() for b in r.bodies],
             "training_scores": None if m not in train else train[m].as_dict(),
             "validation": None if f.validation is None else f.validation.as_dict(),
+            "base_parameters": method_record(f),
         }
     return jsonable({
         "run": meta,
@@ -90,7 +84,9 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str], meta: dict | N
                  "samples": outcome.problem.N},
         "identifiability": {"rank": ident.rank, "n_params": ident.n_params,
                             "condition_number": ident.condition_number,
-                            "not_identifiable": list(ident.unidentifiable)},
+                            "not_identifiable": list(ident.unidentifiable),
+                            "base_parameters": definitions(ident.base) if ident.base is not None else [],
+                            "no_effect": [P.names[j] for j in (ident.base.no_effect if ident.base else ())]},
         "prior": {"source": outcome.config.prior.source, "gamma": outcome.config.prior.gamma,
                   "per_equation": outcome.config.prior.per_equation, "theta0": outcome.prior},
         "uncertainty_note": UNCERTAINTY_NOTE,

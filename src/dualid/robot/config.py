@@ -14,6 +14,7 @@ YAML form (relative paths are relative to the YAML file's folder)::
     validation: {xcorr_window: 0.02}
     references: {lab: lab_parameters.yml}
     out: results/robot
+    uncertainty: {method: sandwich, blocks: segments, segments_per_run: null, resamples: 200, seed: 0}
 
 Only ``model.urdf`` and ``train`` are required. ``columns`` may be omitted when the logs carry the
 DFKI double-pendulum columns (time, pos_meas{i}, vel_meas{i}, tau_meas{i}; see ``fit.column_map``).
@@ -34,10 +35,11 @@ from dualid.estimators.methods import METHODS, make_estimator
 from dualid.estimators.methods import method as method_entry  # the one list of method names
 from dualid.model.drag_spec import DragSpec
 from dualid.robot.drag_config import check_kind, drag_spec
+from dualid.robot.uncertainty import UncertaintyConfig
 
 _TOP_KEYS = (
     "model", "columns", "train", "test", "preprocessing", "joint_terms", "bounds", "methods", "solver", "prior",
-    "validation", "references", "out",
+    "validation", "references", "out", "uncertainty",
 )
 _MODEL_KEYS = ("urdf", "floating_base", "gravity", "kind", "drag")
 _JOINT_TERM_KEYS = ("viscous", "coulomb", "coulomb_velocity", "armature", "joints")
@@ -131,6 +133,7 @@ class FitConfig:
     xcorr_window: float = 0.02  # [s] shift window ± of the normalized cross-correlation
     references: tuple[tuple[str, Path], ...] = ()  # (label, DFKI reference_parameters yml)
     out: Path | None = None
+    uncertainty: UncertaintyConfig = field(default_factory=UncertaintyConfig)
 
     def __post_init__(self) -> None:
         if not self.train:
@@ -256,6 +259,7 @@ class FitConfig:
             xcorr_window=_float(val.get("xcorr_window", 0.02), "validation.xcorr_window"),
             references=tuple((str(k), _path(v, base, f"references.{k}")) for k, v in refs.items()),
             out=None if d.get("out") is None else _path(d["out"], base, "out"),
+            uncertainty=UncertaintyConfig.from_dict(d.get("uncertainty")),
         )
 
     @staticmethod
@@ -303,4 +307,5 @@ class FitConfig:
             "validation": {"xcorr_window": self.xcorr_window},
             "references": {k: str(v) for k, v in self.references},
             "out": None if self.out is None else str(self.out),
+            "uncertainty": self.uncertainty.as_dict(),
         }

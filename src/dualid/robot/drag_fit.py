@@ -36,11 +36,11 @@ from dualid.robot.fit import (
     choose_preprocessing,
     column_map,
     estimator,
-    standard_errors,
     velocity_source,
     with_bounds,
 )
 from dualid.robot.inputs import check_runs_differ
+from dualid.robot.uncertainty import method_uncertainty, parameter_errors
 
 
 def build_drag_model(config: FitConfig) -> DragModel:
@@ -129,8 +129,9 @@ def _fit_drag(config: FitConfig, say: Progress) -> DragFitOutcome:
             if method_entry(method).needs_prior and theta0 is None:
                 raise ConfigError(f"{method}: needs a prior θ₀: give nominal values for every body (diagonal: "
                                   "[…] or full: [[…]]) and damped joint ({joint: value}) in model.drag")
-            result = estimator(method, theta0, config.prior.gamma, config.prior.per_equation,
-                               dict(dict(config.solver).get(method, ()))).fit(problem)
+            est = estimator(method, theta0, config.prior.gamma, config.prior.per_equation,
+                            dict(dict(config.solver).get(method, ())))
+            result = est.fit(problem)
         except (DualidError, ValueError, np.linalg.LinAlgError, cp.error.DCPError, cp.error.SolverError) as exc:
             fits[method] = MethodFit(method, None, error=f"{type(exc).__name__}: {exc}")
             continue
@@ -138,6 +139,9 @@ def _fit_drag(config: FitConfig, say: Progress) -> DragFitOutcome:
         if test:
             say(f"validating {method} on {len(test)} held-out runs")
             validation = validate(model, result.theta, test, method, config.xcorr_window)
-        fits[method] = MethodFit(method, result, standard_errors(method, problem, result, ident), validation)
+        base_unc, base_error = method_uncertainty(problem, result, est, ident.base, [len(t.t) for t in train],
+                                                  config.uncertainty)
+        fits[method] = MethodFit(method, result, parameter_errors(base_unc, ident.base), validation, base=base_unc,
+                                 base_error=base_error)
     return DragFitOutcome(config, model, cmap, tuple(train), tuple(test), problem, ident, fits, prior_text,
                           preprocessing_note=steps_note)

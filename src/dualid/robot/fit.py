@@ -7,14 +7,9 @@ every requested method (physically consistent; ``allow_unidentifiable=True`` bec
 never fully identifiable: the estimate in the null space is one of many minimisers), and validate on
 the held-out runs (``workflow.validate``). A method that fails is recorded, not fatal.
 
-Uncertainty (quadratic estimators ols, wls, energy): with H the estimator's normal matrix
-(Σ Y_iᵀ W_i Y_i) and σ̂² = f(θ̂)/(N·n − rank) (N − rank for the energy residual, one equation per
-sample), cov(θ̂) ≈ σ̂² H⁺. Only parameters whose unit vector lies in the range of H have a standard
-error (any generalized inverse gives the same value there); the others are "not identifiable":
-the data say nothing about them alone, only about combinations. These are the textbook errors
-of the unconstrained estimate under white residuals; active constraints and the coloured,
-model-error-dominated residuals of real data make them optimistic. Not computed for the
-regularized (logdet, pullback) and dual-metric (dm) estimators.
+Uncertainty (every method): 95 % intervals of the base parameters by the sandwich covariance of
+``dualid.robot.uncertainty`` (gradients summed over segments of the training runs); a parameter has its own
+standard error only when it is a base parameter on its own, otherwise "not identifiable".
 """
 
 from __future__ import annotations
@@ -32,15 +27,13 @@ from dualid.data.io import ColumnMap, load_log, read_table
 from dualid.data.preprocessing import preprocess
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError, DualidError, DualidWarning, MissingFileError
-from dualid.estimators import OLS, IdentificationResult
+from dualid.estimators import IdentificationResult
 from dualid.estimators.guards import guard_info
-from dualid.estimators.least_squares import covariance_weight
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.methods import method as method_entry
 from dualid.estimators.plausible import PlausibleParameters, plausible_parameters
-from dualid.estimators.statistics import energy_statistics, statistics
+from dualid.estimators.uncertainty import BaseUncertainty
 from dualid.evaluation.validation import Validation, validate
-from dualid.linalg import pinv_psd
 from dualid.model.external_wrench import apply_wrenches
 from dualid.model.joint_terms import JointTermsModel, with_joint_terms
 from dualid.model.rigid_body import RigidBodyModel
@@ -50,8 +43,7 @@ from dualid.robot.config import FitConfig
 from dualid.robot.defaults import adaptive_preprocessing, warn_far_from_data
 from dualid.robot.files import read_mapping
 from dualid.robot.inputs import array_column_map, check_floating, check_runs_differ, check_units
-
-NOT_IDENTIFIABLE = "not identifiable"
+from dualid.robot.uncertainty import method_uncertainty, parameter_errors
 
 Progress = Callable[[str], None]
 
@@ -220,34 +212,12 @@ def estimator(method: str, theta0: np.ndarray | None = None, gamma: float = 0.1,
                           options=options)
 
 
-def standard_errors(method: str, problem: IdentificationProblem, result: IdentificationResult,
-                    ident: Identifiability) -> tuple[float | str | None, ...]:
-    """Per-parameter standard errors (see the module docstring); NOT_IDENTIFIABLE in the null space,
-    None for methods without one."""
-    if method not in ("ols", "wls", "energy"):
-        return (None,) * problem.p
-    if method == "ols":
-        H, dof = statistics(problem).H, problem.N * problem.n
-    elif method == "wls":
-        W, _ = covariance_weight(problem, None, OLS(allow_unidentifiable=True))
-        H, dof = statistics(problem, W).H, problem.N * problem.n
-    else:
-        H, dof = energy_statistics(problem).H, problem.N
-    H_pinv, rank = pinv_psd(H)
-    var = np.diag(H_pinv)
-    sigma2 = float(result.info.get("data_objective", result.objective)) / max(dof - rank, 1)
-    unident = set(ident.unidentifiable)
-    return tuple(
-        NOT_IDENTIFIABLE if name in unident else float(np.sqrt(max(sigma2 * v, 0.0)))
-        for name, v in zip(problem.parameters.names, var)
-    )
-
-
 # --- outcome ----------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class MethodFit:
-    """One method's fit: the result (None when it failed, then ``error`` says why), its standard
-    errors and its held-out validation."""
+    """One method's fit: the result (None when it failed, then ``error`` says why), its per-parameter
+    standard errors, its held-out validation and the base parameters' uncertainty (``base_error``: why
+    there is none)."""
 
     method: str
     result: IdentificationResult | None
@@ -256,6 +226,8 @@ class MethodFit:
     error: str = ""
     plausible: PlausibleParameters | None = None  # θ with θ̂'s training predictions closest to the prior
     plausible_error: str = ""  # why there is none although prior.plausible asked for it
+    base: BaseUncertainty | None = None
+    base_error: str = ""
 
     @property
     def ok(self) -> bool:
@@ -292,7 +264,7 @@ class FitOutcome:
         lines = [
             f"samples: {self.problem.N} (x {self.problem.n} joints) from {len(self.train)} training runs; "
             f"parameters: {self.problem.p}",
-            ident.describe(max_items=12),
+            ident.describe(),
         ]
         if not ident.full_rank:
             lines += [
@@ -355,8 +327,9 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
                 if ols_theta is None and model is not rigid:
                     ols_theta = estimator("ols").fit(problem).theta
                 theta0, prior_text = prior_theta(config, rigid, model, ols_theta)
-            result = estimator(method, theta0, config.prior.gamma, config.prior.per_equation,
-                               dict(dict(config.solver).get(method, ()))).fit(problem)
+            est = estimator(method, theta0, config.prior.gamma, config.prior.per_equation,
+                            dict(dict(config.solver).get(method, ())))
+            result = est.fit(problem)
         except (DualidError, ValueError, np.linalg.LinAlgError, cp.error.DCPError, cp.error.SolverError) as exc:
             # recorded in the report (cvxpy's DCPError: e.g. data so large the problem loses convexity): one
             # method's failure must not lose the others; anything else is a bug and propagates
@@ -365,7 +338,9 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
         if method == "ols":
             ols_theta = result.theta
         result = _guarded(result, problem, rigid, model)
-        uncertainty = standard_errors(method, problem, result, ident)
+        _say(progress, f"uncertainty of {method}'s base parameters")
+        base_unc, base_error = method_uncertainty(problem, result, est, ident.base, [len(t.t) for t in train],
+                                                  config.uncertainty)
         validation = None
         if test:
             _say(progress, f"validating {method} on {len(test)} held-out runs")
@@ -377,8 +352,8 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
                 plausible = plausible_parameters(problem, result.theta, prior_theta(config, rigid, model, result.theta)[0])
             except DualidError as exc:  # recorded: the files then carry θ̂, and the report says why
                 plausible_error = f"{type(exc).__name__}: {exc}"
-        fits[method] = MethodFit(method, result, uncertainty, validation, plausible=plausible,
-                                 plausible_error=plausible_error)
+        fits[method] = MethodFit(method, result, parameter_errors(base_unc, ident.base), validation, base=base_unc,
+                                 base_error=base_error, plausible=plausible, plausible_error=plausible_error)
 
     references = {}
     for label, path in config.references:

@@ -100,6 +100,15 @@ class ValidationSection(_Section):
     xcorr_window: float = Field(0.02, ge=0, description="[s] shift window of the normalized cross-correlation")
 
 
+class UncertaintySection(_Section):
+    method: Literal["sandwich", "bootstrap", "none"] = Field(
+        "sandwich", description="95 % intervals of the base parameters: sandwich covariance or block bootstrap")
+    blocks: Literal["segments", "runs"] = Field("segments", description="blocks of correlated samples")
+    segments_per_run: int | None = Field(None, ge=1, description="null: 10 per base parameter (≥ 100) in all")
+    resamples: int = Field(200, ge=10, description="bootstrap refits")
+    seed: int = Field(0, ge=0, description="bootstrap seed")
+
+
 class FitConfigSchema(_Section):
     """A real-robot fit (dualid fit --config FILE)."""
 
@@ -120,6 +129,7 @@ class FitConfigSchema(_Section):
     validation: ValidationSection | None = None
     references: dict[str, str] | None = None
     out: str | None = None
+    uncertainty: UncertaintySection | None = None
 
 
 def json_schema() -> dict:
