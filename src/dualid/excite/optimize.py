@@ -132,7 +132,7 @@ class _Problem:
         k = np.isfinite(eff)
         g = [self.b + self.A @ x, (1 - MARGIN - tau[:, k] / eff[k]).ravel(), (1 - MARGIN + tau[:, k] / eff[k]).ravel()]
         if self.distance is not None:  # (d − d_min) / d_min ≥ 0 at every grid sample
-            g.append(self._distance(x)[0] / self.config.min_distance - 1)
+            g.append(self._distance(x)[0] / self.config.min_distance - 1 - MARGIN)
         return np.concatenate(g)
 
     def constraints_jacobian(self, x: np.ndarray) -> np.ndarray:
@@ -168,11 +168,15 @@ class _Problem:
                         bounds=self.bounds(), options={"maxiter": maxiter, "ftol": 1e-7})
 
     def violations(self, x: np.ndarray, t: np.ndarray, most: int = 200) -> np.ndarray:
-        """Up to ``most`` times of t where x exceeds a limit most (local maxima of each sample's largest ratio)."""
+        """Up to ``most`` times of t where x exceeds a limit (or comes closer than min_distance) most (local maxima of each sample's largest ratio)."""
         B = free_basis(t, self.config.period, self.config.harmonics)
         q, v, a = self.states(x, B)
         ratio = np.max([r.max(axis=1) for r in _ratio_arrays(self.design, q, v, a, self.design.torque(q, v, a)).values()],
                        axis=0)
+        if self.distance is not None:  # closer than min_distance counts as a violation too
+            d = self.distance(q)
+            with np.errstate(divide="ignore"):
+                ratio = np.maximum(ratio, np.where(d > 0, self.config.min_distance / d, np.inf))
         peak = (ratio >= np.roll(ratio, 1)) & (ratio >= np.roll(ratio, -1))  # one sample per excursion
         bad = np.flatnonzero((ratio > 1.0) & peak)
         return t[bad[np.argsort(-ratio[bad])][:most]]
@@ -191,7 +195,11 @@ class _Problem:
 
         def ratio(s: float) -> float:
             q, v, a = self.design.q_start + s * q1, s * v1, s * a1
-            return max(_ratios(self.design, q, v, a, self.design.torque(q, v, a)).values())
+            worst = max(_ratios(self.design, q, v, a, self.design.torque(q, v, a)).values())
+            if self.distance is not None:
+                d = self.distance(q).min()
+                worst = max(worst, self.config.min_distance / d if d > 0 else np.inf)
+            return worst
 
         linear = {k: r for k, r in _ratios(self.design, self.design.q_start + q1, v1, a1, np.zeros_like(v1)).items()}
         s_hi = 1.0 / max(max(linear.values()), 1e-300)
