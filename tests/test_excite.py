@@ -265,3 +265,8 @@ def test_min_distance_holds_at_1khz_on_the_optimised_trajectory(tmp_path):
     q = result.trajectory.evaluate(result.trajectory.times(1000.0))[0]
     assert distance(q).min() >= 0.0495 - 1e-9  # without the constraint this optimum comes to 0.0488 m
     assert result.check.ok
+
+
+def test_excite_help_shows_flags_without_a_bool_metavar():
+    text = " ".join(runner.invoke(app, ["excite", "--help"]).output.split())
+    assert "--force" in text and "--force <bool>" not in text

@@ -168,7 +168,8 @@ class _Problem:
                         bounds=self.bounds(), options={"maxiter": maxiter, "ftol": 1e-7})
 
     def violations(self, x: np.ndarray, t: np.ndarray, most: int = 200) -> np.ndarray:
-        """Up to ``most`` times of t where x exceeds a limit (or comes closer than min_distance) most (local maxima of each sample's largest ratio)."""
+        """Up to ``most`` times of t where x exceeds a limit (or comes closer than min_distance) most: the
+        local maxima of each sample's largest |value|/limit, worst first."""
         B = free_basis(t, self.config.period, self.config.harmonics)
         q, v, a = self.states(x, B)
         ratio = np.max([r.max(axis=1) for r in _ratio_arrays(self.design, q, v, a, self.design.torque(q, v, a)).values()],
@@ -201,7 +202,7 @@ class _Problem:
                 worst = max(worst, self.config.min_distance / d if d > 0 else np.inf)
             return worst
 
-        linear = {k: r for k, r in _ratios(self.design, self.design.q_start + q1, v1, a1, np.zeros_like(v1)).items()}
+        linear = _ratios(self.design, self.design.q_start + q1, v1, a1, np.zeros_like(v1))  # effort 0 here
         s_hi = 1.0 / max(max(linear.values()), 1e-300)
         if ratio(s_hi) <= 1.0:
             return s_hi
