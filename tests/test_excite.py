@@ -270,3 +270,10 @@ def test_min_distance_holds_at_1khz_on_the_optimised_trajectory(tmp_path):
 def test_excite_help_shows_flags_without_a_bool_metavar():
     text = " ".join(runner.invoke(app, ["excite", "--help"]).output.split())
     assert "--force" in text and "--force <bool>" not in text
+
+
+def test_the_dfki_example_config_is_valid():
+    cfg = ExciteConfig.from_yaml(DFKI.parent / "excite.yaml")
+    design = build_design(RigidBodyModel.from_urdf(URDF), cfg)
+    np.testing.assert_allclose(design.limits.effort, [5, 5])
+    assert design.limits.notes == ()
