@@ -31,6 +31,7 @@ import numpy as np
 
 from dualid.bench.arms import aggregate, random_arm, torque_nrmse
 from dualid.data.trajectory import Trajectory
+from dualid.errors import DualidError
 from dualid.estimators.methods import make_estimator
 from dualid.excite import ExciteConfig, build_design, check_limits, optimize, random_trajectory
 from dualid.excite.design import random_states
@@ -102,7 +103,7 @@ def identify(design, traj, theta_true, true_torque, sigma, rng, draws, held_out)
         for m in METHODS:
             try:
                 theta = make_estimator(m, allow_unidentifiable=True).fit(problem).theta
-            except Exception as exc:  # counted, not dropped: the table reports failures
+            except (DualidError, ValueError, np.linalg.LinAlgError) as exc:  # counted, not dropped
                 out[m]["failed"] += 1
                 out[m].setdefault("errors", []).append(f"{type(exc).__name__}: {exc}"[:200])
                 continue

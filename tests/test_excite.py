@@ -277,3 +277,14 @@ def test_the_dfki_example_config_is_valid():
     design = build_design(RigidBodyModel.from_urdf(URDF), cfg)
     np.testing.assert_allclose(design.limits.effort, [5, 5])
     assert design.limits.notes == ()
+
+
+def test_limits_the_urdf_does_not_give_are_noted():
+    design = build_design(RigidBodyModel.from_urdf(URDF), ExciteConfig())
+    assert design.limits.notes == (
+        "joint 'Joint2': the URDF's effort limit is 0, read as 'not given'",
+        "joint 'Joint1': no acceleration limit (none in the URDF or the config)",
+        "joint 'Joint2': no acceleration, effort limit (none in the URDF or the config)",
+    )
+    np.testing.assert_allclose(design.limits.effort, [6.0, np.inf])
+    np.testing.assert_allclose(design.limits.velocity, [20.0, 20.0])

@@ -66,9 +66,11 @@ def model_limits(rigid: RigidBodyModel, config: ExciteConfig) -> Limits:
         joint, k = model.joints[j], model.joints[j].idx_v
         if joint.nq == 1 and _finite(model.lowerPositionLimit[joint.idx_q]) and _finite(model.upperPositionLimit[joint.idx_q]):
             lo[k], hi[k] = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
-        for arr, src in ((vel, model.velocityLimit), (eff, model.effortLimit)):
+        for arr, src, what in ((vel, model.velocityLimit, "velocity"), (eff, model.effortLimit, "effort")):
             if _finite(src[k]) and src[k] > 0:
                 arr[k] = src[k]
+            elif src[k] == 0 and names[k] not in config.limits:
+                notes.append(f"joint {names[k]!r}: the URDF's {what} limit is 0, read as 'not given'")
     for k, name in enumerate(names):
         override = config.limits.get(name)
         if override is not None:

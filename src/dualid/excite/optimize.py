@@ -222,7 +222,7 @@ class Restart:
     index: int
     status: int
     message: str
-    iterations: int
+    iterations: int  # SLSQP iterations, summed over the re-solves of the 1 kHz refinement
     value: float  # the criterion after the scale (inf: failed)
     scale: float  # 1.0 when the optimum satisfied every limit at check_rate
 
@@ -258,12 +258,14 @@ def optimize(design: Design, config: ExciteConfig, progress: Progress | None = N
         x0 = x0 * 0.5 * problem.max_scale(x0, problem.t)
         problem.constrain_at(problem.t)
         res = problem.solve(x0, config.maxiter)
+        iterations = int(res.nit)
         for _ in range(REFINE):  # add the check-rate samples that exceed a limit to the constraint times, re-solve
             worst = problem.violations(res.x, check_t)
             if worst.size == 0:
                 break
             problem.constrain_at(np.union1d(problem.tc, worst))
             res = problem.solve(res.x, config.maxiter)
+            iterations += int(res.nit)
         x = res.x
         scale = 1.0 if problem.violations(x, check_t, most=1).size == 0 else min(1.0, problem.max_scale(x, check_t))
         x = x * scale
@@ -271,7 +273,7 @@ def optimize(design: Design, config: ExciteConfig, progress: Progress | None = N
         if problem.distance is not None and problem.distance(problem.trajectory(x).evaluate(check_t)[0]).min() \
                 < config.min_distance:
             value = float("inf")
-        runs.append(Restart(r, int(res.status), str(res.message), int(res.nit), value, scale))
+        runs.append(Restart(r, int(res.status), str(res.message), iterations, value, scale))
         xs.append(x)
         best_value = value if best_value is None else min(best_value, value)
         if progress is not None:
