@@ -84,7 +84,7 @@ def dfki_setup(common: dict):
 
 def conds(design, traj) -> dict:
     q, v, a = traj.evaluate(traj.times(RATE))
-    scaled, raw = base_condition(design.regressor(q, v, a)[:, :, design.base.columns])
+    scaled, raw = base_condition(design.base.regressor(design.regressor(q, v, a)))
     return {"cond": scaled, "cond_raw": raw, **{f"criterion_{c}": design.criterion(c, q, v, a) for c in CRITERIA}}
 
 
@@ -108,8 +108,8 @@ def identify(design, traj, theta_true, true_torque, sigma, rng, draws, held_out)
                 out[m].setdefault("errors", []).append(f"{type(exc).__name__}: {exc}"[:200])
                 continue
             out[m]["nrmse"].append(aggregate(torque_nrmse(Yh, theta, tau_h)))
-            out[m]["beta"].append(design.base.of(theta))
-    beta_true = design.base.of(theta_true)
+            out[m]["beta"].append(design.base.values(theta))
+    beta_true = design.base.values(theta_true)
     res = {}
     for m, r in out.items():
         B = np.array(r["beta"])

@@ -7,9 +7,8 @@
 - The identification model is the one ``dualid fit`` uses: ``RigidBodyModel`` plus joint friction and
   armature (``with_joint_terms``), unless ``joint_terms`` is null. θ_nom: the URDF's inertials and its
   <dynamics damping friction> (armature 0 unless the Pinocchio model has one).
-- Base parameters: the columns of Y chosen by QR with column pivoting (``scipy.linalg.qr``) of the
-  column-scaled regressor at random states within the limits; rank by dualid's rank rule. The other
-  columns are combinations of them, Y_d = Y_b K, so the base parameters are β = θ_b + K θ_d.
+- Base parameters: dualid's regrouping (``dualid.identifiability.base_parameters``, QR with column
+  pivoting of the column-scaled regressor) at random states within the limits, β = C θ.
 - Criteria (all minimised), with W_i = Y_i[:, base] at the design samples i = 1..N:
     dm      −log det( Σ W_iᵀ M_i(θ_nom)⁻¹ W_i / N ): the dual-metric objective's Gauss–Newton information;
     logdet  −log det( Σ W_iᵀ W_i / N ): classic D-optimality;
@@ -24,11 +23,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
-import scipy.linalg
 
 from dualid.errors import ConfigError, ModelError
 from dualid.excite.config import ExciteConfig
-from dualid.linalg import rank_from_singular_values
+from dualid.identifiability import BaseParameters, base_parameters
 from dualid.model.joint_terms import JointTermsModel, with_joint_terms
 from dualid.model.rigid_body import RigidBodyModel
 
@@ -90,36 +88,6 @@ def model_limits(rigid: RigidBodyModel, config: ExciteConfig) -> Limits:
 
 
 @dataclass(frozen=True, eq=False)
-class BaseParameters:
-    """Base columns of Y (QR with column pivoting at random states) and β = θ_b + K θ_d."""
-
-    columns: np.ndarray  # (p_b,) indices into θ, sorted
-    dependent: np.ndarray  # (p − p_b,)
-    K: np.ndarray  # (p_b, p − p_b): Y_d = Y_b K
-    names: tuple[str, ...]  # of the base columns
-
-    def of(self, theta: np.ndarray) -> np.ndarray:
-        """β (p_b,) of a full θ (p,)."""
-        theta = np.asarray(theta, dtype=float)
-        return theta[self.columns] + self.K @ theta[self.dependent]
-
-
-def base_parameters(Y: np.ndarray, names: tuple[str, ...]) -> BaseParameters:
-    """Base columns of a regressor Y (T, n, p) at random states (see the module docstring)."""
-    A = Y.reshape(-1, Y.shape[-1])
-    scale = np.linalg.norm(A, axis=0)
-    nonzero = scale > 0
-    scale[~nonzero] = 1.0
-    As = A / scale
-    rank = rank_from_singular_values(np.linalg.svd(As, compute_uv=False))
-    _, _, piv = scipy.linalg.qr(As, mode="economic", pivoting=True)
-    cols = np.sort(piv[:rank])
-    dep = np.setdiff1d(np.arange(A.shape[1]), cols)
-    K = np.linalg.lstsq(A[:, cols], A[:, dep], rcond=None)[0] if dep.size else np.zeros((rank, 0))
-    return BaseParameters(cols, dep, K, tuple(names[c] for c in cols))
-
-
-@dataclass(frozen=True, eq=False)
 class Design:
     """Everything a criterion and the constraints need about one robot (see the module docstring)."""
 
@@ -178,7 +146,7 @@ class Design:
     # --- criteria ---------------------------------------------------------------------------
     def criterion(self, name: str, q, v, a) -> float:
         """The criterion (minimised) at the samples (q, v, a) (see the module docstring)."""
-        W = self.regressor(q, v, a)[:, :, self.base.columns]  # (N, n, p_b)
+        W = self.base.regressor(self.regressor(q, v, a))  # (N, n, p_b)
         N = W.shape[0]
         if name == "cond":
             A = W.reshape(-1, W.shape[-1])
@@ -229,7 +197,8 @@ def build_design(rigid: RigidBodyModel, config: ExciteConfig, seed: int = 0) -> 
     theta_nom = np.concatenate(theta)
     rng = np.random.default_rng(seed)
     q, v, a = random_states(rng, limits, q_start, RANDOM_STATES)
-    base = base_parameters(model.regressor(q, v, a), model.parameters.names)
+    Y = model.regressor(q, v, a)  # (T, n, p)
+    base = base_parameters(Y.reshape(-1, Y.shape[-1]), model.parameters)
     design = Design(rigid, model, theta_nom, limits, q_start, base, vc, pm, (damping, friction, armature))
     tau0 = design.torque(q_start[None], np.zeros((1, len(names))), np.zeros((1, len(names))))[0]
     over = [j for k, j in enumerate(names) if abs(tau0[k]) > limits.effort[k]]

@@ -68,7 +68,7 @@ def predict(design: Design, traj: FourierTrajectory, rate: float, noise=0.1) -> 
     sigma = torque_noise(design, noise)
     tau = design.torque(q, v, a)
     problem = build_problem(design.model, Trajectory(t, q, v, tau, a, design.joints, name="designed"))
-    W = problem.Y[:, :, design.base.columns]
+    W = design.base.regressor(problem.Y)
     cond, cond_raw = base_condition(W)
     Z = W / sigma[None, :, None]
     F = np.einsum("nap,naq->pq", Z, Z)
@@ -78,4 +78,4 @@ def predict(design: Design, traj: FourierTrajectory, rate: float, noise=0.1) -> 
         se = np.full(W.shape[-1], np.inf)
     criteria = {c: design.criterion(c, q, v, a) for c in CRITERIA}
     return Prediction(rate, t.size, problem.identifiability(), design.base.names, cond, cond_raw, criteria, sigma,
-                      design.base.of(design.theta_nom), se)
+                      design.base.values(design.theta_nom), se)
