@@ -17,12 +17,11 @@ import yaml
 from matplotlib.figure import Figure
 
 from dualid.estimators.methods import color as method_color
-from dualid.estimators.methods import method as method_entry
 from dualid.evaluation.validation import Validation
-from dualid.report.base_parameters import method_record
 from dualid.report.figures import cycle_color, new_figure, save_figure
 from dualid.report.io import jsonable, markdown_table, to_json, write_json
 from dualid.report.outdir import write_output
+from dualid.report.robot import method_entry_record
 from dualid.robot.drag_fit import DragFitOutcome
 
 
@@ -70,26 +69,10 @@ def parameters_record(outcome: DragFitOutcome) -> dict:
     P = outcome.problem.parameters
     methods = {}
     for m, f in outcome.fits.items():
-        if not f.ok:
-            methods[m] = {"description": method_entry(m).description, "error": f.error}
-            continue
-        r = f.result
-        methods[m] = {
-            "description": method_entry(m).description,
-            "status": r.status,
-            "solver": r.solver,
-            "solver_chain": r.info.get("solver_chain", r.solver),
-            "fallback_used": bool(r.info.get("fallback_used", False)),
-            "solve_time_s": r.solve_time,
-            "objective": r.objective,
-            "physically_consistent": bool(r.is_consistent),
-            "parameters": [{"name": n, "unit": u, "value": float(x), "std_error": se}
-                           for n, u, x, se in zip(P.names, P.units, r.theta, f.uncertainty)],
-            "base_parameters": method_record(f),
-            "drag_matrices": {name: {"matrix": C, "eigenvalues": np.linalg.eigvalsh(C)}
-                              for name, C in outcome.model.drag_matrices(r.theta).items()},
-            "validation": None if f.validation is None else f.validation.as_dict(),
-        }
+        methods[m] = method_entry_record(m, f, P)
+        if f.ok:
+            methods[m]["drag_matrices"] = {name: {"matrix": C, "eigenvalues": np.linalg.eigvalsh(C)}
+                                           for name, C in outcome.model.drag_matrices(f.result.theta).items()}
     cfg = outcome.config
     ident = outcome.identifiability
     return jsonable({

@@ -33,6 +33,29 @@ from dualid.robot.fit import FitOutcome
 __all__ = ["parameters_record", "score_table", "write_fit", "write_validation"]
 
 
+def method_entry_record(m: str, f, P) -> dict:
+    """What parameters.yaml says of every fitted method, rigid-body or drag (``f``: a robot.fit.MethodFit, ``P``
+    the parameter space): status, solver and fallback, objective, consistency, parameters with standard
+    errors, base parameters with intervals and the held-out validation; for a failed fit, its error."""
+    if not f.ok:
+        return {"description": method_entry(m).description, "error": f.error}
+    r = f.result
+    return {
+        "description": method_entry(m).description,
+        "status": r.status,
+        "solver": r.solver,
+        "solver_chain": r.info.get("solver_chain", r.solver),
+        "fallback_used": bool(r.info.get("fallback_used", False)),
+        "solve_time_s": r.solve_time,
+        "objective": r.objective,
+        "physically_consistent": bool(r.is_consistent),
+        "parameters": [{"name": n, "unit": u, "value": float(x), "std_error": se}
+                       for n, u, x, se in zip(P.names, P.units, r.theta, f.uncertainty)],
+        "base_parameters": method_record(f),
+        "validation": None if f.validation is None else f.validation.as_dict(),
+    }
+
+
 def parameters_record(outcome: FitOutcome, urdfs: dict[str, str], meta: dict | None = None,
                       train: dict[str, Validation] | None = None, files: dict[str, dict] | None = None) -> dict:
     """The content of parameters.yaml / parameters.json; ``meta``: the run metadata
@@ -43,36 +66,22 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str], meta: dict | N
     ident = outcome.identifiability
     methods = {}
     for m, f in outcome.fits.items():
+        methods[m] = method_entry_record(m, f, P)
         if not f.ok:
-            methods[m] = {"description": method_entry(m).description, "error": f.error}
             continue
         r = f.result
-        methods[m] = {
-            "description": method_entry(m).description,
-            "status": r.status,
-            "solver": r.solver,
-            "solver_chain": r.info.get("solver_chain", r.solver),
-            "fallback_used": bool(r.info.get("fallback_used", False)),
+        methods[m].update({
             "metric_guard": {k: r.info[k] for k in ("metric_ratio_min", "metric_ratio_max", "degenerate",
                                                     "metric_guard_reference", "metric_guard_error") if k in r.info},
-            "solve_time_s": r.solve_time,
             "iterations": r.iterations,
-            "objective": r.objective,
-            "physically_consistent": bool(r.is_consistent),
             "urdf": urdfs.get(m),
             "mjcf": (files or {}).get(m, {}).get("mjcf"),
             "model_files_theta": (files or {}).get(m, {}).get("theta"),
             "mjcf_notes": (files or {}).get(m, {}).get("mjcf_notes"),
             "plausible": plausible_record(f),
-            "parameters": [
-                {"name": n, "unit": u, "value": float(x), "std_error": se}
-                for n, u, x, se in zip(P.names, P.units, r.theta, f.uncertainty)
-            ],
             "bodies": [b.as_dict() for b in r.bodies],
             "training_scores": None if m not in train else train[m].as_dict(),
-            "validation": None if f.validation is None else f.validation.as_dict(),
-            "base_parameters": method_record(f),
-        }
+        })
     return jsonable({
         "run": meta,
         "complete": outcome.complete,  # False when a requested method failed (its entry has "error")
