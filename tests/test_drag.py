@@ -287,7 +287,8 @@ def test_cli_fits_the_example_swimmer(tmp_path):
                                       "--method", "dm-paper", "--out", str(out)])
     assert result.exit_code == 0, result.output
     assert "all 18 parameters are identifiable" in result.output
-    for name in ("parameters.yaml", "parameters.json", "report.md", "identifiability.txt", "velocity_test_swim.png"):
+    for name in ("parameters.yaml", "parameters.json", "report.md", "report.html", "identifiability.txt",
+                 "velocity_test_swim.png"):
         assert (out / name).is_file(), name
     record = yaml.safe_load((out / "parameters.yaml").read_text())
     assert record["complete"] and record["model"]["kind"] == "drag"
@@ -296,6 +297,9 @@ def test_cli_fits_the_example_swimmer(tmp_path):
     ncc = dm["validation"]["mean"]["a_ncc"]
     assert min(ncc.values()) > 0.99, ncc  # the forward prediction v̂ = D̂⁻¹τ on held-out gaits
     assert "Velocity NCC" in (out / "report.md").read_text()
+    html = (out / "report.html").read_text()
+    assert "Velocity NCC" in html and "Base parameters" in html and "data:image/png;base64," in html
+    assert record["run"]["dualid_version"] and any(i["role"] == "config" for i in record["run"]["inputs"])
 
 
 def test_cli_bad_drag_spec_is_bad_input_with_the_key_named(tmp_path):

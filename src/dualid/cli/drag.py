@@ -7,7 +7,7 @@ import typer
 from dualid.cli.common import EXIT_FAILED, console, print_error, show_warnings
 
 
-def fit_drag_command(cfg, force: bool) -> None:
+def fit_drag_command(cfg, force: bool, config_file=None, command: str | None = None) -> None:
     """Run ``robot.drag_fit.fit_drag`` with a progress line and write ``report.drag`` into cfg.out."""
     import warnings
 
@@ -24,7 +24,7 @@ def fit_drag_command(cfg, force: bool) -> None:
             try:
                 outcome = fit_drag(cfg, progress=lambda msg: bar.update(task, description=msg))
                 bar.update(task, description=f"writing {cfg.out}")
-                write_drag_fit(outcome, cfg.out, force)
+                write_drag_fit(outcome, cfg.out, force, command=command, config_file=config_file)
             finally:
                 bar.stop()
                 show_warnings(caught)
@@ -38,7 +38,8 @@ def fit_drag_command(cfg, force: bool) -> None:
         typer.echo("held-out velocity NCC (v̂ = D̂⁻¹τ vs measured v):")
         typer.echo("\n".join(score_table(validations, "a_ncc")))
     failed = [m for m, f in outcome.fits.items() if not f.ok]
-    console.print(f"wrote parameters and report.md to {cfg.out}" + (" (incomplete: see report.md)" if failed else ""),
+    console.print(f"wrote parameters, report.md and report.html to {cfg.out}"
+                  + (" (incomplete: see report.html)" if failed else ""),
                   markup=False)
     for m in failed:
         print_error(f"{m}: failed: {outcome.fits[m].error}")

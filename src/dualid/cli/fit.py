@@ -81,7 +81,7 @@ def fit(
     if cfg.model.kind == "drag":  # a drag-dominated model: its own workflow and report
         from dualid.cli.drag import fit_drag_command
 
-        return fit_drag_command(cfg, force)
+        return fit_drag_command(cfg, force, config_file=config, command=_command_line())
     with Progress(SpinnerColumn(), TextColumn("{task.description}", markup=False), TimeElapsedColumn(), console=console) as bar:
         task = bar.add_task("starting", total=None)
         with warnings.catch_warnings(record=True) as caught:  # recorded in the outcome by fit_robot
