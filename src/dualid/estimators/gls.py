@@ -37,6 +37,7 @@ import numpy as np
 
 from dualid.errors import ConfigError, MetricError, SolverError
 from dualid.estimators.base import check_identifiable, freeze_options
+from dualid.estimators.covariance_model import full_likelihood_estimate, likelihood_estimate, moment_estimate
 from dualid.estimators.guards import DEFAULT_BOUND, guard_info
 from dualid.estimators.least_squares import OLS, WLS, fit_quadratic, residual_covariance
 from dualid.estimators.result import IdentificationResult
@@ -46,6 +47,8 @@ from dualid.problem import IdentificationProblem
 PILOTS = ("wls", "ols", "dm-paper")
 SOLVERS = ("newton", "CLARABEL", "SCS")
 COVARIANCE_MODELS = ("likelihood", "moments")
+SIGMA_STRUCTURES = ("full", "diagonal")
+__all__ = ["FeasibleGLS", "fit_weighted", "full_likelihood_estimate", "likelihood_estimate", "moment_estimate"]
 
 
 def _as_tuple(x, name: str, ndim: int) -> tuple | None:
@@ -57,78 +60,6 @@ def _as_tuple(x, name: str, ndim: int) -> tuple | None:
     if not np.all(np.isfinite(a)):
         raise ConfigError(f"{name}: expected finite values, got {a.tolist()}")
     return tuple(float(v) for v in a) if ndim == 1 else tuple(tuple(float(v) for v in row) for row in a)
-
-
-# --- (Σ, κ) from residuals ---------------------------------------------------------------------
-def moment_estimate(r: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, float]:
-    """(σ (n,), κ) ≥ 0 minimising Σ_i ‖r_i r_iᵀ − diag(σ) − κ M_i‖_F² (normal equations + NNLS)."""
-    from scipy.optimize import nnls
-
-    N, n = r.shape
-    m_scale = float(np.mean(np.trace(M, axis1=1, axis2=2))) / n
-    m_scale = m_scale if m_scale > 0 else 1.0
-    Mh = M / m_scale  # κ' = κ m_scale is O(1) when the two parts are comparable
-    G = np.zeros((n + 1, n + 1))
-    G[:n, :n] = N * np.eye(n)
-    G[:n, n] = G[n, :n] = np.einsum("naa->a", Mh)
-    G[n, n] = float(np.sum(Mh * Mh))
-    b = np.concatenate([np.sum(r * r, axis=0), [float(np.einsum("na,nab,nb->", r, Mh, r))]])
-    d = np.sqrt(np.diag(G))
-    d[d == 0] = 1.0
-    Gs = G / np.outer(d, d)
-    w, U = np.linalg.eigh(Gs)
-    w = np.maximum(w, 1e-14 * w.max())
-    R = np.sqrt(w)[:, None] * U.T  # Gs = RᵀR
-    x = nnls(R, (U.T @ (b / d)) / np.sqrt(w))[0] / d
-    return x[:n], float(x[n] / m_scale)
-
-
-def _nll(x: np.ndarray, r: np.ndarray, M: np.ndarray, m_scale: float):
-    """Mean of log det C_i + r_iᵀ C_i⁻¹ r_i and its gradient in x = (σ, κ·m_scale)."""
-    n = r.shape[1]
-    sigma, kappa = x[:n], x[n] / m_scale
-    C = kappa * M
-    C[:, np.arange(n), np.arange(n)] += sigma
-    try:
-        L = np.linalg.cholesky(C)
-    except np.linalg.LinAlgError:
-        return np.inf, np.zeros_like(x)
-    logdet = 2.0 * np.sum(np.log(np.diagonal(L, axis1=1, axis2=2)), axis=1)
-    Ci = np.linalg.inv(C)
-    w = np.einsum("nab,nb->na", Ci, r)
-    f = float(np.mean(logdet + np.einsum("na,na->n", r, w)))
-    G = Ci - w[:, :, None] * w[:, None, :]  # ∂/∂C_i of log det C_i + rᵀC_i⁻¹r
-    grad = np.concatenate([np.mean(np.einsum("naa->na", G), axis=0), [float(np.mean(np.sum(G * M, axis=(1, 2)))) / m_scale]])
-    return f, grad
-
-
-def likelihood_estimate(r: np.ndarray, M: np.ndarray, floor: float) -> tuple[np.ndarray, float, dict]:
-    """(σ, κ, info): Gaussian maximum likelihood over σ ≥ floor, κ ≥ 0 (coordinates pre-scaled, r ~ 1)."""
-    from scipy.optimize import minimize
-
-    n = r.shape[1]
-    sigma0, kappa0 = moment_estimate(r, M)
-    m_scale = float(np.mean(np.trace(M, axis1=1, axis2=2))) / n
-    m_scale = m_scale if m_scale > 0 else 1.0
-    var = np.mean(r * r, axis=0)
-    # start inside the domain: each σ at least half its coordinate's residual variance not claimed by κM
-    x0 = np.concatenate([np.maximum(sigma0, np.maximum(0.5 * var, floor)), [kappa0 * m_scale]])
-    f0, _ = _nll(x0, r, M, m_scale)
-    bounds = [(floor, None)] * n + [(0.0, None)]
-    res = minimize(_nll, x0, args=(r, M, m_scale), jac=True, method="L-BFGS-B", bounds=bounds,
-                   options={"maxiter": 500, "ftol": 1e-13, "gtol": 1e-9})
-    if not np.all(np.isfinite(res.x)) or not np.isfinite(res.fun):
-        raise SolverError(f"(Σ, κ) likelihood: L-BFGS-B returned a non-finite point ({res.message})", status="failed")
-    x = res.x if res.fun <= f0 else x0
-    info = {
-        "sigma_kappa_status": str(res.message),
-        "sigma_kappa_iterations": int(res.nit),
-        "sigma_kappa_nll": float(min(res.fun, f0)),
-        "sigma_kappa_moment_kappa": float(kappa0),
-    }
-    if res.fun > f0:  # never worse than the start; recorded, not silent
-        info["sigma_kappa_fallback"] = "moment start (L-BFGS-B did not improve it)"
-    return x[:n], float(x[n] / m_scale), info
 
 
 # --- the estimator -----------------------------------------------------------------------------
@@ -145,6 +76,7 @@ class FeasibleGLS:
 
     pilot: str = "wls"
     covariance_model: str = "likelihood"  # "likelihood" | "moments"
+    sigma_structure: str = "full"  # "full" n×n Σ | "diagonal" (the likelihood model; "moments" is always diagonal)
     theta_ref: tuple | None = None  # (p,) fixed pilot θ
     sigma: tuple | None = None  # (n,) or (n, n) fixed sensor covariance Σ
     kappa: float | None = None  # fixed κ ≥ 0
@@ -159,6 +91,8 @@ class FeasibleGLS:
     def __post_init__(self) -> None:
         if self.pilot not in PILOTS:
             raise ConfigError(f"pilot: expected one of {PILOTS}, got {self.pilot!r}")
+        if self.sigma_structure not in SIGMA_STRUCTURES:
+            raise ConfigError(f"sigma_structure: expected one of {SIGMA_STRUCTURES}, got {self.sigma_structure!r}")
         if self.covariance_model not in COVARIANCE_MODELS:
             raise ConfigError(
                 f"covariance_model: expected one of {COVARIANCE_MODELS}, got {self.covariance_model!r}"
@@ -249,15 +183,19 @@ class FeasibleGLS:
         Mh = M / np.outer(scale, scale)
         if self.covariance_model == "moments":
             sig, kappa = moment_estimate(rh, Mh)
-            sig = np.maximum(sig, self.sigma_floor)
-            info["covariance_model"] = "moments"
-        else:
+            Sh = np.diag(np.maximum(sig, self.sigma_floor))
+            info.update(covariance_model="moments", sigma_structure="diagonal")
+        elif self.sigma_structure == "diagonal":
             sig, kappa, info = likelihood_estimate(rh, Mh, self.sigma_floor)
-            info["covariance_model"] = "likelihood"
-        # the share of the residual's second moment each part explains, in the scaled chart
+            Sh = np.diag(sig)
+            info.update(covariance_model="likelihood", sigma_structure="diagonal")
+        else:
+            Sh, kappa, info = full_likelihood_estimate(rh, Mh, self.sigma_floor)
+            info.update(covariance_model="likelihood", sigma_structure="full")
+        # the share of the residual's second moment κ M explains, in the scaled chart
         total = float(np.sum(rh * rh))
         info["kappa_share"] = float(kappa * np.einsum("naa->", Mh) / total) if total > 0 else 0.0
-        return np.diag(sig * scale**2), kappa, info
+        return Sh * np.outer(scale, scale), kappa, info
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
         sensor = problem.in_sensor_chart()
