@@ -38,8 +38,8 @@ import numpy as np
 from dualid.errors import ConfigError, MetricError, SolverError
 from dualid.estimators.base import check_identifiable, freeze_options
 from dualid.estimators.covariance_model import full_likelihood_estimate, likelihood_estimate, moment_estimate
-from dualid.estimators.guards import DEFAULT_BOUND, guard_info
 from dualid.estimators.least_squares import OLS, WLS, fit_quadratic, residual_covariance
+from dualid.estimators.metric_guard import DEFAULT_BOUND, given_reference, reference_guard
 from dualid.estimators.result import IdentificationResult
 from dualid.estimators.statistics import statistics
 from dualid.problem import IdentificationProblem
@@ -82,6 +82,7 @@ class FeasibleGLS:
     kappa: float | None = None  # fixed κ ≥ 0
     sigma_floor: float = 1e-9  # σ_a ≥ floor × (coordinate a's residual variance), keeps C_i ≻ 0
     guard_bound: float = DEFAULT_BOUND  # metric guard against M_i(θ_ref) (dualid.estimators.guards)
+    guard_reference: tuple | None = None  # (p,) guard against this θ (e.g. a prior) instead of the pilot
     constrained: bool = True
     solver: str = "newton"  # "newton" (dualid's interior point, constant metric) or a cvxpy solver
     solver_options: tuple | None = None  # newton: tol, max_iter; cvxpy: its options (a dict or pairs)
@@ -98,6 +99,7 @@ class FeasibleGLS:
                 f"covariance_model: expected one of {COVARIANCE_MODELS}, got {self.covariance_model!r}"
             )
         object.__setattr__(self, "theta_ref", _as_tuple(self.theta_ref, "theta_ref", 1))
+        object.__setattr__(self, "guard_reference", _as_tuple(self.guard_reference, "guard_reference", 1))
         if self.sigma is not None:
             s = np.asarray(self.sigma, dtype=float)
             if s.ndim == 1:
@@ -218,12 +220,12 @@ class FeasibleGLS:
         )
         result = fit_weighted(sensor, C, self.name, self._common(), info,
                               what=f"the residual covariance Σ + κ M_i(θ_ref) (κ = {kappa:.3g})")
-        if theta_ref is not None:
-            try:
-                guard = guard_info(sensor, result.theta, theta_ref, self.guard_bound, f"pilot ({pilot})")
-            except MetricError as exc:  # no reference to measure against: recorded, and not certified
-                guard = {"degenerate": True, "metric_guard_error": str(exc)}
-            result = dataclasses.replace(result, info={**result.info, **guard})
+        ref = given_reference(sensor, self.guard_reference, "FeasibleGLS")
+        label = "given guard_reference" if ref is not None else f"pilot ({pilot})"
+        ref = theta_ref if ref is None else ref
+        guard = reference_guard(sensor, result.theta, ref, label if ref is not None else "no pilot (Σ, κ = 0 given)",
+                                self.guard_bound)
+        result = dataclasses.replace(result, info={**result.info, **guard})
         return result
 
 
