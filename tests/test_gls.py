@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from dualid import WLS
 from dualid.errors import ConfigError, DataError, DualidError
-from dualid.estimators.gls import FeasibleGLS, likelihood_estimate, moment_estimate
+from dualid.estimators.gls import FeasibleGLS, full_likelihood_estimate, likelihood_estimate, moment_estimate
 from dualid.problem import build_problem
 from dualid.systems import pan_tilt
 from tests.factories import drag_problem, random_chart
@@ -167,6 +167,42 @@ def test_sigma_kappa_are_recovered_from_residuals_with_that_covariance(kappa):
     assert k_mm == pytest.approx(kappa, abs=0.2 + 0.2 * kappa)
 
 
+@pytest.mark.parametrize("kappa", [0.0, 0.5, 3.0])
+def test_full_sigma_and_kappa_are_recovered_by_maximum_likelihood(kappa):
+    rng = np.random.default_rng(7)
+    N, n = 4000, 3
+    A = rng.normal(size=(N, n, n))
+    M = A @ np.swapaxes(A, 1, 2) / n + 0.1 * np.eye(n)
+    R = rng.normal(size=(n, n))
+    sigma = R @ R.T / n + 0.2 * np.eye(n)  # correlated sensor covariance
+    C = kappa * M + sigma
+    r = np.einsum("nab,nb->na", np.linalg.cholesky(C), rng.normal(size=(N, n)))
+    S, k, info = full_likelihood_estimate(r, M, 1e-9)
+    np.testing.assert_allclose(S, sigma, atol=0.1 + 0.05 * kappa)
+    assert k == pytest.approx(kappa, abs=0.1 + 0.1 * kappa)
+    assert np.allclose(S, S.T) and np.linalg.eigvalsh(S)[0] > 0
+    # never below the κ = 0 model (the sample covariance), which is one of its starts
+    assert info["sigma_kappa_nll"] <= info["sigma_kappa_kappa0"]["nll"] + 1e-12
+    # the diagonal model cannot represent the correlation: it recovers neither Σ's off-diagonal nor κ as well
+    s_d, k_d, _ = likelihood_estimate(r, M, 1e-9)
+    assert np.max(np.abs(S - sigma)) < np.max(np.abs(np.diag(s_d) - sigma))
+
+
+def test_full_sigma_is_the_default_and_carries_the_correlation_of_the_residuals():
+    """Joint-correlated sensor noise: the default full Σ̂ has the correlation, the diagonal model none."""
+    rng = np.random.default_rng(8)
+    problem, _ = drag_problem(rng, N=400, n=3, noise=0.0)
+    Lc = np.array([[1.0, 0, 0], [0.9, 0.4, 0], [0.5, -0.3, 0.2]])
+    noisy = type(problem)(problem.Y, problem.tau + rng.normal(size=(400, 3)) @ Lc.T * 0.05, problem.metric,
+                          problem.v, problem.parameters)
+    res = FeasibleGLS().fit(noisy)
+    assert res.info["sigma_structure"] == "full"
+    S = np.array(res.info["sigma"])
+    assert abs(S[0, 1]) > 0.3 * np.sqrt(S[0, 0] * S[1, 1])  # the correlation is in the model
+    diag = FeasibleGLS(sigma_structure="diagonal").fit(noisy)
+    assert diag.info["sigma_structure"] == "diagonal" and np.count_nonzero(np.array(diag.info["sigma"]) - np.diag(diag.info["sigma_diag"])) == 0
+
+
 # --- value type and errors -------------------------------------------------------------------
 def test_estimator_is_a_hashable_value():
     a = FeasibleGLS(sigma=np.array([1.0, 2.0]), kappa=0, solver_options={"max_iter": 50})
@@ -180,6 +216,7 @@ def test_estimator_is_a_hashable_value():
     [
         ({"pilot": "nls"}, "pilot"),
         ({"covariance_model": "ml"}, "covariance_model"),
+        ({"sigma_structure": "block"}, "sigma_structure"),
         ({"sigma": [1.0, 1.0], "kappa": -1.0}, "kappa"),
         ({"sigma": [1.0, 1.0], "kappa": float("nan")}, "kappa"),
         ({"sigma": [1.0, 1.0], "kappa": True}, "kappa"),

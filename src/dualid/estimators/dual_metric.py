@@ -10,7 +10,7 @@ and the physical-consistency constraints. All N blocks are one batched PSD const
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -25,6 +25,7 @@ from dualid.estimators.base import (
     parameter_scale,
     solve_cvxpy,
 )
+from dualid.estimators.metric_guard import DEFAULT_BOUND, check_guard_options, given_reference, reference_guard
 from dualid.estimators.newton import fit_dual_metric_newton
 from dualid.estimators.result import IdentificationResult
 from dualid.model.consistency import cvxpy_constraints
@@ -219,6 +220,9 @@ class DualMetric:
     tol: float | None = None
     max_iter: int | None = None
     fallback: tuple[str, ...] = ("sdp",)
+    # metric guard in every result (estimators.guards): against this θ_ref, else against a WLS fit
+    guard_reference: tuple | None = field(default=None, kw_only=True)
+    guard_bound: float = field(default=DEFAULT_BOUND, kw_only=True)
     name = "dual_metric"
 
     def __post_init__(self) -> None:
@@ -250,6 +254,9 @@ class DualMetric:
             unknown = sorted(set(options) - set(NEWTON_OPTIONS))
             if unknown:
                 raise SolverOptionError(f"solver_options: the Newton solver accepts {NEWTON_OPTIONS}, got {unknown}")
+        ref, bound = check_guard_options(self.guard_reference, self.guard_bound, "DualMetric")
+        object.__setattr__(self, "guard_reference", ref)
+        object.__setattr__(self, "guard_bound", bound)
         both = [k for k in ("tol", "max_iter") if k in options and getattr(self, k) is not None]
         if both:
             raise SolverOptionError(f"{both[0]}: given both as an argument and in solver_options; give it once")
@@ -279,6 +286,21 @@ class DualMetric:
                                    solver_options=options or None, method=self.name)
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
+        """The fit (``_solve``), with the metric guard against guard_reference or a WLS fit in its info."""
+        result = self._solve(problem)
+        ref, label = given_reference(problem, self.guard_reference, "DualMetric"), "given guard_reference"
+        if ref is None:
+            from dualid.estimators.least_squares import WLS
+
+            try:
+                ref = WLS(constrained=self.constrained, allow_unidentifiable=True).fit(problem).theta
+                label = "wls fit"
+            except SolverError as exc:  # recorded: the fit is then not certified
+                label = f"the WLS reference failed: {str(exc)[:160]}"
+        guard = reference_guard(problem, result.theta, ref, label, self.guard_bound)
+        return replace(result, info={**result.info, **guard})
+
+    def _solve(self, problem: IdentificationProblem) -> IdentificationResult:
         if not self.allow_unidentifiable:
             check_identifiable(problem)
         chain, failures, inaccurate = self._chain(), [], None

@@ -25,7 +25,7 @@ import numpy as np
 from dualid.errors import ConfigError, MetricError
 from dualid.estimators.base import freeze_options
 from dualid.estimators.gls import PILOTS, FeasibleGLS, fit_weighted
-from dualid.estimators.guards import DEFAULT_BOUND, guard_info
+from dualid.estimators.metric_guard import DEFAULT_BOUND, guard_info
 from dualid.problem import IdentificationProblem
 
 

@@ -7,8 +7,9 @@ the samples), so the conic problem handed to the solver has the size of θ, not 
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,7 @@ from dualid.estimators.base import (
     parameter_scale,
     solve_cvxpy,
 )
+from dualid.estimators.metric_guard import DEFAULT_BOUND, check_guard_options, given_reference, reference_guard
 from dualid.estimators.result import IdentificationResult
 from dualid.estimators.statistics import Statistics, energy_statistics, statistics
 from dualid.linalg import gram_eigh, gram_rank
@@ -168,15 +170,34 @@ class _Common:
     solver: str = "CLARABEL"  # or "SCS"
     solver_options: Mapping[str, Any] | None = None
     allow_unidentifiable: bool = False  # accept one minimiser when the data do not determine θ
+    # metric guard recorded in every result (estimators.guards): against this θ_ref (e.g. a prior), else the
+    # estimator's own pilot or prior when it has one (WLS: its OLS fit; RegularizedWLS: θ₀)
+    guard_reference: tuple | None = field(default=None, kw_only=True)
+    guard_bound: float = field(default=DEFAULT_BOUND, kw_only=True)
 
     def __post_init__(self) -> None:
         name = type(self).__name__
+        ref, bound = check_guard_options(self.guard_reference, self.guard_bound, name)
+        object.__setattr__(self, "guard_reference", ref)
+        object.__setattr__(self, "guard_bound", bound)
         for flag in ("constrained", "allow_unidentifiable"):
             if not isinstance(getattr(self, flag), (bool, np.bool_)):
                 raise ConfigError(f"{name}: {flag} must be True or False, got {getattr(self, flag)!r}")
         if self.solver not in SOLVERS:
             raise ConfigError(f"{name}: solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
         object.__setattr__(self, "solver_options", freeze_options(self.solver_options, f"{name}: solver_options"))
+
+    def _guarded(self, result: IdentificationResult, problem: IdentificationProblem, own=None,
+                 own_label: str = "") -> IdentificationResult:
+        """result with the metric guard against guard_reference, else against ``own`` (a pilot or prior)."""
+        ref = given_reference(problem, self.guard_reference, type(self).__name__)
+        label = "given guard_reference"
+        if ref is None:
+            ref, label = own, own_label
+        if ref is None:
+            label = "no prior or pilot; give guard_reference"
+        guard = reference_guard(problem, result.theta, ref, label, self.guard_bound)
+        return dataclasses.replace(result, info={**result.info, **guard})
 
 
 @dataclass(frozen=True)
@@ -186,10 +207,10 @@ class OLS(_Common):
     name = "ols"
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
-        return fit_quadratic(
+        return self._guarded(fit_quadratic(
             problem, statistics(problem), method=self.name, constrained=self.constrained, solver=self.solver,
             solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
-        )
+        ), problem)
 
 
 def residual_covariance(problem: IdentificationProblem, theta: np.ndarray, floor: float = 1e-9) -> np.ndarray:
@@ -207,9 +228,11 @@ def residual_covariance(problem: IdentificationProblem, theta: np.ndarray, floor
 
 def covariance_weight(problem: IdentificationProblem, covariance, reference: _Common) -> tuple[np.ndarray, dict]:
     """W = Σ̂⁻¹ from a given covariance, or from the residuals of OLS under the same constraints."""
+    theta_ols = None
     if covariance is None:
         ols = OLS(reference.constrained, reference.solver, reference.solver_options, reference.allow_unidentifiable)
-        covariance = residual_covariance(problem, ols.fit(problem).theta)
+        theta_ols = ols.fit(problem).theta
+        covariance = residual_covariance(problem, theta_ols)
         source = "ols residuals"
     else:
         covariance = np.asarray(covariance, dtype=float)
@@ -219,7 +242,7 @@ def covariance_weight(problem: IdentificationProblem, covariance, reference: _Co
                             f"{problem.n} coordinates, got {covariance.shape}")
     W = np.linalg.inv(covariance)
     return 0.5 * (W + W.T), {"covariance": source, "covariance_diag": covariance.diagonal().tolist(),
-                             "covariance_matrix": covariance.tolist()}
+                             "covariance_matrix": covariance.tolist(), "theta_ols": theta_ols}
 
 
 @dataclass(frozen=True)
@@ -235,11 +258,11 @@ class WLS(_Common):
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
         W, info = covariance_weight(problem, self.covariance, self)
-        return fit_quadratic(
+        return self._guarded(fit_quadratic(
             problem, statistics(problem, W), method=self.name, constrained=self.constrained, solver=self.solver,
             solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
             info={k: v for k, v in info.items() if k in ("covariance", "covariance_matrix")},
-        )
+        ), problem, info["theta_ols"], "pilot (ols)")
 
 
 @dataclass(frozen=True)
@@ -249,10 +272,10 @@ class EnergyLS(_Common):
     name = "energy"
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
-        return fit_quadratic(
+        return self._guarded(fit_quadratic(
             problem, energy_statistics(problem), method=self.name, constrained=self.constrained, solver=self.solver,
             solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
-        )
+        ), problem)
 
 
 @dataclass(frozen=True)
@@ -293,9 +316,9 @@ class RegularizedWLS(_Common):
         theta0 = check_nominal(problem.parameters, self.theta0, strict=True)
         W, info = covariance_weight(problem, self.covariance, self)
         gamma = float(self.gamma) * (problem.N * problem.n if self.per_equation else 1.0)
-        return fit_quadratic(
+        return self._guarded(fit_quadratic(
             problem, statistics(problem, W), method=self.name, constrained=self.constrained, solver=self.solver,
             solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
             regularizer=(self.regularizer, theta0, gamma),
             info={"covariance": info["covariance"], "covariance_matrix": info["covariance_matrix"], "gamma": gamma},
-        )
+        ), problem, theta0, "prior θ₀")
