@@ -19,15 +19,32 @@ from dualid.model.base import Kind, Model
 from dualid.model.metric import AffineMetric
 from dualid.model.parameters import ParameterSpace
 
+CHECK_CHUNK = 16384  # samples per block of the finiteness check and the column norms (no N-sized temporaries)
+
 
 def _frozen(a, name: str, shape: tuple) -> np.ndarray:
-    a = np.array(a, dtype=float)  # a private copy
+    """A read-only float array: a private copy, unless ``a`` is already a read-only float64 array (then it
+    is taken as it is, without copying: the caller gave up writing to it, see ``owned``)."""
+    a = np.asarray(a)
+    if a.dtype != np.float64 or a.flags.writeable:
+        a = np.array(a, dtype=float)  # a private copy
     if a.shape != shape:
         raise DataError(f"{name}: expected shape {shape}, got {a.shape}")
-    bad = ~np.isfinite(a)
-    if bad.any():
-        where = np.argwhere(bad)[0].tolist()
-        raise DataError(f"{name}: {int(bad.sum())} non-finite values (NaN or inf), first at index {where}")
+    counts = [int(np.count_nonzero(~np.isfinite(a[s : s + CHECK_CHUNK]))) for s in range(0, a.shape[0], CHECK_CHUNK)]
+    if any(counts):
+        start = CHECK_CHUNK * next(k for k, c in enumerate(counts) if c)
+        where = np.argwhere(~np.isfinite(a[start : start + CHECK_CHUNK]))[0]
+        where[0] += start
+        raise DataError(f"{name}: {sum(counts)} non-finite values (NaN or inf), first at index {where.tolist()}")
+    if a.flags.writeable:
+        a.setflags(write=False)
+    return a
+
+
+def owned(a: np.ndarray) -> np.ndarray:
+    """``a`` (a freshly made float64 array nobody else writes to) marked read-only, so that
+    IdentificationProblem takes it without a copy (at N = 10⁶ the Crazyflie's Y is 1.9 GB)."""
+    a = np.asarray(a, dtype=float)
     a.setflags(write=False)
     return a
 
@@ -143,11 +160,15 @@ class IdentificationProblem:
         """Rank and null space of the stacked regressor (columns scaled to unit norm first; the rank
         rule is dualid.linalg's)."""
         A = self.Y.reshape(-1, self.p)
-        scale = np.linalg.norm(A, axis=0)
+        scale = self.column_norms()
         scale[scale == 0] = 1.0
-        # SVD of the p×p Gram matrix's Cholesky-free square root: cheap for N·n ≫ p
+        # SVD of the R factor of a QR of the scaled regressor, accumulated over blocks of rows (TSQR:
+        # R = qr([R; A_block]), memory O(block·p)): cheap for N·n ≫ p and no copy of Y
         if A.shape[0] > 4 * self.p:
-            _, R = np.linalg.qr(A / scale, mode="reduced")
+            R = np.zeros((0, self.p))
+            rows = CHECK_CHUNK * self.n
+            for start in range(0, A.shape[0], rows):
+                R = np.linalg.qr(np.vstack([R, A[start : start + rows] / scale]), mode="r")
             _, s, Vt = np.linalg.svd(R)
         else:
             _, s, Vt = np.linalg.svd(A / scale, full_matrices=True)
@@ -169,12 +190,21 @@ class IdentificationProblem:
             names=self.parameters.names,
         )
 
+    def column_norms(self) -> np.ndarray:
+        """(p,) Euclidean norms of the stacked regressor's columns, accumulated over blocks of samples."""
+        sq = np.zeros(self.p)
+        for start in range(0, self.N, CHECK_CHUNK):
+            Yc = self.Y[start : start + CHECK_CHUNK].reshape(-1, self.p)
+            sq += np.einsum("kp,kp->p", Yc, Yc)
+        return np.sqrt(sq)
+
     # --- transformations --------------------------------------------------------------------
     def subset(self, idx) -> "IdentificationProblem":
         """The problem restricted to samples idx (indices, slice or boolean mask)."""
         idx = np.arange(self.N)[idx]
         return IdentificationProblem(
-            self.Y[idx], self.tau[idx], self.metric.take(idx), self.v[idx], self.parameters, self.kind, self.coordinates,
+            owned(self.Y[idx]), self.tau[idx], self.metric.take(idx), self.v[idx], self.parameters, self.kind,
+            self.coordinates,
             None if self.sensor_chart is None else self.sensor_chart[idx],
         )
 
@@ -189,7 +219,7 @@ class IdentificationProblem:
         Bt = np.swapaxes(B, 1, 2)
         v = np.linalg.solve(B, self.v[..., None])[..., 0]
         return IdentificationProblem(
-            Bt @ self.Y,
+            owned(Bt @ self.Y),
             (Bt @ self.tau[..., None])[..., 0],
             self.metric.pullback(B),
             v,
@@ -210,6 +240,8 @@ class IdentificationProblem:
     def concatenate(problems: list["IdentificationProblem"]) -> "IdentificationProblem":
         """Stack the samples of several problems (e.g. several runs) of the same system."""
         first = problems[0]
+        if len(problems) == 1:
+            return first
         for q in problems[1:]:
             if q.parameters != first.parameters or q.kind != first.kind or q.n != first.n:
                 raise DataError("concatenate: problems describe different systems (parameters, kind or n differ)")
@@ -220,7 +252,7 @@ class IdentificationProblem:
                 [q.sensor_chart if q.sensor_chart is not None else np.broadcast_to(eye, (q.N, q.n, q.n)) for q in problems]
             )
         return IdentificationProblem(
-            np.concatenate([q.Y for q in problems]),
+            owned(np.concatenate([q.Y for q in problems])),
             np.concatenate([q.tau for q in problems]),
             AffineMetric.concatenate([q.metric for q in problems]),
             np.concatenate([q.v for q in problems]),
@@ -249,7 +281,7 @@ def build_problem(model: Model, trajectories: list[Trajectory] | Trajectory) -> 
             )
         problems.append(
             IdentificationProblem(
-                Y=model.regressor(traj.q, traj.v, traj.a),
+                Y=owned(model.regressor(traj.q, traj.v, traj.a)),
                 tau=traj.tau,
                 metric=model.metric(traj.q),
                 v=traj.v,

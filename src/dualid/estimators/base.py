@@ -112,7 +112,7 @@ def check_nominal(parameters: ParameterSpace, theta0: np.ndarray, strict: bool) 
 
 def parameter_scale(problem: IdentificationProblem) -> np.ndarray:
     """Per-parameter scale s_k (θ = s ⊙ φ) so the solver sees unit-norm regressor columns."""
-    s = np.linalg.norm(problem.Y.reshape(-1, problem.p), axis=0)
+    s = problem.column_norms()  # blockwise: np.linalg.norm(axis=0) would square a copy of Y
     ok = s > 0
     s[ok] = 1.0 / s[ok]
     s[~ok] = 1.0

@@ -34,20 +34,18 @@ def statistics(problem: IdentificationProblem, W: np.ndarray | None = None, chun
     """H, g, c for a constant weight W (n, n) (None: identity), accumulated in chunks of samples."""
     p = problem.p
     H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
+    F = None
+    if W is not None:  # W = F Fᵀ (eigen-factor, W ⪰ 0): Σ Y_iᵀ W Y_i = Σ (Fᵀ Y_i)ᵀ (Fᵀ Y_i), one GEMM per chunk
+        lam, U = np.linalg.eigh(0.5 * (np.asarray(W, dtype=float) + np.asarray(W, dtype=float).T))
+        F = U * np.sqrt(np.clip(lam, 0.0, None))
     for start in range(0, problem.N, chunk):
-        Y = problem.Y[start : start + chunk].reshape(-1, p) if W is None else None
-        tau = problem.tau[start : start + chunk]
-        if W is None:
-            t = tau.reshape(-1)
-            H += Y.T @ Y
-            g += Y.T @ t
-            c += float(t @ t)
-        else:
-            Yc = problem.Y[start : start + chunk]
-            WY = np.einsum("ab,nbp->nap", W, Yc)
-            H += np.einsum("nap,naq->pq", Yc, WY)
-            g += np.einsum("nap,na->p", WY, tau)
-            c += float(np.einsum("na,ab,nb->", tau, W, tau))
+        Yc, tau = problem.Y[start : start + chunk], problem.tau[start : start + chunk]
+        if F is not None:
+            Yc, tau = np.matmul(F.T, Yc), tau @ F
+        A, t = Yc.reshape(-1, p), tau.reshape(-1)
+        H += A.T @ A
+        g += A.T @ t
+        c += float(t @ t)
     return Statistics(0.5 * (H + H.T), g, c, W)
 
 

@@ -18,6 +18,23 @@ from dualid.model.consistency import feasible_set
 from dualid.problem import IdentificationProblem
 
 
+def check_bounds(problem: IdentificationProblem, constrained: bool) -> None:
+    """SolverError (status infeasible) when some parameter's bounds admit no strictly feasible θ."""
+    if not constrained:
+        return
+    p = problem.p
+    lo = np.asarray(problem.parameters.lower if problem.parameters.lower is not None else [-np.inf] * p)
+    hi = np.asarray(problem.parameters.upper if problem.parameters.upper is not None else [np.inf] * p)
+    bad = np.flatnonzero(lo >= hi)
+    if len(bad):
+        k = int(bad[0])
+        raise SolverError(
+            f"dual-metric Newton: the bounds admit no strictly feasible θ: {problem.parameters.names[k]} has "
+            f"lower bound {lo[k]:g} ≥ upper bound {hi[k]:g}",
+            status="infeasible",
+        )
+
+
 def fit_dual_metric_newton(
     problem: IdentificationProblem,
     *,
@@ -40,17 +57,7 @@ def fit_dual_metric_newton(
     t0 = time.perf_counter()
     p = problem.p
     cons = feasible_set(problem.parameters, constrained)
-    if constrained:
-        lo = np.asarray(problem.parameters.lower if problem.parameters.lower is not None else [-np.inf] * p)
-        hi = np.asarray(problem.parameters.upper if problem.parameters.upper is not None else [np.inf] * p)
-        bad = np.flatnonzero(lo >= hi)
-        if len(bad):
-            k = int(bad[0])
-            raise SolverError(
-                f"dual-metric Newton: the bounds admit no strictly feasible θ: {problem.parameters.names[k]} has "
-                f"lower bound {lo[k]:g} ≥ upper bound {hi[k]:g}",
-                status="infeasible",
-            )
+    check_bounds(problem, constrained)
     warm, failed_warm = None, ""
     if warm_start_samples and problem.N > 4 * warm_start_samples:
         sub = problem.subset(slice(0, None, problem.N // warm_start_samples))
