@@ -55,7 +55,6 @@ def fit_dual_metric_newton(
     re-centred there at a small gap; 0 disables it.
     """
     t0 = time.perf_counter()
-    p = problem.p
     cons = feasible_set(problem.parameters, constrained)
     check_bounds(problem, constrained)
     warm, failed_warm = None, ""
