@@ -159,36 +159,12 @@ class IdentificationProblem:
     def identifiability(self) -> Identifiability:
         """Rank and null space of the stacked regressor (columns scaled to unit norm first; the rank
         rule is dualid.linalg's)."""
-        A = self.Y.reshape(-1, self.p)
-        scale = self.column_norms()
-        scale[scale == 0] = 1.0
-        # SVD of the R factor of a QR of the scaled regressor, accumulated over blocks of rows (TSQR:
-        # R = qr([R; A_block]), memory O(block·p)): cheap for N·n ≫ p and no copy of Y
-        if A.shape[0] > 4 * self.p:
-            R = np.zeros((0, self.p))
-            rows = CHECK_CHUNK * self.n
-            for start in range(0, A.shape[0], rows):
-                R = np.linalg.qr(np.vstack([R, A[start : start + rows] / scale]), mode="r")
-            _, s, Vt = np.linalg.svd(R)
-        else:
-            _, s, Vt = np.linalg.svd(A / scale, full_matrices=True)
-        s_full = np.zeros(self.p)
-        s_full[: len(s)] = s
-        rank = rank_from_singular_values(s_full)
-        null = Vt[rank:].T / scale[:, None]  # back to unscaled θ directions
-        if null.size:
-            null = null / np.linalg.norm(null, axis=0)
-        in_null = np.linalg.norm(null, axis=1) > 1e-6 if null.size else np.zeros(self.p, bool)
-        cond = float(s_full[0] / s_full[rank - 1]) if rank > 0 else float("inf")
-        return Identifiability(
-            rank=rank,
-            n_params=self.p,
-            condition_number=cond,
-            singular_values=s_full,
-            null_space=null,
-            unidentifiable=tuple(nm for nm, z in zip(self.parameters.names, in_null) if z),
-            names=self.parameters.names,
-        )
+        return identifiability_of(self)
+
+    def blocks(self):
+        """The problem's samples as in-memory blocks: this problem itself (a ChunkedProblem, see
+        dualid.streaming, yields one block per chunk of its source instead)."""
+        yield self
 
     def column_norms(self) -> np.ndarray:
         """(p,) Euclidean norms of the stacked regressor's columns, accumulated over blocks of samples."""
@@ -261,6 +237,54 @@ class IdentificationProblem:
             first.coordinates,
             charts,
         )
+
+
+def identifiability_of(problem) -> Identifiability:
+    """``problem.identifiability()`` for an IdentificationProblem or a ChunkedProblem: the SVD of the R factor of
+    a QR of the column-scaled regressor, accumulated over blocks of samples (TSQR: R = qr([R; A_block]), memory
+    O(block·p), no copy of Y), or of the regressor itself when it has at most 4p rows."""
+    p = problem.p
+    scale = problem.column_norms()
+    scale[scale == 0] = 1.0
+    if problem.N * problem.n > 4 * p:
+        R = np.zeros((0, p))
+        for block, rows, _ in sample_blocks(problem, CHECK_CHUNK):
+            R = np.linalg.qr(np.vstack([R, block.Y[rows].reshape(-1, p) / scale]), mode="r")
+        _, s, Vt = np.linalg.svd(R)
+    else:
+        A = np.concatenate([b.Y.reshape(-1, p) for b in problem.blocks()])
+        _, s, Vt = np.linalg.svd(A / scale, full_matrices=True)
+    s_full = np.zeros(p)
+    s_full[: len(s)] = s
+    rank = rank_from_singular_values(s_full)
+    null = Vt[rank:].T / scale[:, None]  # back to unscaled θ directions
+    if null.size:
+        null = null / np.linalg.norm(null, axis=0)
+    in_null = np.linalg.norm(null, axis=1) > 1e-6 if null.size else np.zeros(p, bool)
+    cond = float(s_full[0] / s_full[rank - 1]) if rank > 0 else float("inf")
+    names = problem.parameters.names
+    return Identifiability(
+        rank=rank,
+        n_params=p,
+        condition_number=cond,
+        singular_values=s_full,
+        null_space=null,
+        unidentifiable=tuple(nm for nm, z in zip(names, in_null) if z),
+        names=names,
+    )
+
+
+def sample_blocks(problem, chunk: int):
+    """(block, rows, offset) over every sample of ``problem`` (an IdentificationProblem or a ChunkedProblem):
+    ``block`` an in-memory IdentificationProblem, ``rows`` a slice of at most ``chunk`` of its samples, and
+    ``offset`` the index of the slice's first sample in the whole problem. The kernels that pass over the data
+    (statistics, the Newton derivatives) iterate this way, so they work on data that are never all in memory."""
+    offset = 0
+    for block in problem.blocks():
+        for start in range(0, block.N, chunk):
+            rows = slice(start, min(start + chunk, block.N))
+            yield block, rows, offset + start
+        offset += block.N
 
 
 def build_problem(model: Model, trajectories: list[Trajectory] | Trajectory) -> IdentificationProblem:

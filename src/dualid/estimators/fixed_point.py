@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dualid.errors import ConfigError, MetricError
+from dualid.errors import ConfigError, DataError, MetricError
 from dualid.estimators.base import freeze_options
 from dualid.estimators.gls import PILOTS, FeasibleGLS, fit_weighted
 from dualid.estimators.guards import DEFAULT_BOUND, guard_info
@@ -75,6 +75,9 @@ class BoundedFixedPoint:
         object.__setattr__(self, "solver_options", freeze_options(self.solver_options, "BoundedFixedPoint: solver_options"))
 
     def fit(self, problem: IdentificationProblem):
+        if not isinstance(problem, IdentificationProblem):
+            raise DataError(f"{self.name}: keeps a weight per sample between its iterations, so it needs the data in "
+                            f"memory (an IdentificationProblem), got {type(problem).__name__}")
         sensor = problem.in_sensor_chart()
         helper = FeasibleGLS(pilot=self.pilot, constrained=self.constrained, solver=self.solver,
                              solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable)
@@ -92,7 +95,7 @@ class BoundedFixedPoint:
         log_lam = np.zeros((N, n))
         U = np.broadcast_to(np.eye(n), (N, n, n)).copy()
 
-        def weight(rows):  # M̄_i = L_i U_i diag(λ_i) U_iᵀ L_iᵀ for a block of samples
+        def weight(block, rows):  # M̄_i = L_i U_i diag(λ_i) U_iᵀ L_iᵀ for a block of samples
             L = np.linalg.cholesky(sensor.metric.evaluate(theta_ref, rows))
             return _compose(L, np.exp(log_lam[rows]), U[rows])
 

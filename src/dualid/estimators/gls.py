@@ -274,14 +274,16 @@ class FeasibleGLS:
         rows = slice(0, None, step)
         M_some = r_some = None
         if theta_ref is not None:
-            M_some = sensor.metric.evaluate(theta_ref, rows)
-            r_some = sensor.Y[rows] @ theta_ref - sensor.tau[rows]
+            some = sensor if isinstance(sensor, IdentificationProblem) else sensor.subset(rows)  # streamed: collect
+            rows = rows if some is sensor else slice(None)
+            M_some = some.metric.evaluate(theta_ref, rows)
+            r_some = some.Y[rows] @ theta_ref - some.tau[rows]
         S, kappa, info = self.covariance(sensor, theta_ref, M_some, r_some)
         if step > 1:
             info["covariance_samples"] = len(range(sensor.N)[rows])
 
-        def C(rows):  # Σ + κ M_i(θ_ref) for a block of samples
-            return S[None] if kappa == 0 else S + kappa * sensor.metric.evaluate(theta_ref, rows)
+        def C(block, rows):  # Σ + κ M_i(θ_ref) for a block of samples
+            return S[None] if kappa == 0 else S + kappa * block.metric.evaluate(theta_ref, rows)
 
         info.update(
             pilot=pilot,
@@ -313,7 +315,7 @@ def fit_weighted(sensor: IdentificationProblem, C, method: str, common: dict, in
     whitening, C_i = L_i L_iᵀ, the per-sample chart B_i = L_i⁻ᵀ (r̃_i = L_i⁻¹ r_i), then OLS in
     ``least_squares.fit_quadratic``.
     """
-    weight = C if callable(C) else (lambda rows, C=np.asarray(C): C if C.shape[0] == 1 else C[rows])
+    weight = C if callable(C) else (lambda block, rows, C=np.asarray(C): C if C.shape[0] == 1 else C[rows])
     if common["solver"] == "newton":
         from dualid.estimators.newton import fit_dual_metric_newton
         from dualid.estimators.newton.weighted import fit_weighted_newton
@@ -325,7 +327,9 @@ def fit_weighted(sensor: IdentificationProblem, C, method: str, common: dict, in
             result = fit_weighted_newton(sensor, weight, constrained=common["constrained"], method=method,
                                          what=f"{method}: {what}", **common["solver_options"])
             if result is None:  # the materialised constant metric, with newton's own start and phase I
-                C = np.broadcast_to(weight(slice(None)), (sensor.N, sensor.n, sensor.n))
+                if not isinstance(sensor, IdentificationProblem):
+                    sensor = sensor.materialise()
+                C = np.broadcast_to(weight(sensor, slice(None)), (sensor.N, sensor.n, sensor.n))
                 np.linalg.cholesky(C)
                 const = dataclasses.replace(sensor, metric=AffineMetric(sensor.p, (), np.array(C)))
                 result = fit_dual_metric_newton(const, constrained=common["constrained"], method=method,
@@ -336,7 +340,9 @@ def fit_weighted(sensor: IdentificationProblem, C, method: str, common: dict, in
         except SolverError as exc:  # the same problem by cvxpy (whitened); recorded in the result
             info = {**info, "solver_fallback": f"CLARABEL after newton failed: {str(exc)[:200]}"}
             common = {**common, "solver": "CLARABEL", "solver_options": {}}
-    C = np.broadcast_to(weight(slice(None)), (sensor.N, sensor.n, sensor.n))
+    if not isinstance(sensor, IdentificationProblem):  # streamed: whitening needs every sample at once
+        sensor = sensor.materialise()
+    C = np.broadcast_to(weight(sensor, slice(None)), (sensor.N, sensor.n, sensor.n))
     try:
         L = np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 1, 2)))
     except np.linalg.LinAlgError as exc:

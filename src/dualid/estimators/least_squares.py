@@ -29,7 +29,7 @@ from dualid.estimators.result import IdentificationResult
 from dualid.estimators.statistics import Statistics, energy_statistics, statistics
 from dualid.linalg import gram_eigh, gram_rank
 from dualid.model.consistency import cvxpy_constraints, prior_blocks, pullback_metric, regularizer_value
-from dualid.problem import IdentificationProblem
+from dualid.problem import IdentificationProblem, sample_blocks
 
 
 def fit_quadratic(
@@ -198,8 +198,11 @@ def residual_covariance(problem: IdentificationProblem, theta: np.ndarray, floor
     The floor keeps W = Σ̂⁻¹ finite when a coordinate fits exactly (noiseless data, or a passive
     joint whose modelled torque is identically zero).
     """
-    r = problem.residual(theta)
-    S = r.T @ r / problem.N
+    S = np.zeros((problem.n, problem.n))
+    for block, rows, _ in sample_blocks(problem, 65536):
+        r = block.Y[rows] @ theta - block.tau[rows]
+        S += r.T @ r
+    S /= problem.N
     w, U = np.linalg.eigh(0.5 * (S + S.T))
     w = np.maximum(w, max(floor * np.trace(S) / problem.n, 1e-300))
     return (U * w) @ U.T

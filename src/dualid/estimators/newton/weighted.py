@@ -27,30 +27,34 @@ from dualid.estimators.newton.start import _central_point
 from dualid.estimators.result import IdentificationResult
 from dualid.estimators.statistics import energy_statistics
 from dualid.model.consistency import feasible_set
-from dualid.problem import IdentificationProblem
+from dualid.problem import IdentificationProblem, sample_blocks
 
-Weight = Callable[[slice], np.ndarray]  # rows → C_i (c, n, n), symmetric positive definite
+# (block, rows) → C_i (c, n, n) symmetric positive definite, for the samples ``rows`` of the in-memory ``block``
+# (see dualid.problem.sample_blocks; for an in-memory problem the block is the problem itself)
+Weight = Callable[[IdentificationProblem, slice], np.ndarray]
 
 
-def _whitened(problem: IdentificationProblem, weight: Weight, rows: slice, what: str):
+def _weight(weight: Weight, block: IdentificationProblem, rows: slice) -> np.ndarray:
+    return np.broadcast_to(weight(block, rows), (len(range(block.N)[rows]), block.n, block.n))
+
+
+def _whitened(problem, block: IdentificationProblem, weight: Weight, rows: slice, what: str):
     """(L_i⁻¹ Y_i (c, n, p), L_i⁻¹ τ_i (c, n)) for C_i = L_i L_iᵀ; MetricError if some C_i is not ≻ 0."""
-    C = np.broadcast_to(weight(rows), (problem.Y[rows].shape[0], problem.n, problem.n))
     try:
-        L = np.linalg.cholesky(C)
+        L = np.linalg.cholesky(_weight(weight, block, rows))
     except np.linalg.LinAlgError:
         L = None
     if L is None or not np.all(np.isfinite(L)):
         bad, low = 0, np.inf
-        for start in range(0, problem.N, 4096):  # the whole count, for the message
-            lam = np.linalg.eigvalsh(np.broadcast_to(weight(slice(start, start + 4096)),
-                                                     (min(4096, problem.N - start), problem.n, problem.n)))[:, 0]
+        for b, r, _ in sample_blocks(problem, 4096):  # the whole count, for the message
+            lam = np.linalg.eigvalsh(_weight(weight, b, r))[:, 0]
             bad, low = bad + int(np.sum(~(lam > 0))), min(low, float(lam.min()))
         raise MetricError(
             f"{what} must be positive definite at every sample, but it is not at {bad} of {problem.N} samples "
             f"(smallest eigenvalue {low:.3g}); give a positive-definite Σ or a pilot with a positive-definite metric"
         )
     Li = _tri_inverse(L)
-    return np.matmul(Li, problem.Y[rows]), np.einsum("cab,cb->ca", Li, problem.tau[rows])
+    return np.matmul(Li, block.Y[rows]), np.einsum("cab,cb->ca", Li, block.tau[rows])
 
 
 def weighted_statistics(problem: IdentificationProblem, weight: Weight, chunk: int = 4096,
@@ -58,8 +62,8 @@ def weighted_statistics(problem: IdentificationProblem, weight: Weight, chunk: i
     """(H, g, c) = Σ Y_iᵀC_i⁻¹Y_i, Σ Y_iᵀC_i⁻¹τ_i, Σ τ_iᵀC_i⁻¹τ_i accumulated over chunks of samples."""
     p = problem.p
     H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
-    for start in range(0, problem.N, chunk):
-        Z, z = _whitened(problem, weight, slice(start, start + chunk), what)
+    for block, rows, _ in sample_blocks(problem, chunk):
+        Z, z = _whitened(problem, block, weight, rows, what)
         Z2, z1 = Z.reshape(-1, p), z.reshape(-1)
         H += Z2.T @ Z2
         g += Z2.T @ z1
@@ -70,8 +74,8 @@ def weighted_statistics(problem: IdentificationProblem, weight: Weight, chunk: i
 def weighted_objective(problem: IdentificationProblem, weight: Weight, theta: np.ndarray, chunk: int = 4096) -> float:
     """Σ r_iᵀ C_i⁻¹ r_i from the residuals (no cancellation, unlike θᵀHθ − 2gᵀθ + c)."""
     f = 0.0
-    for start in range(0, problem.N, chunk):
-        Z, z = _whitened(problem, weight, slice(start, start + chunk), "the weight")
+    for block, rows, _ in sample_blocks(problem, chunk):
+        Z, z = _whitened(problem, block, weight, rows, "the weight")
         e = Z @ theta - z
         f += float(np.sum(e * e))
     return f
