@@ -55,8 +55,9 @@ def check_covariance(covariance, who: str) -> tuple[tuple[float, ...], ...] | No
 
 
 def is_problem_property(exc: SolverError) -> bool:
-    """Infeasible or unbounded: a property of the problem, which another solver cannot change (no fallback)."""
-    return bool(exc.status) and ("infeasible" in exc.status or "unbounded" in exc.status)
+    """Infeasible, unbounded or an optimum at infinity: a property of the problem, which another solver cannot
+    change (no fallback)."""
+    return bool(exc.status) and any(s in exc.status for s in ("infeasible", "unbounded", "at_infinity"))
 
 
 @contextmanager

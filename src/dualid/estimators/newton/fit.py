@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 
-from dualid.errors import SolverError
+from dualid.errors import OptimumAtInfinityWarning, SolverError
 from dualid.estimators.newton.interior_point import _interior_point
 from dualid.estimators.newton.objective import (
     _NotPositiveDefinite,
@@ -85,6 +86,15 @@ def fit_dual_metric_newton(
         start = failed_warm + start
     f = info.pop("objective")
     info["start"] = start
+    if info.get("optimum_at_infinity"):
+        d = info.pop("diverging_direction")
+        names = problem.parameters.names
+        top = [k for k in np.argsort(-np.abs(d))[:4] if abs(d[k]) > 1e-3]
+        info["diverging_direction"] = " ".join(f"{d[k]:+.3f}·{names[k]}" for k in top)
+        warnings.warn(OptimumAtInfinityWarning(
+            f"{method}: the objective was still decreasing as θ grew without bound along {info['diverging_direction']} "
+            f"(|θ| grew {info['theta_norm_growth']:.3g}× over the last {info['diverging_steps']} iterations): the "
+            "infimum is at infinity and θ̂ is where the solver stopped; bound or fix these parameters"), stacklevel=2)
     return IdentificationResult(
         method, theta, problem.parameters, f, "optimal", "newton", time.perf_counter() - t0, info["iterations"],
         constrained, info,
