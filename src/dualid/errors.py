@@ -60,10 +60,6 @@ class DualidWarning(UserWarning):
     from dq/dt, the same log for training and testing); the fit goes on and the report records it."""
 
 
-class DualidWarning(UserWarning):
-    """Base class of dualid's warnings (recorded in a result's info, e.g. ``solver_warnings``)."""
-
-
 class OptimumAtInfinityWarning(DualidWarning):
     """The objective's infimum is approached as θ grows without bound: the returned θ̂ is where the solver
     stopped on that ray, not a minimiser (``result.info["optimum_at_infinity"]``)."""
