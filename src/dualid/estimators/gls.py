@@ -46,7 +46,7 @@ from dualid.problem import IdentificationProblem
 PILOTS = ("wls", "ols", "dm-paper")
 SOLVERS = ("newton", "CLARABEL", "SCS")
 COVARIANCE_MODELS = ("likelihood", "moments")
-COVARIANCE_SAMPLES = 200_000  # (Σ, κ) are estimated from at most this many evenly strided samples
+COVARIANCE_SAMPLES = 100_000  # (Σ, κ) are estimated from at most this many evenly strided samples
 
 
 def _as_tuple(x, name: str, ndim: int) -> tuple | None:

@@ -54,7 +54,12 @@ def fit_quadratic(
     if regularizer is None and not allow_unidentifiable:
         check_identifiable(problem, rank=rank, what=f"{method} weighted regressor")
 
-    s = parameter_scale(problem)
+    if stats.W is None and not stats.energy:  # H = Σ YᵀY: its diagonal holds the squared column norms (no pass)
+        s = np.sqrt(np.clip(np.diag(stats.H), 0.0, None))
+        s[s > 0] = 1.0 / s[s > 0]
+        s[s == 0] = 1.0
+    else:
+        s = parameter_scale(problem)
     Hs = s[:, None] * stats.H * s[None, :]
     gs = s * stats.g
 

@@ -25,7 +25,6 @@ from dualid.estimators.newton.linalg import _solve_psd
 from dualid.estimators.newton.objective import _Derivatives, _tri_inverse
 from dualid.estimators.newton.start import _central_point
 from dualid.estimators.result import IdentificationResult
-from dualid.estimators.statistics import energy_statistics
 from dualid.model.consistency import feasible_set
 from dualid.problem import IdentificationProblem, sample_blocks
 
@@ -58,16 +57,24 @@ def _whitened(problem, block: IdentificationProblem, weight: Weight, rows: slice
 
 
 def weighted_statistics(problem: IdentificationProblem, weight: Weight, chunk: int = 4096,
-                        what: str = "the weight's covariance") -> tuple[np.ndarray, np.ndarray, float]:
-    """(H, g, c) = Σ Y_iᵀC_i⁻¹Y_i, Σ Y_iᵀC_i⁻¹τ_i, Σ τ_iᵀC_i⁻¹τ_i accumulated over chunks of samples."""
+                        what: str = "the weight's covariance", energy: bool = False):
+    """(H, g, c) = Σ Y_iᵀC_i⁻¹Y_i, Σ Y_iᵀC_i⁻¹τ_i, Σ τ_iᵀC_i⁻¹τ_i accumulated over chunks of samples; with
+    energy=True also (H_e, g_e) of the energy residual v_iᵀ r_i, from the same pass."""
     p = problem.p
     H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
+    He, ge = np.zeros((p, p)), np.zeros(p)
     for block, rows, _ in sample_blocks(problem, chunk):
+        if energy:
+            e = np.einsum("nap,na->np", block.Y[rows], block.v[rows])
+            He += e.T @ e
+            ge += e.T @ np.einsum("na,na->n", block.tau[rows], block.v[rows])
         Z, z = _whitened(problem, block, weight, rows, what)
         Z2, z1 = Z.reshape(-1, p), z.reshape(-1)
         H += Z2.T @ Z2
         g += Z2.T @ z1
         c += float(z1 @ z1)
+    if energy:
+        return 0.5 * (H + H.T), g, c, He, ge
     return 0.5 * (H + H.T), g, c
 
 
@@ -101,7 +108,7 @@ def fit_weighted_newton(
     t0 = time.perf_counter()
     check_bounds(problem, constrained)
     cons = feasible_set(problem.parameters, constrained)
-    H, g, c = weighted_statistics(problem, weight, chunk, what)
+    H, g, c, H_e, g_e = weighted_statistics(problem, weight, chunk, what, energy=True)
     theta_f = _solve_psd(H, g, rtol=1e-10)  # the unconstrained weighted LS (min-norm): the frozen-metric LS
     f_min = max(c - 2.0 * float(g @ theta_f) + float(theta_f @ H @ theta_f), 0.0)
 
@@ -115,8 +122,7 @@ def fit_weighted_newton(
         return _Derivatives(f_of(th), 2.0 * (H @ th - g), 2.0 * H)
 
     start = None
-    energy = energy_statistics(problem, chunk=chunk)
-    theta_c = _central_point(_solve_psd(energy.H, energy.g, rtol=1e-10), cons)
+    theta_c = _central_point(_solve_psd(H_e, g_e, rtol=1e-10), cons)
     if cons.margin(theta_c) > 0:  # as newton.start.starting_point with the energy seed; every θ is in the domain
         d = theta_f - theta_c
         beta = min(1.0, 0.9 * cons.max_step(theta_c, d))
