@@ -107,7 +107,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("benchmarks/large_n.md"))
     ap.add_argument("--methods", default=",".join(METHODS))
     ap.add_argument("--sizes", default=",".join(str(n) for n in SIZES))
-    ap.add_argument("--timeout", type=float, default=300.0)
+    ap.add_argument("--timeout", type=float, default=150.0, help="kill a run after this many seconds (recorded)")
     ap.add_argument("--force", action="store_true", help="overwrite --out and its .json")
     args = ap.parse_args()
     out_json = args.out.with_suffix(".json")

@@ -120,3 +120,31 @@ def test_fixed_point_needs_the_data_in_memory(data):
 
     with pytest.raises(DataError, match="keeps a weight per sample between its iterations, so it needs the data"):
         make_estimator("dm-bfp").fit(_chunked(data))
+
+
+def test_fit_stream_cli_prints_the_fit_and_its_passes(tmp_path):
+    import pandas as pd
+    from typer.testing import CliRunner
+
+    from dualid.cli import app
+    from tests.test_bad_inputs import URDF
+
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(URDF)
+    model = RigidBodyModel.from_urdf(urdf)
+    rng = np.random.default_rng(1)
+    N = 600
+    q = rng.uniform(-2, 2, size=(N, model.nq))
+    v, a = rng.normal(size=(N, model.nv)), rng.normal(size=(N, model.nv))
+    tau = model.regressor(q, v, a) @ model.nominal
+    cols = {f"q_{j}": q[:, j] for j in range(model.nq)}
+    for name, x in (("v", v), ("a", a), ("tau", tau)):
+        cols.update({f"{name}_{c}": x[:, k] for k, c in enumerate(model.coordinates)})
+    pd.DataFrame(cols).to_parquet(tmp_path / "run.parquet", index=False)
+    result = CliRunner().invoke(app, ["fit-stream", "--model", str(urdf), "--data", str(tmp_path / "run.parquet"),
+                                      "--method", "ols", "--chunk", "128", "--allow-unidentifiable"])
+    assert result.exit_code == 0, result.output
+    assert "ols: optimal" in result.output and "N = 600" in result.output and "passes over the data" in result.output
+    # exact data: link2's mass (0.5 kg in the URDF) comes back
+    line = next(ln for ln in result.output.splitlines() if ln.split() and ln.split()[0] == "Joint2.m")
+    assert abs(float(line.split()[1]) - 0.5) < 1e-6
