@@ -145,6 +145,7 @@ def test_fit_stream_cli_prints_the_fit_and_its_passes(tmp_path):
                                       "--method", "ols", "--chunk", "128", "--allow-unidentifiable"])
     assert result.exit_code == 0, result.output
     assert "ols: optimal" in result.output and "N = 600" in result.output and "passes over the data" in result.output
-    # exact data: link2's mass (0.5 kg in the URDF) comes back
-    line = next(ln for ln in result.output.splitlines() if ln.split() and ln.split()[0] == "Joint2.m")
-    assert abs(float(line.split()[1]) - 0.5) < 1e-6
+    # exact data (the masses alone are not identifiable here, so no parameter is checked): the fit is exact
+    objective = float(result.output.split("objective ")[1].split(",")[0])
+    assert objective < 1e-10 * float(np.sum(tau**2))
+    assert "Joint2.m" in result.output
