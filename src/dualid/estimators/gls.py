@@ -46,7 +46,8 @@ from dualid.problem import IdentificationProblem
 PILOTS = ("wls", "ols", "dm-paper")
 SOLVERS = ("newton", "CLARABEL", "SCS")
 COVARIANCE_MODELS = ("likelihood", "moments")
-COVARIANCE_SAMPLES = 100_000  # (Σ, κ) are estimated from at most this many evenly strided samples
+COVARIANCE_SAMPLES = 20_000  # (Σ, κ) (n + 1 numbers) from at most this many evenly strided samples: the likelihood
+# makes one pass over the samples it is given per L-BFGS iteration (recorded in info["covariance_samples"])
 
 
 def _as_tuple(x, name: str, ndim: int) -> tuple | None:
