@@ -1,6 +1,7 @@
 """The dual-metric objective whose infimum is at infinity (DFKI Joint1's mass): flagged, not silent."""
 
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -56,3 +57,17 @@ def test_a_pure_ray_with_no_floor_is_an_error_naming_the_cause():
     with pytest.raises(SolverError, match="the objective keeps decreasing while θ grows without bound") as info:
         DualMetric(solver="newton", allow_unidentifiable=True, max_iter=60).fit(problem)
     assert info.value.status == "optimum_at_infinity"
+
+
+@pytest.mark.skipif(not (Path(__file__).resolve().parents[1] / "examples" / "dfki" / "data").is_dir(),
+                    reason="the DFKI example data are not present")
+def test_dfki_joint1_mass_is_flagged_and_a_mass_bound_removes_the_flag():
+    from tests.test_newton_convergence import _dfki_problem
+
+    problem = _dfki_problem(mass_bound=None)
+    result = DualMetric(allow_unidentifiable=True, fallback=()).fit(problem)
+    assert result.info["optimum_at_infinity"] is True
+    assert result.info["diverging_direction"].startswith("+1.000·Joint1.m")
+    assert result.info["objective_pushed_out"] < result.objective  # lower still with Joint1.m ≥ 10× θ̂'s
+    bounded = DualMetric(allow_unidentifiable=True, fallback=()).fit(_dfki_problem(mass_bound=5.0))
+    assert bounded.info["optimum_at_infinity"] is False

@@ -12,6 +12,7 @@ from dualid.estimators.newton.interior_point import _interior_point
 from dualid.estimators.newton.objective import (
     _force_scale,
     _NotPositiveDefinite,
+    _objective,
     dual_metric_derivatives,
 )
 from dualid.estimators.newton.start import starting_point
@@ -21,6 +22,47 @@ from dualid.problem import IdentificationProblem
 
 WARM_TOL = 1e-8  # the subsample's tolerance (a tight one costs iterations on 50,000 samples, not passes over N) …
 WARM_GAP = 1e-6  # … and the duality gap (× f) the full problem's dual variables are re-centred at
+
+
+PUSH = 10.0  # the re-solve's lower bound: this many times the main components' values at θ̂
+
+
+def pushed_out(problem, theta, f, d, tol, max_iter, chunk) -> dict | None:
+    """Is f lower still farther out along the direction d the iterations ran off in? Re-solve from θ̂ with the
+    main components of d (those ≥ 5 % of its largest; e.g. Joint1's mass) bounded below at PUSH × their values
+    at θ̂: the other parameters may follow (on DFKI the second moments spend the consistency margin the mass
+    buys, so no fixed ray stays feasible). If that optimum is lower than f(θ̂) by more than the tolerance, the
+    infimum lies beyond θ̂: {"objective_pushed_out", "pushed_out_bound"}; else (or if it cannot be tested,
+    e.g. streamed data or a main component not growing away from 0) None."""
+    from dataclasses import replace
+
+    if not isinstance(problem, IdentificationProblem):
+        return None
+    main = np.flatnonzero(np.abs(d) >= 0.05 * np.abs(d).max())
+    if not np.all(d[main] * theta[main] > 0):  # only components growing away from zero in their own sign
+        return None
+    lower = np.asarray(problem.parameters.lower if problem.parameters.lower is not None else [-np.inf] * problem.p)
+    upper = np.asarray(problem.parameters.upper if problem.parameters.upper is not None else [np.inf] * problem.p)
+    lower, upper = lower.copy(), upper.copy()
+    target = PUSH * theta[main]
+    pos = target > 0
+    lower[main[pos]] = np.maximum(lower[main[pos]], target[pos])
+    upper[main[~pos]] = np.minimum(upper[main[~pos]], target[~pos])
+    if np.any(lower >= upper):
+        return None
+    pushed = replace(problem, parameters=problem.parameters.with_bounds(lower, upper))
+    cons = feasible_set(pushed.parameters, True)
+    start = theta.copy()
+    start[main] = PUSH * (1 + 1e-3) * theta[main]
+    if cons.margin(start) <= 0 or not np.isfinite(_objective(pushed, start, chunk)):
+        return None
+    try:
+        _, _, _, info = _interior_point(pushed, cons, start, None, None, tol, max_iter, chunk, False)
+    except (SolverError, _NotPositiveDefinite):
+        return None
+    if info["objective"] < f - 10 * tol * abs(f):
+        return {"objective_pushed_out": float(info["objective"]), "pushed_out_bound": float(PUSH)}
+    return None
 
 
 def check_bounds(problem: IdentificationProblem, constrained: bool) -> None:
@@ -96,14 +138,23 @@ def fit_dual_metric_newton(
         start = failed_warm + start
     f = info.pop("objective")
     info["start"] = start
+    candidate = info.pop("diverging_candidate", None)
+    if candidate is not None and constrained and not info.get("optimum_at_infinity"):
+        pushed = pushed_out(problem, theta, f, candidate, tol, max_iter, chunk)
+        if pushed is not None:
+            info.update(optimum_at_infinity=True, diverging_direction=candidate, **pushed)
     if info.get("optimum_at_infinity"):
         d = info.pop("diverging_direction")
         names = problem.parameters.names
         top = [k for k in np.argsort(-np.abs(d))[:4] if abs(d[k]) > 1e-3]
         info["diverging_direction"] = " ".join(f"{d[k]:+.3f}·{names[k]}" for k in top)
+        detail = f"|θ| grew {info['theta_norm_growth']:.3g}× over {info['diverging_steps']} aligned iterations"
+        if "objective_pushed_out" in info:
+            detail += (f"; with its main components bounded at {PUSH:g}× their values the optimum is lower still "
+                       f"({info['objective_pushed_out']:.10g} < {f:.10g})")
         warnings.warn(OptimumAtInfinityWarning(
             f"{method}: the objective was still decreasing as θ grew without bound along {info['diverging_direction']} "
-            f"(|θ| grew {info['theta_norm_growth']:.3g}× over the last {info['diverging_steps']} iterations): the "
+            f"({detail}): the "
             "infimum is at infinity and θ̂ is where the solver stopped; bound or fix these parameters"), stacklevel=2)
     return IdentificationResult(
         method, theta, problem.parameters, f, "optimal", "newton", time.perf_counter() - t0, info["iterations"],

@@ -46,6 +46,22 @@ def diverging_iterates(thetas: list[np.ndarray], f_history: list[float]) -> dict
     if keep and aligned and growing and falling:
         out.update(optimum_at_infinity=True, diverging_steps=k, theta_norm_growth=norms[-1] / max(norms[0], 1e-300),
                    diverging_direction=d[-1] / lengths[-1])
+        return out
+    # earlier in the run: ≥ 3 aligned steps (cosine ≥ 0.99) over which |θ| grew ≥ 2× — a candidate direction
+    # for the caller to test on the objective (``ray_decreases``): on the DFKI pendubot the mass runs 18 → 65 kg
+    # in 4 such steps, then its direction turns flat to the tolerance and the iteration converges there
+    d = [b - a for a, b in zip(thetas[:-1], thetas[1:])]
+    best, start = None, 0
+    for j in range(1, len(d) + 1):
+        if j == len(d) or not (float(d[j] @ d[j - 1]) >= 0.99 * np.linalg.norm(d[j]) * np.linalg.norm(d[j - 1]) > 0):
+            if j - start >= 3:
+                n0, n1 = float(np.linalg.norm(thetas[start])), float(np.linalg.norm(thetas[j]))
+                if n1 >= 2.0 * n0 and (best is None or n1 / max(n0, 1e-300) > best[0]):
+                    move = thetas[j] - thetas[start]
+                    best = (n1 / max(n0, 1e-300), move / np.linalg.norm(move), j - start)
+            start = j
+    if best is not None:
+        out.update(diverging_candidate=best[1], theta_norm_growth=best[0], diverging_steps=best[2])
     return out
 
 
