@@ -123,9 +123,16 @@ def main() -> None:
                "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "(default)")}
     runs = []
     with tempfile.TemporaryDirectory(prefix="dualid-large-n-") as tmp:
+        slow: set[str] = set()  # methods that timed out: not run at larger N (recorded)
         for N in sizes:
             for method in methods:
+                if method in slow:
+                    runs.append({"method": method, "N": N, "error": "skipped: timed out at a smaller N"})
+                    print(f"{method:18s} N={N:>9,}: skipped (timed out at a smaller N)", flush=True)
+                    continue
                 row = run_in_subprocess(method, N, Path(tmp), args.timeout)
+                if str(row.get("error", "")).startswith("timeout"):
+                    slow.add(method)
                 runs.append(row)
                 what = row.get("error") or f"{row['wall_time_s']:.2f} s, {row['peak_rss_GB']:.2f} GB"
                 print(f"{method:18s} N={N:>9,}: {what}", flush=True)

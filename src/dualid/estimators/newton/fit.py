@@ -21,6 +21,7 @@ from dualid.model.consistency import feasible_set
 from dualid.problem import IdentificationProblem
 
 WARM_TOL = 1e-8  # the subsample's tolerance (a tight one costs iterations on 50,000 samples, not passes over N) …
+MIN_WARM = 5_000  # smallest default warm-start subsample
 WARM_GAP = 1e-6  # … and the duality gap (× f) the full problem's dual variables are re-centred at
 
 
@@ -97,18 +98,22 @@ def fit_dual_metric_newton(
 
     tol: relative tolerance on f for (duality gap + squared Newton decrement of the Lagrangian);
     chunk: samples per pass (memory O(chunk·n·p)); raises SolverError after max_iter iterations.
-    warm_start_samples: when N > 4× this, first solve on an evenly strided subsample of about this
-    size (to WARM_TOL = 1e-8) and start the full problem from its θ, with the dual variables re-centred
-    there at a small gap (WARM_GAP = 1e-6 f) and the objective's scale from the subsample; 0 disables
-    it. On the benchmark Crazyflie at N = 300,000 this takes 3 passes over the data instead of 7 (the
-    earlier 1e-4 / 1e-3: 5 full iterations plus a scale pass), with the same objective to 12 digits.
+    warm_start_samples: when N > 4× this (or N ≥ 8 × MIN_WARM: then an eighth of the samples), first solve
+    on an evenly strided subsample of about this size (to WARM_TOL = 1e-8) and start the full problem
+    from its θ, with the dual variables re-centred there at a small gap (WARM_GAP = 1e-6 f) and the
+    objective's scale from the subsample; 0 disables it. On the benchmark Crazyflie at N = 300,000 this
+    takes 3 passes over the data instead of 7 (the earlier 1e-4 / 1e-3: 5 full iterations plus a scale
+    pass), with the same objective to 12 digits; at N = 100,000, 4.4 s instead of 8.0 s (cold).
     """
     t0 = time.perf_counter()
     cons = feasible_set(problem.parameters, constrained)
     check_bounds(problem, constrained)
     warm, failed_warm = None, ""
-    if warm_start_samples and problem.N > 4 * warm_start_samples:
-        sub = problem.subset(slice(0, None, problem.N // warm_start_samples))
+    # the subsample: warm_start_samples when N > 4× that; else an eighth of the data from 8 × MIN_WARM samples on
+    # (at N = 100,000 a 12,500-sample warm start saves about 6 of the 9 full passes)
+    m = warm_start_samples if problem.N > 4 * warm_start_samples else problem.N // 8
+    if warm_start_samples and m >= min(warm_start_samples, MIN_WARM) and problem.N > 4 * m:
+        sub = problem.subset(slice(0, None, problem.N // m))
         theta, start = starting_point(sub, cons, chunk)
         try:
             th, _, _, info_sub = _interior_point(sub, cons, theta, None, None, WARM_TOL, max_iter, chunk, verbose)
