@@ -204,7 +204,7 @@ def residual_covariance(problem: IdentificationProblem, theta: np.ndarray, floor
     joint whose modelled torque is identically zero).
     """
     S = np.zeros((problem.n, problem.n))
-    for block, rows, _ in sample_blocks(problem, 65536):
+    for block, rows, _ in sample_blocks(problem, 16384):
         r = block.Y[rows] @ theta - block.tau[rows]
         S += r.T @ r
     S /= problem.N

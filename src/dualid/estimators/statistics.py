@@ -23,7 +23,7 @@ class Statistics:
     def objective(self, problem: IdentificationProblem, theta: np.ndarray) -> float:
         """Σ r_iᵀ W_i r_i from the residuals (no cancellation, unlike θᵀHθ − 2gᵀθ + c)."""
         f = 0.0
-        for block, rows, _ in sample_blocks(problem, 65536):
+        for block, rows, _ in sample_blocks(problem, 16384):
             r = block.Y[rows] @ theta - block.tau[rows]
             if self.energy:
                 f += float(np.sum(np.einsum("na,na->n", block.v[rows], r) ** 2))
@@ -34,7 +34,7 @@ class Statistics:
         return f
 
 
-def statistics(problem: IdentificationProblem, W: np.ndarray | None = None, chunk: int = 65536) -> Statistics:
+def statistics(problem: IdentificationProblem, W: np.ndarray | None = None, chunk: int = 16384) -> Statistics:
     """H, g, c for a constant weight W (n, n) (None: identity), accumulated in chunks of samples."""
     p = problem.p
     H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
@@ -53,7 +53,7 @@ def statistics(problem: IdentificationProblem, W: np.ndarray | None = None, chun
     return Statistics(0.5 * (H + H.T), g, c, W)
 
 
-def energy_statistics(problem: IdentificationProblem, chunk: int = 65536) -> Statistics:
+def energy_statistics(problem: IdentificationProblem, chunk: int = 16384) -> Statistics:
     """W_i = v_i v_iᵀ: the rows e_i = Y_iᵀ v_i and targets v_iᵀ τ_i, accumulated in chunks of samples."""
     p = problem.p
     H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
