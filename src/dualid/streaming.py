@@ -110,7 +110,10 @@ class ParquetSource:
         import pyarrow.parquet as pq
 
         n, nq = len(self.coordinates), self.nq
-        for batch in pq.ParquetFile(self.path).iter_batches(batch_size=self.chunk, columns=self._columns()):
+        # pre_buffer=False: with it, pyarrow coalesces the reads of every row group the iterator will visit, i.e.
+        # holds the whole (compressed) file in memory (peak RSS 2.5 GB for a 1.7 GB file at N = 10⁷)
+        for batch in pq.ParquetFile(self.path, pre_buffer=False).iter_batches(batch_size=self.chunk,
+                                                                               columns=self._columns()):
             X = np.column_stack([batch.column(k).to_numpy(zero_copy_only=False) for k in range(batch.num_columns)])
             a = X[:, nq + n : nq + 2 * n] if self.has_a else None
             yield X[:, :nq], X[:, nq : nq + n], a, X[:, -n:]
