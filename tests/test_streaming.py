@@ -149,3 +149,14 @@ def test_fit_stream_cli_prints_the_fit_and_its_passes(tmp_path):
     objective = float(result.output.split("objective ")[1].split(",")[0])
     assert objective < 1e-10 * float(np.sum(tau**2))
     assert "Joint2.m" in result.output
+
+
+@pytest.mark.parametrize("key", ["logdet", "pullback"])
+def test_streamed_regularized_fit_equals_the_in_memory_fit(data, key):
+    model, _, whole = data
+    theta0 = model.nominal.copy()
+    theta0[0::10] += 0.05  # each body a little heavier: a strictly consistent prior
+    est = make_estimator(key, theta0=theta0, allow_unidentifiable=True)
+    a, b = est.fit(whole), est.fit(_chunked(data))
+    assert a.status == b.status == "optimal"
+    assert abs(b.objective - a.objective) <= 1e-8 * abs(a.objective)
