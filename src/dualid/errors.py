@@ -58,3 +58,8 @@ class SolverOptionError(ConfigError):
 class DualidWarning(UserWarning):
     """Something in the input that is probably wrong but not certainly (e.g. a logged velocity far
     from dq/dt, the same log for training and testing); the fit goes on and the report records it."""
+
+
+class OptimumAtInfinityWarning(DualidWarning):
+    """The objective's infimum is approached as θ grows without bound: the returned θ̂ is where the solver
+    stopped on that ray, not a minimiser (``result.info["optimum_at_infinity"]``)."""

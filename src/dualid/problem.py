@@ -19,15 +19,32 @@ from dualid.model.base import Kind, Model
 from dualid.model.metric import AffineMetric
 from dualid.model.parameters import ParameterSpace
 
+CHECK_CHUNK = 16384  # samples per block of the finiteness check and the column norms (no N-sized temporaries)
+
 
 def _frozen(a, name: str, shape: tuple) -> np.ndarray:
-    a = np.array(a, dtype=float)  # a private copy
+    """A read-only float array: a private copy, unless ``a`` is already a read-only float64 array (then it
+    is taken as it is, without copying: the caller gave up writing to it, see ``owned``)."""
+    a = np.asarray(a)
+    if a.dtype != np.float64 or a.flags.writeable:
+        a = np.array(a, dtype=float)  # a private copy
     if a.shape != shape:
         raise DataError(f"{name}: expected shape {shape}, got {a.shape}")
-    bad = ~np.isfinite(a)
-    if bad.any():
-        where = np.argwhere(bad)[0].tolist()
-        raise DataError(f"{name}: {int(bad.sum())} non-finite values (NaN or inf), first at index {where}")
+    counts = [int(np.count_nonzero(~np.isfinite(a[s : s + CHECK_CHUNK]))) for s in range(0, a.shape[0], CHECK_CHUNK)]
+    if any(counts):
+        start = CHECK_CHUNK * next(k for k, c in enumerate(counts) if c)
+        where = np.argwhere(~np.isfinite(a[start : start + CHECK_CHUNK]))[0]
+        where[0] += start
+        raise DataError(f"{name}: {sum(counts)} non-finite values (NaN or inf), first at index {where.tolist()}")
+    if a.flags.writeable:
+        a.setflags(write=False)
+    return a
+
+
+def owned(a: np.ndarray) -> np.ndarray:
+    """``a`` (a freshly made float64 array nobody else writes to) marked read-only, so that
+    IdentificationProblem takes it without a copy (at N = 10⁶ the Crazyflie's Y is 1.9 GB)."""
+    a = np.asarray(a, dtype=float)
     a.setflags(write=False)
     return a
 
@@ -108,15 +125,30 @@ class IdentificationProblem:
         return float(np.sum(z * z))
 
     def identifiability(self) -> Identifiability:
-        """Rank, null space and base parameters of the stacked regressor (dualid.identifiability)."""
-        return identifiability(self.Y.reshape(-1, self.p), self.parameters)
+        """Rank, null space and base parameters of the stacked regressor (dualid.identifiability), accumulated
+        over blocks of samples (``identifiability_of``)."""
+        return identifiability_of(self)
+
+    def blocks(self):
+        """The problem's samples as in-memory blocks: this problem itself (a ChunkedProblem, see
+        dualid.streaming, yields one block per chunk of its source instead)."""
+        yield self
+
+    def column_norms(self) -> np.ndarray:
+        """(p,) Euclidean norms of the stacked regressor's columns, accumulated over blocks of samples."""
+        sq = np.zeros(self.p)
+        for start in range(0, self.N, CHECK_CHUNK):
+            Yc = self.Y[start : start + CHECK_CHUNK].reshape(-1, self.p)
+            sq += np.einsum("kp,kp->p", Yc, Yc)
+        return np.sqrt(sq)
 
     # --- transformations --------------------------------------------------------------------
     def subset(self, idx) -> "IdentificationProblem":
         """The problem restricted to samples idx (indices, slice or boolean mask)."""
         idx = np.arange(self.N)[idx]
         return IdentificationProblem(
-            self.Y[idx], self.tau[idx], self.metric.take(idx), self.v[idx], self.parameters, self.kind, self.coordinates,
+            owned(self.Y[idx]), self.tau[idx], self.metric.take(idx), self.v[idx], self.parameters, self.kind,
+            self.coordinates,
             None if self.sensor_chart is None else self.sensor_chart[idx],
         )
 
@@ -131,7 +163,7 @@ class IdentificationProblem:
         Bt = np.swapaxes(B, 1, 2)
         v = np.linalg.solve(B, self.v[..., None])[..., 0]
         return IdentificationProblem(
-            Bt @ self.Y,
+            owned(Bt @ self.Y),
             (Bt @ self.tau[..., None])[..., 0],
             self.metric.pullback(B),
             v,
@@ -152,6 +184,8 @@ class IdentificationProblem:
     def concatenate(problems: list["IdentificationProblem"]) -> "IdentificationProblem":
         """Stack the samples of several problems (e.g. several runs) of the same system."""
         first = problems[0]
+        if len(problems) == 1:
+            return first
         for q in problems[1:]:
             if q.parameters != first.parameters or q.kind != first.kind or q.n != first.n:
                 raise DataError("concatenate: problems describe different systems (parameters, kind or n differ)")
@@ -162,7 +196,7 @@ class IdentificationProblem:
                 [q.sensor_chart if q.sensor_chart is not None else np.broadcast_to(eye, (q.N, q.n, q.n)) for q in problems]
             )
         return IdentificationProblem(
-            np.concatenate([q.Y for q in problems]),
+            owned(np.concatenate([q.Y for q in problems])),
             np.concatenate([q.tau for q in problems]),
             AffineMetric.concatenate([q.metric for q in problems]),
             np.concatenate([q.v for q in problems]),
@@ -171,6 +205,37 @@ class IdentificationProblem:
             first.coordinates,
             charts,
         )
+
+
+def identifiability_of(problem) -> Identifiability:
+    """``problem.identifiability()`` for an IdentificationProblem or a ChunkedProblem. With more than 4p rows the
+    stacked regressor A is replaced by its triangular factor R (AᵀA = RᵀR: same singular values, null space,
+    column norms and pivoted-QR regrouping), accumulated over blocks of samples (TSQR: R = qr([R; A_block]) on
+    column-scaled blocks, memory O(block·p), no copy of Y)."""
+    p = problem.p
+    if problem.N * problem.n > 4 * p:
+        scale = problem.column_norms()
+        scale[scale == 0] = 1.0
+        R = np.zeros((0, p))
+        for block, rows, _ in sample_blocks(problem, CHECK_CHUNK):
+            R = np.linalg.qr(np.vstack([R, block.Y[rows].reshape(-1, p) / scale]), mode="r")
+        A = R * scale  # the factor of the unscaled A
+    else:
+        A = np.concatenate([b.Y.reshape(-1, p) for b in problem.blocks()])
+    return identifiability(A, problem.parameters)
+
+
+def sample_blocks(problem, chunk: int):
+    """(block, rows, offset) over every sample of ``problem`` (an IdentificationProblem or a ChunkedProblem):
+    ``block`` an in-memory IdentificationProblem, ``rows`` a slice of at most ``chunk`` of its samples, and
+    ``offset`` the index of the slice's first sample in the whole problem. The kernels that pass over the data
+    (statistics, the Newton derivatives) iterate this way, so they work on data that are never all in memory."""
+    offset = 0
+    for block in problem.blocks():
+        for start in range(0, block.N, chunk):
+            rows = slice(start, min(start + chunk, block.N))
+            yield block, rows, offset + start
+        offset += block.N
 
 
 def build_problem(model: Model, trajectories: list[Trajectory] | Trajectory) -> IdentificationProblem:
@@ -191,7 +256,7 @@ def build_problem(model: Model, trajectories: list[Trajectory] | Trajectory) -> 
             )
         problems.append(
             IdentificationProblem(
-                Y=model.regressor(traj.q, traj.v, traj.a),
+                Y=owned(model.regressor(traj.q, traj.v, traj.a)),
                 tau=traj.tau,
                 metric=model.metric(traj.q),
                 v=traj.v,

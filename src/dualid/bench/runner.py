@@ -164,14 +164,14 @@ def build_problem(path: Path, N: int):
     from dualid.model.metric import AffineMetric, MetricTerm
     from dualid.model.parameters import rigid_body_space
     from dualid.model.rigid_body import spatial_inertia_basis
-    from dualid.problem import IdentificationProblem
+    from dualid.problem import IdentificationProblem, owned
 
     if N < 1:
         raise ConfigError(f"N: expected a positive number of samples, got {N}")
     data = np.load(path)
     count = data["Y"].shape[0]
     idx = np.arange(N) % count
-    Y = data["Y"][idx] if N > count else data["Y"][:N]  # (N, n, p)
+    Y = owned(data["Y"][idx] if N > count else data["Y"][:N])  # (N, n, p), taken by the problem without a copy
     tau = Y @ data["theta"]  # (N, n)
     rng = np.random.default_rng(N)
     tau += NOISE * np.abs(tau).mean(axis=0) * rng.normal(size=tau.shape)

@@ -55,8 +55,9 @@ def check_covariance(covariance, who: str) -> tuple[tuple[float, ...], ...] | No
 
 
 def is_problem_property(exc: SolverError) -> bool:
-    """Infeasible or unbounded: a property of the problem, which another solver cannot change (no fallback)."""
-    return bool(exc.status) and ("infeasible" in exc.status or "unbounded" in exc.status)
+    """Infeasible, unbounded or an optimum at infinity: a property of the problem, which another solver cannot
+    change (no fallback)."""
+    return bool(exc.status) and any(s in exc.status for s in ("infeasible", "unbounded", "at_infinity"))
 
 
 @contextmanager
@@ -112,7 +113,7 @@ def check_nominal(parameters: ParameterSpace, theta0: np.ndarray, strict: bool) 
 
 def parameter_scale(problem: IdentificationProblem) -> np.ndarray:
     """Per-parameter scale s_k (θ = s ⊙ φ) so the solver sees unit-norm regressor columns."""
-    s = np.linalg.norm(problem.Y.reshape(-1, problem.p), axis=0)
+    s = problem.column_norms()  # blockwise: np.linalg.norm(axis=0) would square a copy of Y
     ok = s > 0
     s[ok] = 1.0 / s[ok]
     s[~ok] = 1.0

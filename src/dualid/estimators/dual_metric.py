@@ -277,6 +277,8 @@ class DualMetric:
                 options["max_iter"] = self.max_iter
             return fit_dual_metric_newton(problem, constrained=self.constrained, method=self.name, **options)
         cvx_solver = _sdp_name(self, solver)
+        if not isinstance(problem, IdentificationProblem):  # streamed: the SDP needs every sample at once
+            problem = problem.materialise()
         if first and self.tol is not None:
             options.update({"tol_gap_abs": self.tol, "tol_gap_rel": self.tol, "tol_feas": self.tol}
                            if cvx_solver == "CLARABEL" else {"eps": self.tol})

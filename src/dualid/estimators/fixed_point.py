@@ -22,11 +22,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dualid.errors import ConfigError, MetricError
+from dualid.errors import ConfigError, DataError, MetricError
 from dualid.estimators.base import freeze_options
 from dualid.estimators.gls import PILOTS, FeasibleGLS, fit_weighted
 from dualid.estimators.metric_guard import DEFAULT_BOUND, guard_info
 from dualid.problem import IdentificationProblem
+
+CHUNK = 8192  # samples per block: the weight and the pencil are computed blockwise (no (N, n, n) temporaries)
 
 
 def _pencil(M_ref: np.ndarray, M: np.ndarray):
@@ -73,34 +75,50 @@ class BoundedFixedPoint:
         object.__setattr__(self, "solver_options", freeze_options(self.solver_options, "BoundedFixedPoint: solver_options"))
 
     def fit(self, problem: IdentificationProblem):
+        if not isinstance(problem, IdentificationProblem):
+            raise DataError(f"{self.name}: keeps a weight per sample between its iterations, so it needs the data in "
+                            f"memory (an IdentificationProblem), got {type(problem).__name__}")
         sensor = problem.in_sensor_chart()
         helper = FeasibleGLS(pilot=self.pilot, constrained=self.constrained, solver=self.solver,
                              solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable)
         common = helper._common()
         theta_ref, pilot = helper.reference(sensor)
-        M_ref = sensor.metric.evaluate(theta_ref)
-        try:
-            L, _, _ = _pencil(M_ref, M_ref)
-        except np.linalg.LinAlgError as exc:
-            raise MetricError(f"{self.name}: the pilot's metric M_i(θ_ref) is not positive definite") from exc
+        chunk = CHUNK
+        N, n = sensor.N, sensor.n
+        for start in range(0, N, chunk):  # M_i(θ_ref) ≻ 0 everywhere (the pencil's reference)
+            try:
+                np.linalg.cholesky(sensor.metric.evaluate(theta_ref, slice(start, start + chunk)))
+            except np.linalg.LinAlgError as exc:
+                raise MetricError(f"{self.name}: the pilot's metric M_i(θ_ref) is not positive definite") from exc
         c = float(self.bound)
-        log_lam = np.zeros((sensor.N, sensor.n))  # the weight's pencil eigenvalues (log), in basis U
-        U = np.broadcast_to(np.eye(sensor.n), (sensor.N, sensor.n, sensor.n)).copy()
+        # the weight's state, per sample: pencil eigenvalues (log) and eigenbasis; everything else per block
+        log_lam = np.zeros((N, n))
+        U = np.broadcast_to(np.eye(n), (N, n, n)).copy()
+
+        def weight(block, rows):  # M̄_i = L_i U_i diag(λ_i) U_iᵀ L_iᵀ for a block of samples
+            L = np.linalg.cholesky(sensor.metric.evaluate(theta_ref, rows))
+            return _compose(L, np.exp(log_lam[rows]), U[rows])
+
         theta = theta_ref
         history, clipped, converged = [], 0.0, False
         for k in range(self.max_iter):
-            C = _compose(L, np.exp(log_lam), U)
-            result = fit_weighted(sensor, C, self.name, common, {})
+            result = fit_weighted(sensor, weight, self.name, common, {})
             theta = result.theta
-            _, lam, U_new = _pencil(M_ref, sensor.metric.evaluate(theta))
-            lam_c = np.clip(lam, 1.0 / c, c)
-            clipped = float(np.mean((lam < 1.0 / c) | (lam > c)))
-            # damping: geometric mean of the previous weight and the new one, in the new eigenbasis
-            old_in_new = np.log(np.clip(np.einsum("nji,njk,nk,nlk,nli->ni", U_new, U, np.exp(log_lam), U, U_new), 1e-300, None))
-            new_log = (1 - self.damping) * old_in_new + self.damping * np.log(lam_c)
-            step = float(np.max(np.abs(new_log - old_in_new)))
+            step, n_clipped = 0.0, 0
+            for start in range(0, N, chunk):
+                rows = slice(start, start + chunk)
+                _, lam, U_new = _pencil(sensor.metric.evaluate(theta_ref, rows), sensor.metric.evaluate(theta, rows))
+                lam_c = np.clip(lam, 1.0 / c, c)
+                n_clipped += int(np.sum((lam < 1.0 / c) | (lam > c)))
+                # damping: geometric mean of the previous weight and the new one, in the new eigenbasis
+                Ub = U[rows]
+                old_in_new = np.log(np.clip(np.einsum("nji,njk,nk,nlk,nli->ni", U_new, Ub, np.exp(log_lam[rows]), Ub,
+                                                      U_new), 1e-300, None))
+                new_log = (1 - self.damping) * old_in_new + self.damping * np.log(lam_c)
+                step = max(step, float(np.max(np.abs(new_log - old_in_new))))
+                log_lam[rows], U[rows] = new_log, U_new
+            clipped = n_clipped / (N * n)
             history.append(step)
-            log_lam, U = new_log, U_new
             if step < self.tol:
                 converged = True
                 break

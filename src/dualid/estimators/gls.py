@@ -51,6 +51,8 @@ from dualid.problem import IdentificationProblem
 PILOTS = ("wls", "ols", "dm-paper")
 SOLVERS = ("newton", "CLARABEL", "SCS")
 COVARIANCE_MODELS = ("likelihood", "moments")
+COVARIANCE_SAMPLES = 20_000  # (Σ, κ) (at most n(n+1)/2 + 1 numbers) from at most this many evenly strided samples: the likelihood
+# makes one pass over the samples it is given per L-BFGS iteration (recorded in info["covariance_samples"])
 SIGMA_STRUCTURES = ("full", "diagonal")
 __all__ = ["FeasibleGLS", "fit_weighted", "full_likelihood_estimate", "likelihood_estimate", "moment_estimate"]
 
@@ -168,9 +170,10 @@ class FeasibleGLS:
         return DualMetric(constrained=c["constrained"], allow_unidentifiable=c["allow_unidentifiable"]).fit(sensor).theta, "dm-paper"
 
     def covariance(self, sensor: IdentificationProblem, theta_ref: np.ndarray,
-                   M: np.ndarray | None = None) -> tuple[np.ndarray, float, dict]:
+                   M: np.ndarray | None = None, r: np.ndarray | None = None) -> tuple[np.ndarray, float, dict]:
         """(Σ (n, n), κ, info) in the sensor chart: given, or estimated from the residuals at θ_ref;
-        M (N, n, n): M_i(θ_ref) when the caller has it already."""
+        M (N', n, n) and r (N', n): M_i(θ_ref) and the residuals when the caller has them already (or for
+        the samples it chose; both or neither)."""
         n = sensor.n
         info: dict = {}
         if self.sigma is not None and self.kappa is not None:
@@ -180,7 +183,7 @@ class FeasibleGLS:
                 raise ConfigError(f"sigma: expected {n} coordinates, got shape {np.asarray(self.sigma).shape}")
             info["covariance_model"] = "given"
             return S, self.kappa, info
-        r = sensor.residual(theta_ref)
+        r = sensor.residual(theta_ref) if r is None else r
         M = sensor.metric.evaluate(theta_ref) if M is None else M
         rms = np.sqrt(np.mean(r * r, axis=0))
         floor_abs = 1e-150
@@ -210,11 +213,23 @@ class FeasibleGLS:
             theta_ref, pilot = self.reference(sensor)
         else:
             theta_ref, pilot = None, "none (κ = 0)"
-        M_ref = None if theta_ref is None else sensor.metric.evaluate(theta_ref)  # once: Σ, κ and the weight
-        S, kappa, info = self.covariance(sensor, theta_ref, M_ref)
-        C = np.broadcast_to(S, (sensor.N, sensor.n, sensor.n)).copy()
-        if kappa > 0:
-            C += kappa * M_ref
+        # (Σ, κ) from the residuals of at most COVARIANCE_SAMPLES evenly strided samples: few numbers, and the
+        # likelihood's iterations each pass over the samples it is given
+        step = -(-sensor.N // COVARIANCE_SAMPLES)
+        rows = slice(0, None, step)
+        M_some = r_some = None
+        if theta_ref is not None:
+            some = sensor if isinstance(sensor, IdentificationProblem) else sensor.subset(rows)  # streamed: collect
+            rows = rows if some is sensor else slice(None)
+            M_some = some.metric.evaluate(theta_ref, rows)
+            r_some = some.Y[rows] @ theta_ref - some.tau[rows]
+        S, kappa, info = self.covariance(sensor, theta_ref, M_some, r_some)
+        if step > 1:
+            info["covariance_samples"] = len(range(sensor.N)[rows])
+
+        def C(block, rows):  # Σ + κ M_i(θ_ref) for a block of samples
+            return S[None] if kappa == 0 else S + kappa * block.metric.evaluate(theta_ref, rows)
+
         info.update(
             pilot=pilot,
             kappa=float(kappa),
@@ -234,36 +249,46 @@ class FeasibleGLS:
         return result
 
 
-def fit_weighted(sensor: IdentificationProblem, C: np.ndarray, method: str, common: dict, info: dict,
+def fit_weighted(sensor: IdentificationProblem, C, method: str, common: dict, info: dict,
                  what: str = "the weight's covariance") -> IdentificationResult:
-    """argmin Σ r_iᵀ C_i⁻¹ r_i (C (N, n, n) or (1, n, n), ≻ 0) under the constraints.
+    """argmin Σ r_iᵀ C_i⁻¹ r_i (C (N, n, n) or (1, n, n), ≻ 0, or a function rows → C_i of a block of
+    samples, so no N-sized array is needed) under the constraints.
 
     solver "newton": the dual-metric interior-point method of ``estimators.newton`` on the problem
-    with the constant metric M_i = C_i (its objective is then exactly this one); it converges to
-    1e-9 relative, also where the data determine θ only up to a null space. A cvxpy solver: by
+    with the constant metric M_i = C_i (its objective is then exactly this one), run on the weighted
+    sufficient statistics (``newton.weighted``); it converges to 1e-9 relative, also where the data
+    determine θ only up to a null space. A cvxpy solver: by
     whitening, C_i = L_i L_iᵀ, the per-sample chart B_i = L_i⁻ᵀ (r̃_i = L_i⁻¹ r_i), then OLS in
     ``least_squares.fit_quadratic``.
     """
-    C = np.broadcast_to(C, (sensor.N, sensor.n, sensor.n))
+    weight = C if callable(C) else (lambda block, rows, C=np.asarray(C): C if C.shape[0] == 1 else C[rows])
     if common["solver"] == "newton":
         from dualid.estimators.newton import fit_dual_metric_newton
+        from dualid.estimators.newton.weighted import fit_weighted_newton
         from dualid.model.metric import AffineMetric
 
         if not common["allow_unidentifiable"]:
             check_identifiable(sensor, what=f"{method} regressor")
-        try:
-            np.linalg.cholesky(C)
-        except np.linalg.LinAlgError:
-            pass  # the message below
-        else:
-            const = dataclasses.replace(sensor, metric=AffineMetric(sensor.p, (), np.array(C)))
-            try:
+        try:  # from the weighted statistics (two passes over the data); None: the cheap start failed
+            result = fit_weighted_newton(sensor, weight, constrained=common["constrained"], method=method,
+                                         what=f"{method}: {what}", **common["solver_options"])
+            if result is None:  # the materialised constant metric, with newton's own start and phase I
+                if not isinstance(sensor, IdentificationProblem):
+                    sensor = sensor.materialise()
+                C = np.broadcast_to(weight(sensor, slice(None)), (sensor.N, sensor.n, sensor.n))
+                np.linalg.cholesky(C)
+                const = dataclasses.replace(sensor, metric=AffineMetric(sensor.p, (), np.array(C)))
                 result = fit_dual_metric_newton(const, constrained=common["constrained"], method=method,
                                                 **common["solver_options"])
-                return dataclasses.replace(result, info={**result.info, **info})
-            except SolverError as exc:  # the same problem by cvxpy (whitened); recorded in the result
-                info = {**info, "solver_fallback": f"CLARABEL after newton failed: {str(exc)[:200]}"}
-                common = {**common, "solver": "CLARABEL", "solver_options": {}}
+            return dataclasses.replace(result, info={**result.info, **info})
+        except np.linalg.LinAlgError:
+            pass  # the message below
+        except SolverError as exc:  # the same problem by cvxpy (whitened); recorded in the result
+            info = {**info, "solver_fallback": f"CLARABEL after newton failed: {str(exc)[:200]}"}
+            common = {**common, "solver": "CLARABEL", "solver_options": {}}
+    if not isinstance(sensor, IdentificationProblem):  # streamed: whitening needs every sample at once
+        sensor = sensor.materialise()
+    C = np.broadcast_to(weight(sensor, slice(None)), (sensor.N, sensor.n, sensor.n))
     try:
         L = np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 1, 2)))
     except np.linalg.LinAlgError as exc:

@@ -31,7 +31,7 @@ from dualid.estimators.result import IdentificationResult
 from dualid.estimators.statistics import Statistics, energy_statistics, statistics
 from dualid.linalg import gram_eigh, gram_rank
 from dualid.model.consistency import cvxpy_constraints, prior_blocks, pullback_metric, regularizer_value
-from dualid.problem import IdentificationProblem
+from dualid.problem import IdentificationProblem, sample_blocks
 
 
 def fit_quadratic(
@@ -56,7 +56,12 @@ def fit_quadratic(
     if regularizer is None and not allow_unidentifiable:
         check_identifiable(problem, rank=rank, what=f"{method} weighted regressor")
 
-    s = parameter_scale(problem)
+    if stats.W is None and not stats.energy:  # H = Σ YᵀY: its diagonal holds the squared column norms (no pass)
+        s = np.sqrt(np.clip(np.diag(stats.H), 0.0, None))
+        s[s > 0] = 1.0 / s[s > 0]
+        s[s == 0] = 1.0
+    else:
+        s = parameter_scale(problem)
     Hs = s[:, None] * stats.H * s[None, :]
     gs = s * stats.g
 
@@ -219,8 +224,11 @@ def residual_covariance(problem: IdentificationProblem, theta: np.ndarray, floor
     The floor keeps W = Σ̂⁻¹ finite when a coordinate fits exactly (noiseless data, or a passive
     joint whose modelled torque is identically zero).
     """
-    r = problem.residual(theta)
-    S = r.T @ r / problem.N
+    S = np.zeros((problem.n, problem.n))
+    for block, rows, _ in sample_blocks(problem, 16384):
+        r = block.Y[rows] @ theta - block.tau[rows]
+        S += r.T @ r
+    S /= problem.N
     w, U = np.linalg.eigh(0.5 * (S + S.T))
     w = np.maximum(w, max(floor * np.trace(S) / problem.n, 1e-300))
     return (U * w) @ U.T

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from dualid.errors import ConfigError, DataError, MetricError
-from dualid.problem import IdentificationProblem
+from dualid.problem import IdentificationProblem, sample_blocks
 
 DEFAULT_BOUND = 100.0  # c: generalised eigenvalues outside [1/c, c] flag the fit as degenerate
 
@@ -45,10 +45,9 @@ def generalized_eigenvalues(
     if theta.shape != (problem.p,) or theta_ref.shape != (problem.p,):
         raise DataError(f"θ and θ_ref: expected shape ({problem.p},), got {theta.shape} and {theta_ref.shape}")
     out = np.empty((problem.N, problem.n))
-    for start in range(0, problem.N, chunk):
-        rows = slice(start, start + chunk)
-        M_ref = problem.metric.evaluate(theta_ref, rows)
-        M = problem.metric.evaluate(theta, rows)
+    for block, rows, start in sample_blocks(problem, chunk):
+        M_ref = block.metric.evaluate(theta_ref, rows)
+        M = block.metric.evaluate(theta, rows)
         try:
             L = np.linalg.cholesky(M_ref)
         except np.linalg.LinAlgError as exc:
@@ -61,7 +60,7 @@ def generalized_eigenvalues(
             ) from exc
         X = np.linalg.solve(L, M)  # L⁻¹ M
         A = np.linalg.solve(L, np.swapaxes(X, 1, 2))  # L⁻¹ (L⁻¹ M)ᵀ = L⁻¹ M L⁻ᵀ
-        out[rows] = np.linalg.eigvalsh(0.5 * (A + np.swapaxes(A, 1, 2)))
+        out[start : start + M.shape[0]] = np.linalg.eigvalsh(0.5 * (A + np.swapaxes(A, 1, 2)))
     return out
 
 

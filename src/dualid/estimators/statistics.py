@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dualid.problem import IdentificationProblem
+from dualid.problem import IdentificationProblem, sample_blocks
 
 
 @dataclass(frozen=True)
@@ -22,43 +22,44 @@ class Statistics:
 
     def objective(self, problem: IdentificationProblem, theta: np.ndarray) -> float:
         """Σ r_iᵀ W_i r_i from the residuals (no cancellation, unlike θᵀHθ − 2gᵀθ + c)."""
-        r = problem.residual(theta)
-        if self.energy:
-            return float(np.sum(np.einsum("na,na->n", problem.v, r) ** 2))
-        if self.W is None:
-            return float(np.sum(r * r))
-        return float(np.einsum("na,ab,nb->", r, self.W, r))
+        f = 0.0
+        for block, rows, _ in sample_blocks(problem, 16384):
+            r = block.Y[rows] @ theta - block.tau[rows]
+            if self.energy:
+                f += float(np.sum(np.einsum("na,na->n", block.v[rows], r) ** 2))
+            elif self.W is None:
+                f += float(np.sum(r * r))
+            else:
+                f += float(np.einsum("na,ab,nb->", r, self.W, r))
+        return f
 
 
-def statistics(problem: IdentificationProblem, W: np.ndarray | None = None, chunk: int = 65536) -> Statistics:
+def statistics(problem: IdentificationProblem, W: np.ndarray | None = None, chunk: int = 16384) -> Statistics:
     """H, g, c for a constant weight W (n, n) (None: identity), accumulated in chunks of samples."""
     p = problem.p
     H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
-    for start in range(0, problem.N, chunk):
-        Y = problem.Y[start : start + chunk].reshape(-1, p) if W is None else None
-        tau = problem.tau[start : start + chunk]
-        if W is None:
-            t = tau.reshape(-1)
-            H += Y.T @ Y
-            g += Y.T @ t
-            c += float(t @ t)
-        else:
-            Yc = problem.Y[start : start + chunk]
-            WY = np.einsum("ab,nbp->nap", W, Yc)
-            H += np.einsum("nap,naq->pq", Yc, WY)
-            g += np.einsum("nap,na->p", WY, tau)
-            c += float(np.einsum("na,ab,nb->", tau, W, tau))
+    F = None
+    if W is not None:  # W = F Fᵀ (eigen-factor, W ⪰ 0): Σ Y_iᵀ W Y_i = Σ (Fᵀ Y_i)ᵀ (Fᵀ Y_i), one GEMM per chunk
+        lam, U = np.linalg.eigh(0.5 * (np.asarray(W, dtype=float) + np.asarray(W, dtype=float).T))
+        F = U * np.sqrt(np.clip(lam, 0.0, None))
+    for block, rows, _ in sample_blocks(problem, chunk):
+        Yc, tau = block.Y[rows], block.tau[rows]
+        if F is not None:
+            Yc, tau = np.matmul(F.T, Yc), tau @ F
+        A, t = Yc.reshape(-1, p), tau.reshape(-1)
+        H += A.T @ A
+        g += A.T @ t
+        c += float(t @ t)
     return Statistics(0.5 * (H + H.T), g, c, W)
 
 
-def energy_statistics(problem: IdentificationProblem, chunk: int = 65536) -> Statistics:
+def energy_statistics(problem: IdentificationProblem, chunk: int = 16384) -> Statistics:
     """W_i = v_i v_iᵀ: the rows e_i = Y_iᵀ v_i and targets v_iᵀ τ_i, accumulated in chunks of samples."""
     p = problem.p
     H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
-    for start in range(0, problem.N, chunk):
-        rows = slice(start, start + chunk)
-        e = np.einsum("nap,na->np", problem.Y[rows], problem.v[rows])
-        y = np.einsum("na,na->n", problem.tau[rows], problem.v[rows])
+    for block, rows, _ in sample_blocks(problem, chunk):
+        e = np.einsum("nap,na->np", block.Y[rows], block.v[rows])
+        y = np.einsum("na,na->n", block.tau[rows], block.v[rows])
         H += e.T @ e
         g += e.T @ y
         c += float(y @ y)

@@ -17,6 +17,53 @@ from dualid.model.consistency import (
     _repair_psd,
 )
 
+DIVERGENCE_RATIO = 0.95  # each of the last primal steps at least this times the one before (not shrinking) …
+DIVERGENCE_STEPS = 5  # … this many in a row, along one direction, |θ| growing and f falling: optimum at infinity
+
+
+def diverging_iterates(thetas: list[np.ndarray], f_history: list[float]) -> dict:
+    """Does the iteration run off to infinity? Near a finite minimiser Newton's steps shrink (quadratically, or at
+    worst linearly while it is jammed). When the infimum is approached as θ → ∞ along a ray (e.g. f = S_A/m + S_B as
+    a mass m grows, the metric loosening without bound: DFKI Joint1) the steps keep their length and direction
+    (×1.5 per step on the pure hyperbola c/m; about constant once the Levenberg term of the Newton matrix limits
+    them) while |θ| grows and f keeps falling. Flags it when the last DIVERGENCE_STEPS steps each keep ≥
+    DIVERGENCE_RATIO of the previous one's length, point the same way (cosine ≥ 0.99), |θ| increases at every one
+    of them and f decreases; ``diverging_direction`` is the last step, normalised."""
+    out = {"optimum_at_infinity": False}
+    k = DIVERGENCE_STEPS
+    if len(thetas) < k + 2 or len(f_history) < k + 2:
+        return out
+    th = thetas[-(k + 2):]
+    d = [b - a for a, b in zip(th[:-1], th[1:])]
+    lengths = [float(np.linalg.norm(x)) for x in d]
+    if min(lengths) <= 0:
+        return out
+    keep = all(b >= DIVERGENCE_RATIO * a for a, b in zip(lengths[:-1], lengths[1:]))
+    aligned = all(float(x @ y) >= 0.99 * lx * ly for x, y, lx, ly in zip(d[:-1], d[1:], lengths[:-1], lengths[1:]))
+    norms = [float(np.linalg.norm(x)) for x in th]
+    growing = all(b > a for a, b in zip(norms[:-1], norms[1:]))
+    falling = all(b < a for a, b in zip(f_history[-(k + 2):-1], f_history[-(k + 1):]))
+    if keep and aligned and growing and falling:
+        out.update(optimum_at_infinity=True, diverging_steps=k, theta_norm_growth=norms[-1] / max(norms[0], 1e-300),
+                   diverging_direction=d[-1] / lengths[-1])
+        return out
+    # earlier in the run: ≥ 3 aligned steps (cosine ≥ 0.99) over which |θ| grew ≥ 2× — a candidate direction
+    # for the caller to test on the objective (``ray_decreases``): on the DFKI pendubot the mass runs 18 → 65 kg
+    # in 4 such steps, then its direction turns flat to the tolerance and the iteration converges there
+    d = [b - a for a, b in zip(thetas[:-1], thetas[1:])]
+    best, start = None, 0
+    for j in range(1, len(d) + 1):
+        if j == len(d) or not (float(d[j] @ d[j - 1]) >= 0.99 * np.linalg.norm(d[j]) * np.linalg.norm(d[j - 1]) > 0):
+            if j - start >= 3:
+                n0, n1 = float(np.linalg.norm(thetas[start])), float(np.linalg.norm(thetas[j]))
+                if n1 >= 2.0 * n0 and (best is None or n1 / max(n0, 1e-300) > best[0]):
+                    move = thetas[j] - thetas[start]
+                    best = (n1 / max(n0, 1e-300), move / np.linalg.norm(move), j - start)
+            start = j
+    if best is not None:
+        out.update(diverging_candidate=best[1], theta_norm_growth=best[0], diverging_steps=best[2])
+    return out
+
 
 def _dual_direction(cons: FeasibleSet, Z, z, Cinv, s, d, target):
     """HKM direction: ΔZ = σμ C⁻¹ − Z − sym(Z ΔC C⁻¹); Δz = σμ/s − z − (z/s) G d."""
@@ -83,7 +130,7 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
         mu = gap0 * max(der.f, 1e-300) / max(nu, 1)  # dual start on the central path: Z_b = μ C_b⁻¹, z = μ / s
         Z = [mu * np.linalg.inv(c.C(theta)) for c in cons.lmis]
         z = mu / (cons.G @ theta + cons.h) if len(cons.h) else np.zeros(0)
-    history, n_evals = [], 0
+    history, n_evals, thetas = [], 0, [np.array(theta, dtype=float)]
     for it in range(max_iter + 1):
         if der is None:
             der = objective(theta, 2)
@@ -111,6 +158,7 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
             info = {"objective": f, "iterations": it, "duality_gap": gap, "kkt_residual": float(np.sqrt(kkt)),
                     "relative_gap": (gap + kkt) / f_ref, "objective_start": f_start,
                     "objective_evaluations": n_evals, "f_history": history}
+            info.update(diverging_iterates(thetas, history))
             return theta, Z, z, info
         if it == max_iter:
             break
@@ -167,10 +215,20 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
         # active block) and the dual step (blocked by a Z_b near its boundary) throttle each other in turn and
         # the iteration crawls at α ≈ 0.05–0.15 (106 iterations on the DFKI pendubot, 37–42 on arm7)
         theta, der = trial, der_trial
+        thetas.append(np.array(theta, dtype=float))
         Z = [_repair_psd(Zb + alpha_dual * dZb) for Zb, dZb in zip(Z, dZ)]  # PD up to rounding
         z = z + alpha_dual * dz
         if verbose:
             print(f"            sigma {sigma:.3g} alpha {alpha:.3g} alpha_dual {alpha_dual:.3g}")
+    away = diverging_iterates(thetas, history)
+    if away["optimum_at_infinity"]:
+        raise SolverError(
+            f"dual-metric Newton: no convergence in {max_iter} iterations: the objective keeps decreasing while θ "
+            f"grows without bound (the last {away['diverging_steps']} steps kept their length and direction, |θ| "
+            f"{away['theta_norm_growth']:.3g}× larger over them); the infimum is at infinity, not at a finite θ: bound the "
+            "unidentifiable parameters (e.g. a mass bound) or fix them",
+            status="optimum_at_infinity",
+        )
     raise SolverError(
         f"dual-metric Newton: no convergence in {max_iter} iterations; relative gap reached "
         f"{(gap + kkt) / f_ref:.3g} (duality gap {gap:.3g}, KKT residual {np.sqrt(kkt):.3g}, tol {tol:g})",

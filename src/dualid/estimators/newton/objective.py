@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dualid.problem import IdentificationProblem
+from dualid.problem import IdentificationProblem, sample_blocks
 
 
 class _NotPositiveDefinite(Exception):
@@ -67,17 +67,16 @@ def dual_metric_derivatives(
 
     Raises _NotPositiveDefinite when some M_i(θ) is not positive definite.
     """
-    N, n, p = problem.N, problem.n, problem.p
+    n, p = problem.n, problem.p
     theta = np.asarray(theta, dtype=float)
     f = 0.0
     grad = np.zeros(p) if order else None
     hess = np.zeros((p, p)) if order else None
-    for start in range(0, N, chunk):
-        rows = slice(start, min(start + chunk, N))
-        Y = problem.Y[rows]  # (c, n, p)
+    for block, rows, _ in sample_blocks(problem, chunk):
+        Y = block.Y[rows]  # (c, n, p)
         c = Y.shape[0]
-        r = (Y.reshape(c * n, p) @ theta).reshape(c, n) - problem.tau[rows]  # (c, n)
-        L = _cholesky(problem.metric.evaluate(theta, rows))  # M_i = L_i L_iᵀ
+        r = (Y.reshape(c * n, p) @ theta).reshape(c, n) - block.tau[rows]  # (c, n)
+        L = _cholesky(block.metric.evaluate(theta, rows))  # M_i = L_i L_iᵀ
         if not order:
             z = _forward(L, r)  # L⁻¹ r
             f += float(np.sum(z * z))
@@ -86,7 +85,7 @@ def dual_metric_derivatives(
         z = np.einsum("cab,cb->ca", Li, r)  # L⁻¹ r
         f += float(np.sum(z * z))
         w = np.einsum("cba,cb->ca", Li, z)  # M⁻¹ r = L⁻ᵀ L⁻¹ r
-        D, wMw = problem.metric.apply_quad(w, rows, out=Y.copy())  # D = Y_i − [M_ik w_i]_k, Σ_i w_iᵀ M_ik w_i
+        D, wMw = block.metric.apply_quad(w, rows, out=Y.copy())  # D = Y_i − [M_ik w_i]_k, Σ_i w_iᵀ M_ik w_i
         grad += 2.0 * (w.reshape(-1) @ Y.reshape(-1, p)) - wMw
         Z = np.matmul(Li, D).reshape(-1, p)  # L⁻¹ (Y_i − M_ik w_i)
         hess += 2.0 * (Z.T @ Z)
@@ -106,9 +105,8 @@ def _objective(problem, theta, chunk) -> float:
 def _force_scale(problem, theta, chunk) -> float:
     """Σ τ_iᵀ M_i(θ)⁻¹ τ_i: the size of the measured forces in the dual metric (the objective's scale)."""
     total = 0.0
-    for start in range(0, problem.N, chunk):
-        rows = slice(start, start + chunk)
-        L = np.linalg.cholesky(problem.metric.evaluate(theta, rows))
-        z = np.linalg.solve(L, problem.tau[rows][..., None])
+    for block, rows, _ in sample_blocks(problem, chunk):
+        L = np.linalg.cholesky(block.metric.evaluate(theta, rows))
+        z = np.linalg.solve(L, block.tau[rows][..., None])
         total += float(np.sum(z * z))
     return total

@@ -9,7 +9,7 @@ from dualid.estimators.newton.linalg import _solve_psd
 from dualid.estimators.newton.objective import _objective
 from dualid.estimators.statistics import energy_statistics, statistics
 from dualid.model.consistency import FeasibleSet
-from dualid.problem import IdentificationProblem
+from dualid.problem import IdentificationProblem, sample_blocks
 
 
 def _ols(problem: IdentificationProblem, chunk: int) -> np.ndarray:
@@ -81,9 +81,8 @@ def _phase_one(problem, cons: FeasibleSet, theta_ref: np.ndarray, samples: np.nd
 def _not_pd_samples(problem, theta, chunk, limit=50) -> np.ndarray:
     """Indices of (up to limit of the worst) samples where M_i(θ) is not positive definite."""
     bad, worst = [], []
-    for start in range(0, problem.N, chunk):
-        rows = slice(start, min(start + chunk, problem.N))
-        lam = np.linalg.eigvalsh(problem.metric.evaluate(theta, rows))[:, 0]
+    for block, rows, start in sample_blocks(problem, chunk):
+        lam = np.linalg.eigvalsh(block.metric.evaluate(theta, rows))[:, 0]
         scale = np.abs(lam).max() if lam.size else 1.0
         i = np.flatnonzero(lam <= 1e-12 * scale)
         bad.append(start + i)
@@ -103,14 +102,13 @@ def _frozen_metric_ls(problem: IdentificationProblem, theta_c: np.ndarray, chunk
     M_i(θ_c) is not positive definite."""
     p = problem.p
     H, g = np.zeros((p, p)), np.zeros(p)
-    for start in range(0, problem.N, chunk):
-        rows = slice(start, start + chunk)
+    for block, rows, _ in sample_blocks(problem, chunk):
         try:
-            L = np.linalg.cholesky(problem.metric.evaluate(theta_c, rows))
+            L = np.linalg.cholesky(block.metric.evaluate(theta_c, rows))
         except np.linalg.LinAlgError:
             return None
-        Z = np.linalg.solve(L, problem.Y[rows])  # L⁻¹ Y_i (n, p)
-        z = np.linalg.solve(L, problem.tau[rows][..., None])[..., 0]
+        Z = np.linalg.solve(L, block.Y[rows])  # L⁻¹ Y_i (n, p)
+        z = np.linalg.solve(L, block.tau[rows][..., None])[..., 0]
         H += np.einsum("nap,naq->pq", Z, Z)
         g += np.einsum("nap,na->p", Z, z)
     return _solve_psd(H, g, rtol=1e-10)
