@@ -21,11 +21,12 @@ orthonormal in the prior's metric G and c the point of β̂'s slice nearest θ�
 O(1) at any level. level → 0 shrinks the ellipsoid onto θ̂'s slice; level = 0 *is* the
 exact-prediction choice (``plausible_parameters`` is called).
 
-Which parameters the prior determined: with μ the multiplier of the ellipsoid and F = CᵀΣ_β⁻¹C, the
-quadratic model of the problem at θ₀ gives ∂θ_p/∂θ₀ = (G + 2μF)⁻¹G where no consistency constraint
-is active (G + μF for the pullback objective, whose Hessian is 2G); its diagonal is the prior share
-(unchanged by a unit scaling of any parameter), and μ → ∞ gives the exact form's G-orthogonal
-projector onto the null space. "prior" from a share of PRIOR_SHARE on, as there.
+Which parameters the prior determined: with μ the multiplier of the ellipsoid (from stationarity) and
+F = CᵀΣ_β⁻¹C, the quadratic model of the problem at θ₀ gives ∂θ_p/∂θ₀ = (G + λF)⁻¹G, λ = 2μ (μ for
+the pullback objective, whose Hessian is 2G), where no consistency constraint is active; its diagonal
+is the prior share (unchanged by a unit scaling of any parameter), evaluated as
+I − G⁻¹Cᵀ(Σ_β/λ + CG⁻¹Cᵀ)⁻¹C so that λ → ∞ (a tiny Σ_β, exact data) gives the exact form's
+G-orthogonal projector onto the null space. "prior" from a share of PRIOR_SHARE on, as there.
 
 What it costs: the training τ RMSE of θ_p against θ̂'s is recorded; when Σ_β matches the noise the
 ellipsoid lets the fit's objective grow by about c² noise variances over the N·n residuals, a relative
@@ -100,6 +101,19 @@ def _gradient(blocks, theta: np.ndarray, theta0: np.ndarray, objective: str) -> 
         else:
             grad[idx] += 2.0 * pullback_metric(V, C0) @ (theta[idx] - theta0[idx])
     return grad
+
+
+def _prior_share(G, C, Sigma, lam: float, scale, s_ind) -> np.ndarray:
+    """diag((G + λCᵀΣ⁻¹C)⁻¹G) (p,) written as I − G⁻¹Cᵀ(Σ/λ + CG⁻¹Cᵀ)⁻¹C (Woodbury): no Σ⁻¹, so a tiny Σ (exact
+    data) gives the G-orthogonal projector onto C's null space instead of roundoff; in the column-scaled chart
+    (a diagonal rescaling leaves the diagonal unchanged)."""
+    if lam <= 0:
+        return np.ones(G.shape[0])
+    Gs = G / np.outer(scale, scale)
+    Cs = C * s_ind[:, None] / scale[None, :]
+    Ginv_Ct = np.linalg.solve(Gs, Cs.T)
+    inner = Sigma * np.outer(s_ind, s_ind) / lam + Cs @ Ginv_Ct
+    return np.clip(1.0 - np.einsum("kr,rk->k", Ginv_Ct, np.linalg.solve(inner, Cs)), 0.0, 1.0)
 
 
 def plausible_in_region(problem: IdentificationProblem, theta_hat, theta0, uncertainty: BaseUncertainty,
@@ -179,16 +193,13 @@ def plausible_in_region(problem: IdentificationProblem, theta_hat, theta0, uncer
         raise SolverError(f"{exc} ({' → '.join(chain)})", status=exc.status) from None
     if pulled:
         chain.append(f"moved {pulled:.1e} of the way back to θ̂ to clear a rounding-size violation of consistency")
-    # prior share from the quadratic model: ∂θ_p/∂θ₀ = (G + 2μ/h F)⁻¹ G, h = 1 (log-det) or 2 (pullback); μ of
+    # prior share from the quadratic model: ∂θ_p/∂θ₀ = (G + λF)⁻¹ G, λ = 2μ/h, h = 1 (log-det) or 2 (pullback); μ of
     # (β − β̂)ᵀΣ⁻¹(β − β̂) ≤ radius2 is μ' of ‖u‖² ≤ 1 over radius2, and stationarity in u, ∇_u f = −2μ'u with
     # ‖u‖ = 1 when active (∇_u f = 0 when not), gives μ' = ‖∇_u f‖/2: from the analytic gradient, as the solver's
     # dual (and its u, when the ellipsoid is tiny) is only accurate to its tolerance
     mu = float(np.linalg.norm(ER.T @ _gradient(blocks, theta_p, theta0, objective))) / (2.0 * radius2) if k else 0.0
-    F = base.C.T @ Sinv @ base.C
-    h = 1.0 if objective == "logdet" else 2.0
-    Dsc = np.diag(scale)  # computed in the scaled chart, then its diagonal (unchanged by the scaling)
-    Gs, Fs = np.linalg.inv(Dsc) @ G @ np.linalg.inv(Dsc), np.linalg.inv(Dsc) @ F @ np.linalg.inv(Dsc)
-    share = np.clip(np.diag(np.linalg.solve(Gs + 2.0 * max(mu, 0.0) / h * Fs, Gs)), 0.0, 1.0)
+    lam = 2.0 * mu / (1.0 if objective == "logdet" else 2.0)
+    share = _prior_share(G, base.C, np.asarray(uncertainty.covariance, dtype=float), lam, scale, s_ind)
     determined = tuple(PRIOR if x_ >= PRIOR_SHARE else DATA for x_ in share)
     d = base.values(theta_p) - beta_hat
     A = problem.Y.reshape(-1, P.p)
