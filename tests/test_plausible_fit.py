@@ -83,3 +83,11 @@ def test_plausible_option_round_trip(value, expected):
     config = FitConfig.from_dict(small_config(prior={"plausible": value}))
     assert config.as_dict()["prior"]["plausible"] == expected
     assert FitConfig.from_dict({**small_config(), "prior": config.as_dict()["prior"]}).prior == config.prior
+
+
+def test_without_uncertainty_the_exact_choice_is_used_and_said():
+    config = FitConfig.from_dict(small_config(methods=["ols"], references={}, uncertainty={"method": "none"}))
+    p = fit_robot(config).fits["ols"].plausible
+    assert p.form == "exact" and p.predictions_unchanged and p.fallback_used
+    assert p.note == ("no uncertainty of the base parameters (not requested (uncertainty.method: none)): the "
+                      "exact-prediction choice instead of the 0.95 confidence region")

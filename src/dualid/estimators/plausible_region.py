@@ -45,6 +45,7 @@ from dualid.errors import ConfigError, ConsistencyError, DataError, SolverError
 from dualid.estimators.base import SOLVERS, check_nominal
 from dualid.estimators.plausible import (
     DATA,
+    PREDICTION_RTOL,
     PRIOR,
     PRIOR_SHARE,
     TIE_BREAK,
@@ -207,7 +208,8 @@ def plausible_in_region(problem: IdentificationProblem, theta_hat, theta0, uncer
     return PlausibleParameters(
         theta_p, theta_hat=theta_hat, theta0=theta0, names=P.names, prior_share=share, determined_by=determined,
         null_space=N, rank=r, status=solved.status, solver=solved.solver, solver_chain=" → ".join(chain),
-        fallback_used=len(chain) > 1, objective=objective, prediction_change=change, predictions_unchanged=False,
+        fallback_used=len(chain) > 1, objective=objective, prediction_change=change,
+        predictions_unchanged=change <= PREDICTION_RTOL,
         consistent=P.is_consistent(theta_p, tol=1e-7),
         divergence_hat=regularizer_value("logdet", P, theta_hat, theta0),
         divergence=regularizer_value("logdet", P, theta_p, theta0), form=CONFIDENCE, level=level, radius2=radius2,
