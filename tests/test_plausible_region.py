@@ -3,7 +3,8 @@
 Specifications: (1) on a noisy 4-DoF arm the masses the prior determines move toward the prior compared
 with the exact-prediction choice, and the divergence is never larger (the exact slice lies inside the
 region); (2) the ellipsoid constraint holds at the solution, checked with Σ_β⁻¹ computed here; (3) level
-→ 0 reproduces the exact-prediction choice, level 0 is it; (4) exact error messages for bad levels.
+→ 0 reproduces the exact-prediction choice, level 0 is it; (4) exact error messages for bad levels;
+(5) the choice does not depend on the unit of a parameter.
 """
 
 from __future__ import annotations
@@ -103,3 +104,32 @@ def test_bad_levels(level):
         check_level(level)
     assert str(err.value) == ("plausible parameters: level: expected a probability in [0, 1) (0: keep the training "
                               f"predictions exactly), got {level!r}")
+
+
+def test_invariant_under_a_unit_scaling_of_a_parameter():
+    """Joint1.b in N mm s/rad instead of N m s/rad (θ_k × 1000, its regressor column / 1000): the same choice."""
+    import dataclasses
+
+    rigid = RigidBodyModel.from_urdf(PENDUBOT)
+    model = with_joint_terms(rigid)
+    rng = np.random.default_rng(3)
+    theta_true = np.concatenate([rigid.nominal, [0.02, 0.01], [0.08, 0.09], [0.003, 0.004]])
+    T = 80
+    q, v, a = rng.uniform(-2, 2, (T, 2)), rng.normal(size=(T, 2)), rng.normal(size=(T, 2))
+    tau = model.regressor(q, v, a) @ theta_true + 0.01 * rng.normal(size=(T, 2))
+    problem = build_problem(model, Trajectory(np.arange(T) * 0.01, q, v, tau, a, coordinates=model.coordinates))
+    k, s = problem.parameters.index("Joint1.b"), 1000.0
+    Y = np.array(problem.Y)
+    Y[:, :, k] /= s
+    scaled = dataclasses.replace(problem, Y=Y)
+    theta0 = theta_true.copy()
+    theta0[:20] *= np.repeat([1.25, 0.8], 10)
+    theta0_s = theta0.copy()
+    theta0_s[k] *= s
+    a_, b_ = (plausible_in_region(pr, th, t0, unc, 0.95)
+              for pr, t0 in ((problem, theta0), (scaled, theta0_s)) for th, unc in [_fit(pr)])
+    back = b_.theta.copy()
+    back[k] /= s
+    np.testing.assert_allclose(back, a_.theta, rtol=1e-5, atol=1e-8)
+    np.testing.assert_allclose(b_.prior_share, a_.prior_share, atol=1e-4)  # μ from the solution: solver accuracy
+    assert b_.statistic == pytest.approx(a_.statistic, rel=1e-6) and b_.divergence == pytest.approx(a_.divergence, rel=1e-6)
