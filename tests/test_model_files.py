@@ -199,7 +199,7 @@ def test_dfki_files_give_dualids_held_out_scores(tmp_path):
     """The issue's done-when: the DFKI example's dm.xml, loaded unchanged in Pinocchio and MuJoCo, gives
     the held-out τ RMSE of dualid's own validation to 1e-6 N m; dm.urdf loses the armature, and with it
     the joint-2 score."""
-    from dualid.report.model_files import PLAUSIBLE, write_model_files
+    from dualid.report.model_files import write_model_files, written_theta
     from dualid.robot.config import FitConfig
     from dualid.robot.fit import fit_robot
 
@@ -208,11 +208,12 @@ def test_dfki_files_give_dualids_held_out_scores(tmp_path):
     outcome = fit_robot(config)
     (tmp_path / "out").mkdir()
     _, record = write_model_files(outcome, tmp_path / "out")  # what dualid fit writes (without the figures)
-    assert record["dm"] == {"theta": PLAUSIBLE, "urdf": "dm.urdf", "mjcf": "dm.xml", "mjcf_notes": record["dm"]["mjcf_notes"]}
     fit = outcome.fits["dm"]
-    assert fit.plausible is not None and fit.plausible.predictions_unchanged
+    assert record["dm"] == {"theta": written_theta(fit)[1], "urdf": "dm.urdf", "mjcf": "dm.xml",
+                            "mjcf_notes": record["dm"]["mjcf_notes"]}
+    assert fit.plausible is not None and fit.plausible.form == "confidence"  # the default: θ_plausible in the region
     names, vc = outcome.model.coordinates, outcome.model.coulomb_velocity
-    ours = np.array([r.tau_rmse for r in fit.validation.runs])  # dualid's validation of the raw θ̂
+    ours = np.array([r.tau_rmse for r in fit.plausible_validation.runs])  # dualid's validation of the written θ
     scores = {}
     for label, path, loader in (("xml pinocchio", "dm.xml", "pinocchio"), ("xml mujoco", "dm.xml", "mujoco"),
                                 ("urdf pinocchio", "dm.urdf", "pinocchio"), ("urdf mujoco", "dm.urdf", "mujoco")):

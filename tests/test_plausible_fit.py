@@ -1,4 +1,5 @@
-"""dualid fit with plausible parameters: on by default (URDF prior), off by prior.plausible: false."""
+"""dualid fit with plausible parameters: on by default (URDF prior; base parameters in the fit's 95 %
+confidence region), the exact-prediction choice with prior.plausible: {level: 0}, off by prior.plausible: false."""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from test_workflow import small_config  # noqa: E402 - the small DFKI case of the workflow tests
 
 
-@pytest.mark.parametrize("plausible", [True, False])
+@pytest.mark.parametrize("plausible", [True, False, {"level": 0}])
 def test_fit_writes_urdf_and_mjcf_with_the_plausible_parameters(tmp_path, plausible):
     config = FitConfig.from_dict(small_config(methods=["ols"], references={}, prior={"plausible": plausible}))
     outcome = fit_robot(config)
@@ -41,14 +42,52 @@ def test_fit_writes_urdf_and_mjcf_with_the_plausible_parameters(tmp_path, plausi
         by = {e["name"]: e["determined_by"] for e in entries}
         assert by["Joint1.m"] == "prior" and by["Joint2.Ixx"] == "data"
         np.testing.assert_allclose(written, p.theta[:p0], rtol=1e-9, atol=1e-12)
-        assert record["plausible"]["predictions_unchanged"] is True
+        rec = record["plausible"]
+        if plausible is True:  # the default: the confidence region, its constraint active, training RMSE ~kept
+            assert rec["form"] == "confidence" and rec["level"] == 0.95 and rec["note"] == ""
+            assert rec["statistic"] == pytest.approx(rec["radius2"], rel=1e-4) and rec["radius2"] == pytest.approx(3.8415, 1e-4)
+            # what it costs on the training data: 1.5 % τ RMSE here (the sandwich over segments sees the residuals'
+            # correlation, so the region is wider than white noise would make it), and the held-out runs are scored
+            assert 0 <= rec["training_rmse"] / rec["training_rmse_raw"] - 1 < 0.03
+            assert len(rec["held_out_tau_rmse"]) == 2
+            assert record["model_files_theta"].startswith("θ_plausible (closest to the prior with base parameters in")
+        else:
+            assert rec["form"] == "exact" and rec["predictions_unchanged"] is True
+            assert rec["note"] == "prior.plausible.level: 0 (the training predictions exactly)"
         assert "## Plausible parameters" in (tmp_path / "report.md").read_text()
     else:
         assert record["plausible"] is None and record["model_files_theta"].startswith("raw θ̂")
         np.testing.assert_allclose(written, outcome.fits["ols"].result.theta[:p0], rtol=1e-9, atol=1e-12)
 
 
-def test_plausible_switch_must_be_a_bool():
+@pytest.mark.parametrize("value, message", [
+    ("yes", "prior.plausible: expected true, false or a mapping {level: …, joint: …}, got 'yes'"),
+    ({"level": 1.0}, "prior.plausible.level: expected a probability in [0, 1) (0: keep the training predictions "
+                     "exactly), got 1.0"),
+    ({"level": -0.1}, "prior.plausible.level: expected a probability in [0, 1) (0: keep the training predictions "
+                      "exactly), got -0.1"),
+    ({"level": "high"}, "prior.plausible.level: expected a probability in [0, 1) (0: keep the training predictions "
+                        "exactly), got 'high'"),
+    ({"level": 0.9, "joint": "no"}, "prior.plausible.joint: expected true or false, got 'no'"),
+    ({"radius": 2}, "prior.plausible: unknown keys ['radius']; known keys: ['level', 'joint']"),
+])
+def test_plausible_option_errors(value, message):
     with pytest.raises(ConfigError) as err:
-        FitConfig.from_dict(small_config(prior={"plausible": "yes"}))
-    assert str(err.value) == "prior.plausible: expected true or false, got 'yes'"
+        FitConfig.from_dict(small_config(prior={"plausible": value}))
+    assert str(err.value) == message
+
+
+@pytest.mark.parametrize("value, expected", [(True, {"level": 0.95, "joint": False}), (False, False),
+                                             ({"level": 0.68, "joint": True}, {"level": 0.68, "joint": True})])
+def test_plausible_option_round_trip(value, expected):
+    config = FitConfig.from_dict(small_config(prior={"plausible": value}))
+    assert config.as_dict()["prior"]["plausible"] == expected
+    assert FitConfig.from_dict({**small_config(), "prior": config.as_dict()["prior"]}).prior == config.prior
+
+
+def test_without_uncertainty_the_exact_choice_is_used_and_said():
+    config = FitConfig.from_dict(small_config(methods=["ols"], references={}, uncertainty={"method": "none"}))
+    p = fit_robot(config).fits["ols"].plausible
+    assert p.form == "exact" and p.predictions_unchanged and p.fallback_used
+    assert p.note == ("no uncertainty of the base parameters (not requested (uncertainty.method: none)): the "
+                      "exact-prediction choice instead of the 0.95 confidence region")

@@ -95,7 +95,10 @@ def test_outputs_and_urdf_round_trip(outcome, written):
     theta = np.array([p["value"] for p in dm["parameters"]])
     np.testing.assert_allclose(theta, outcome.fits["dm"].result.theta)
 
-    # the written URDF reproduces the identified rigid-body dynamics and friction
+    # the written URDF reproduces the identified rigid-body dynamics and friction, of the θ it carries (θ_plausible)
+    from dualid.report.model_files import written_theta
+
+    theta = written_theta(outcome.fits["dm"])[0]
     rigid = outcome.rigid
     back = RigidBodyModel.from_urdf(written / "dm.urdf")
     p0 = rigid.parameters.p

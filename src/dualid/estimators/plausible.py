@@ -73,6 +73,15 @@ class PlausibleParameters:
     consistent: bool  # θ_p physically consistent (tolerance 1e-7, as IdentificationResult)
     divergence_hat: float  # Σ_b D(C_b(θ̂) ‖ C_b(θ₀)) (inf when θ̂ is on the consistency boundary)
     divergence: float  # Σ_b D(C_b(θ_p) ‖ C_b(θ₀))
+    # the noise-aware choice (estimators.plausible_region): "exact" (θ̂'s predictions) or "confidence" (β(θ) in
+    # the fit's confidence ellipsoid at ``level``: (β − β̂)ᵀΣ⁻¹(β − β̂) ≤ χ²_r(level) = radius2)
+    form: str = "exact"
+    level: float = 0.0
+    radius2: float = 0.0  # χ²_r(level)
+    statistic: float = 0.0  # (β(θ_p) − β̂)ᵀΣ⁻¹(β(θ_p) − β̂) at the solution
+    training_rmse_hat: float = float("nan")  # τ RMSE of θ̂ on the training data (all joints)
+    training_rmse: float = float("nan")  # the same for θ_p
+    note: str = ""  # e.g. why the exact form was used although a region was asked for
 
     def __post_init__(self) -> None:
         for name in ("theta", "theta_hat", "theta0", "null_space", "prior_share"):
@@ -91,6 +100,8 @@ class PlausibleParameters:
             "null_dimension": int(self.null_space.shape[1]),
             "prediction_change": self.prediction_change, "predictions_unchanged": self.predictions_unchanged,
             "consistent": self.consistent, "divergence_raw": self.divergence_hat, "divergence": self.divergence,
+            "form": self.form, "level": self.level, "radius2": self.radius2, "statistic": self.statistic,
+            "training_rmse_raw": self.training_rmse_hat, "training_rmse": self.training_rmse, "note": self.note,
         }
 
 

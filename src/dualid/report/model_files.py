@@ -4,7 +4,7 @@
   (armature as dualid's non-standard <dynamics armature>: no URDF loader keeps it);
 - <method>.xml: MJCF through MuJoCo's MjSpec, with armature, damping and frictionloss.
 
-Both carry θ_plausible (``estimators.plausible``) when the fit has one, else the raw θ̂; the record
+Both carry θ_plausible (``robot.plausible_step``) when the fit has one, else the raw θ̂; the record
 says which. A file that cannot be written (e.g. a fit on the consistency boundary) is recorded as
 "not written: <why>", the other files are still written.
 """
@@ -23,12 +23,14 @@ from dualid.report.urdf import write_urdf
 from dualid.robot.fit import FitOutcome, MethodFit
 
 RAW, PLAUSIBLE = "raw θ̂ (the fit's own values)", "θ_plausible (closest to the prior with θ̂'s predictions)"
+PLAUSIBLE_REGION = "θ_plausible (closest to the prior with base parameters in the fit's {level:g} confidence region)"
 
 
 def written_theta(fit: MethodFit) -> tuple[np.ndarray, str]:
     """(θ the files carry, which one it is)."""
     if fit.plausible is not None:
-        return fit.plausible.theta, PLAUSIBLE
+        p = fit.plausible
+        return p.theta, (PLAUSIBLE_REGION.format(level=p.level) if p.form == "confidence" else PLAUSIBLE)
     return fit.result.theta, RAW
 
 
@@ -69,8 +71,10 @@ def plausible_record(fit: MethodFit) -> dict | None:
     p = fit.plausible
     if p is None:
         return {"error": fit.plausible_error} if fit.plausible_error else None
+    held_out = fit.plausible_validation
     return {
         **p.as_dict(),
+        "held_out_tau_rmse": None if held_out is None else [float(x) for x in held_out.mean("tau_rmse")],
         "parameters": [
             {"name": n, "value": float(x), "prior": float(x0), "determined_by": d, "prior_share": float(s)}
             for n, x, x0, d, s in zip(p.names, p.theta, p.theta0, p.determined_by, p.prior_share)
@@ -91,15 +95,25 @@ def plausible_lines(outcome: FitOutcome) -> list[str]:
         p = f.plausible
         cells = ", ".join(f"{p.names[k].removesuffix('.m')} {p.theta_hat[k]:.4g} → {p.theta[k]:.4g} "
                           f"({p.theta0[k]:.4g}, {p.determined_by[k]})" for k in masses)
-        lines.append(f"- {m}: {p.objective} divergence {p.divergence_hat:.4g} → {p.divergence:.4g}, "
-                     f"training predictions changed by {p.prediction_change:.1e} (relative), {p.solver_chain}; "
+        form = (f"{p.level:g} confidence region ((β − β̂)ᵀΣ⁻¹(β − β̂) = {p.statistic:.3g} ≤ {p.radius2:.3g})"
+                if p.form == "confidence" else "same training predictions")
+        rmse = (f"training τ RMSE {p.training_rmse_hat:.4g} → {p.training_rmse:.4g} "
+                f"({100 * (p.training_rmse / p.training_rmse_hat - 1):+.2f} %)" if p.training_rmse_hat > 0 else "")
+        if f.validation is not None and f.plausible_validation is not None:
+            a, b = float(np.mean(f.validation.mean("tau_rmse"))), float(np.mean(f.plausible_validation.mean("tau_rmse")))
+            rmse += f"{', ' if rmse else ''}held-out τ RMSE {a:.4g} → {b:.4g} ({100 * (b / a - 1):+.2f} %)"
+        lines.append(f"- {m}: {form}{'; ' + p.note if p.note else ''}; {p.objective} divergence {p.divergence_hat:.4g} "
+                     f"→ {p.divergence:.4g}, training predictions changed by {p.prediction_change:.1e} (relative)"
+                     f"{', ' + rmse if rmse else ''}, {p.solver_chain}; "
                      f"masses [kg] raw → plausible (prior, determined by): {cells}")
     return lines
 
 
 PLAUSIBLE_INTRO = ("The model files carry, for each method, the parameters closest to the prior (log-det divergence "
-                   "of the pseudo-inertias) among those with the fit's own training predictions; parameters.yaml "
-                   "keeps the raw θ̂ and lists θ_plausible with who determined each parameter.")
+                   "of the pseudo-inertias) among those the data do not reject: base parameters in the fit's "
+                   "confidence region (every linear combination within its interval), or, with level 0 or without "
+                   "uncertainty, the fit's own training predictions; parameters.yaml keeps the raw θ̂ and lists "
+                   "θ_plausible with who determined each parameter.")
 
 
 def plausible_section(outcome: FitOutcome) -> Section:

@@ -35,6 +35,7 @@ from dualid.estimators.methods import METHODS, make_estimator
 from dualid.estimators.methods import method as method_entry  # the one list of method names
 from dualid.model.drag_spec import DragSpec
 from dualid.robot.drag_config import check_kind, drag_spec
+from dualid.robot.plausible_step import PLAUSIBLE_LEVEL, plausible_dict, plausible_option
 from dualid.robot.uncertainty import UncertaintyConfig
 
 _TOP_KEYS = (
@@ -113,7 +114,9 @@ class PriorConfig:
     source: str = "urdf"  # "urdf" (the URDF's inertials) or a parameters.yaml/json file (from a previous fit)
     gamma: float = 0.1  # weight of the prior: per equation (γ·N·n, the study's convention) or absolute
     per_equation: bool = True
-    plausible: bool = True  # written URDF/MJCF: the θ with θ̂'s predictions closest to the prior (estimators.plausible)
+    plausible: bool = True  # written URDF/MJCF: the plausible θ closest to the prior (robot.plausible_step)
+    plausible_level: float = PLAUSIBLE_LEVEL  # confidence level of the region (0: θ̂'s predictions exactly)
+    plausible_joint: bool = False  # χ²_r (joint region) instead of χ²₁ (each combination within its interval)
 
 
 @dataclass(frozen=True)
@@ -213,7 +216,7 @@ class FitConfig:
             source = str(_path(source, base, "prior.source"))
         prior = PriorConfig(source, _float(pr.get("gamma", 0.1), "prior.gamma"),
                             _bool(pr.get("per_equation", True), "prior.per_equation"),
-                            _bool(pr.get("plausible", True), "prior.plausible"))
+                            *plausible_option(pr.get("plausible", True)))
 
         bounds_in = d.get("bounds") or {}
         if not isinstance(bounds_in, Mapping):
@@ -303,7 +306,7 @@ class FitConfig:
             "methods": list(self.methods),
             "solver": {m: dict(o) for m, o in self.solver},
             "prior": {"source": self.prior.source, "gamma": self.prior.gamma, "per_equation": self.prior.per_equation,
-                      "plausible": self.prior.plausible},
+                      "plausible": plausible_dict(self.prior)},
             "validation": {"xcorr_window": self.xcorr_window},
             "references": {k: str(v) for k, v in self.references},
             "out": None if self.out is None else str(self.out),

@@ -31,7 +31,7 @@ from dualid.estimators import IdentificationResult
 from dualid.estimators.guards import guard_info
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.methods import method as method_entry
-from dualid.estimators.plausible import PlausibleParameters, plausible_parameters
+from dualid.estimators.plausible import PlausibleParameters
 from dualid.estimators.uncertainty import BaseUncertainty
 from dualid.evaluation.validation import Validation, validate
 from dualid.model.external_wrench import apply_wrenches
@@ -43,6 +43,7 @@ from dualid.robot.config import FitConfig
 from dualid.robot.defaults import adaptive_preprocessing, warn_far_from_data
 from dualid.robot.files import read_mapping
 from dualid.robot.inputs import array_column_map, check_floating, check_runs_differ, check_units
+from dualid.robot.plausible_step import choose_plausible
 from dualid.robot.uncertainty import method_uncertainty, parameter_errors
 
 Progress = Callable[[str], None]
@@ -224,8 +225,9 @@ class MethodFit:
     uncertainty: tuple[float | str | None, ...] = ()
     validation: Validation | None = None
     error: str = ""
-    plausible: PlausibleParameters | None = None  # θ with θ̂'s training predictions closest to the prior
+    plausible: PlausibleParameters | None = None  # θ closest to the prior the data do not reject (plausible_step)
     plausible_error: str = ""  # why there is none although prior.plausible asked for it
+    plausible_validation: Validation | None = None  # held-out scores of θ_plausible (the written model files)
     base: BaseUncertainty | None = None
     base_error: str = ""
 
@@ -347,13 +349,19 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
             validation = validate(model, result.theta, test, method, config.xcorr_window)
         plausible, plausible_error = None, ""
         if config.prior.plausible:
-            _say(progress, f"choosing {method}'s plausible parameters (closest to the prior, same predictions)")
+            _say(progress, f"choosing {method}'s plausible parameters (closest to the prior, in the confidence region)")
             try:
-                plausible = plausible_parameters(problem, result.theta, prior_theta(config, rigid, model, result.theta)[0])
+                plausible = choose_plausible(problem, result.theta, prior_theta(config, rigid, model, result.theta)[0],
+                                             base_unc, base_error, config.prior.plausible_level,
+                                             config.prior.plausible_joint)
             except DualidError as exc:  # recorded: the files then carry θ̂, and the report says why
                 plausible_error = f"{type(exc).__name__}: {exc}"
+        plausible_validation = validation  # the exact form keeps θ̂'s predictions
+        if test and plausible is not None and plausible.form != "exact":
+            plausible_validation = validate(model, plausible.theta, test, method, config.xcorr_window)
         fits[method] = MethodFit(method, result, parameter_errors(base_unc, ident.base), validation, base=base_unc,
-                                 base_error=base_error, plausible=plausible, plausible_error=plausible_error)
+                                 base_error=base_error, plausible=plausible, plausible_error=plausible_error,
+                                 plausible_validation=plausible_validation)
 
     references = {}
     for label, path in config.references:

@@ -88,12 +88,20 @@ class JointTermsSection(_Section):
     joints: list[str] | str | None = None
 
 
+class PlausibleSection(_Section):
+    level: float = Field(0.95, ge=0, lt=1, description="confidence level of the region; 0: keep the training "
+                                                       "predictions exactly")
+    joint: bool = Field(False, description="radius² χ²_r(level) (the joint region of all base parameters) instead "
+                                           "of χ²₁(level) (each linear combination within its own interval)")
+
+
 class PriorSection(_Section):
     source: str = Field("urdf", description="'urdf' or a parameters.yaml/json of a previous fit ('file#method')")
     gamma: float = Field(0.1, ge=0)
     per_equation: bool = Field(True, description="γ·N·n (the study's convention) instead of an absolute γ")
-    plausible: bool = Field(True, description="write URDF/MJCF with the parameters closest to the prior among those "
-                                              "with the fit's training predictions")
+    plausible: bool | PlausibleSection = Field(
+        True, description="write URDF/MJCF with the parameters closest to the prior among those the data do not "
+                          "reject (the base parameters in the fit's confidence region); false: the raw θ̂")
 
 
 class ValidationSection(_Section):

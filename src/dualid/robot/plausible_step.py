@@ -1,0 +1,63 @@
+"""The plausible-parameters step of ``fit_robot`` and its config (``prior.plausible``).
+
+``prior.plausible``: true (default) | false | {level: 0.95, joint: false}. With a prior and the method's
+uncertainty of the base parameters, the model files carry θ closest to the prior whose base parameters
+lie in the fit's confidence region (``estimators.plausible_region``: radius² χ²₁(level), every linear
+combination of β within its own interval; ``joint: true``: χ²_r(level), the joint region). level 0, or a
+method without uncertainty (uncertainty.method: none, or its computation failed), falls back to the
+exact-prediction choice (``estimators.plausible``), and the result's ``note`` says why.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+
+import numpy as np
+
+from dualid.errors import ConfigError
+from dualid.estimators.plausible import PlausibleParameters, plausible_parameters
+from dualid.estimators.plausible_region import LEVEL, check_level, plausible_in_region, training_rmse
+from dualid.estimators.uncertainty import BaseUncertainty
+from dualid.problem import IdentificationProblem
+
+PLAUSIBLE_LEVEL = LEVEL
+PLAUSIBLE_KEYS = ("level", "joint")
+
+
+def plausible_option(x) -> tuple[bool, float, bool]:
+    """(on, level, joint) from ``prior.plausible``: a bool or a mapping {level, joint}."""
+    if isinstance(x, bool):
+        return x, LEVEL, False
+    if isinstance(x, Mapping):
+        unknown = [k for k in x if k not in PLAUSIBLE_KEYS]
+        if unknown:
+            raise ConfigError(f"prior.plausible: unknown keys {unknown}; known keys: {list(PLAUSIBLE_KEYS)}")
+        joint = x.get("joint", False)
+        if not isinstance(joint, bool):
+            raise ConfigError(f"prior.plausible.joint: expected true or false, got {joint!r}")
+        return True, check_level(x.get("level", LEVEL), "prior.plausible.level"), joint
+    raise ConfigError(f"prior.plausible: expected true, false or a mapping {{level: …, joint: …}}, got {x!r}")
+
+
+def plausible_dict(prior) -> bool | dict:
+    """The config's ``prior.plausible`` as written back (from_dict accepts it)."""
+    if not prior.plausible:
+        return False
+    return {"level": prior.plausible_level, "joint": prior.plausible_joint}
+
+
+def choose_plausible(problem: IdentificationProblem, theta_hat: np.ndarray, theta0: np.ndarray,
+                     base: BaseUncertainty | None, base_error: str, level: float,
+                     joint: bool) -> PlausibleParameters:
+    """θ_plausible of one method (module docstring); raises what the estimators raise."""
+    if level > 0 and base is not None:
+        return plausible_in_region(problem, theta_hat, theta0, base, level, joint)
+    p = plausible_parameters(problem, theta_hat, theta0)
+    p = dataclasses.replace(p, training_rmse_hat=training_rmse(problem, theta_hat),
+                            training_rmse=training_rmse(problem, p.theta))
+    if level == 0:
+        return dataclasses.replace(p, note="prior.plausible.level: 0 (the training predictions exactly)")
+    return dataclasses.replace(p, fallback_used=True, note=(
+        f"no uncertainty of the base parameters ({base_error or 'none'}): the exact-prediction choice instead of "
+        f"the {level:g} confidence region"))

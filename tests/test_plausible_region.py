@@ -1,0 +1,135 @@
+"""plausible_in_region: the θ closest to the prior whose base parameters lie in the fit's confidence region.
+
+Specifications: (1) on a noisy 4-DoF arm the masses the prior determines move toward the prior compared
+with the exact-prediction choice, and the divergence is never larger (the exact slice lies inside the
+region); (2) the ellipsoid constraint holds at the solution, checked with Σ_β⁻¹ computed here; (3) level
+→ 0 reproduces the exact-prediction choice, level 0 is it; (4) exact error messages for bad levels;
+(5) the choice does not depend on the unit of a parameter.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.stats
+
+from dualid.bench.arms import make_run, random_arm
+from dualid.data.trajectory import Trajectory
+from dualid.errors import ConfigError
+from dualid.estimators import OLS
+from dualid.estimators.plausible import PRIOR, plausible_parameters
+from dualid.estimators.plausible_region import check_level, plausible_in_region
+from dualid.estimators.uncertainty import base_uncertainty
+from dualid.model.joint_terms import with_joint_terms
+from dualid.model.rigid_body import RigidBodyModel
+from dualid.problem import build_problem
+from dualid.robot.uncertainty import training_blocks
+
+PENDUBOT = Path(__file__).resolve().parents[1] / "examples" / "dfki" / "data" / "pendubot_model_2.1.urdf"
+
+
+def _fit(problem):
+    est = OLS(allow_unidentifiable=True)
+    result = est.fit(problem)
+    base = problem.identifiability().base
+    return result.theta, base_uncertainty(problem, result, est, base, blocks=training_blocks([problem.N], base.rank))
+
+
+@pytest.fixture(scope="module")
+def noisy_arm():
+    """4-DoF random arm, 2 % torque noise, v and a differentiated from 16-bit encoders; CAD-like prior."""
+    rng = np.random.default_rng(4)
+    arm = random_arm(rng, 4)
+    run = make_run(arm, rng, 4.0, 0.02)
+    problem = build_problem(arm.ident, run.measured).subset(slice(None, None, 4))
+    p0 = arm.ident.base.parameters.p
+    prior = arm.theta_true.copy()
+    factor = 1 + rng.choice([-1, 1], 4) * rng.uniform(0.2, 0.3, 4)
+    prior[:p0] = (arm.theta_true[:p0].reshape(4, 10) * factor[:, None]).ravel()
+    theta_hat, unc = _fit(problem)
+    prior[p0:] = np.maximum(theta_hat[p0:], 1e-3 * theta_hat[p0:].max())
+    return problem, theta_hat, prior, unc, np.arange(0, p0, 10)
+
+
+def test_masses_move_toward_the_prior_and_the_region_holds(noisy_arm):
+    problem, theta_hat, prior, unc, masses = noisy_arm
+    exact = plausible_parameters(problem, theta_hat, prior)
+    region = plausible_in_region(problem, theta_hat, prior, unc, 0.95)
+    assert region.form == "confidence" and region.level == 0.95 and region.consistent
+    assert region.radius2 == pytest.approx(scipy.stats.chi2.ppf(0.95, 1))
+    # the constraint at the solution, with Σ_β⁻¹ and β = Cθ computed here
+    d = unc.base.C @ region.theta - unc.base.C @ theta_hat
+    statistic = d @ np.linalg.solve(unc.covariance, d)
+    assert statistic <= region.radius2 * (1 + 1e-6)
+    assert statistic == pytest.approx(region.statistic, rel=1e-6)
+    assert region.divergence <= exact.divergence  # θ̂'s slice lies inside the region
+    by_prior = [k for k in masses if region.determined_by[k] == PRIOR and exact.determined_by[k] == PRIOR]
+    assert len(by_prior) >= 2
+    gap_exact = np.abs(np.log(exact.theta[by_prior] / prior[by_prior]))
+    gap_region = np.abs(np.log(region.theta[by_prior] / prior[by_prior]))
+    assert np.all(gap_region < gap_exact), (gap_region, gap_exact)
+    assert np.max(gap_exact) > np.log(10) > np.max(gap_region)  # 10× off the prior, then within a factor of 10
+    # what it costs on the training data: a small fraction of the residual
+    assert region.training_rmse_hat < region.training_rmse < 1.01 * region.training_rmse_hat
+
+
+def test_level_to_zero_is_the_exact_choice():
+    rigid = RigidBodyModel.from_urdf(PENDUBOT)
+    model = with_joint_terms(rigid)
+    rng = np.random.default_rng(2)
+    theta_true = np.concatenate([rigid.nominal, [0.02, 0.01], [0.08, 0.09], [0.003, 0.004]])
+    T = 80
+    q, v, a = rng.uniform(-2, 2, (T, 2)), rng.normal(size=(T, 2)), rng.normal(size=(T, 2))
+    tau = model.regressor(q, v, a) @ theta_true + 0.01 * rng.normal(size=(T, 2))
+    problem = build_problem(model, Trajectory(np.arange(T) * 0.01, q, v, tau, a, coordinates=model.coordinates))
+    theta_hat, unc = _fit(problem)
+    theta0 = theta_true.copy()
+    theta0[:20] *= np.repeat([1.25, 0.8], 10)
+    exact = plausible_parameters(problem, theta_hat, theta0)
+    zero = plausible_in_region(problem, theta_hat, theta0, unc, 0.0)
+    assert zero.form == "exact" and zero.theta.tolist() == exact.theta.tolist()
+    tiny = plausible_in_region(problem, theta_hat, theta0, unc, 1e-9)
+    assert tiny.form == "confidence" and tiny.radius2 < 1e-17
+    np.testing.assert_allclose(tiny.theta, exact.theta, rtol=1e-4, atol=1e-6)
+    assert tiny.determined_by == exact.determined_by
+    wide = plausible_in_region(problem, theta_hat, theta0, unc, 0.95)
+    assert wide.divergence <= tiny.divergence <= exact.divergence * (1 + 1e-6)
+
+
+@pytest.mark.parametrize("level", [1.0, -0.1, "high", True, float("nan")])
+def test_bad_levels(level):
+    with pytest.raises(ConfigError) as err:
+        check_level(level)
+    assert str(err.value) == ("plausible parameters: level: expected a probability in [0, 1) (0: keep the training "
+                              f"predictions exactly), got {level!r}")
+
+
+def test_invariant_under_a_unit_scaling_of_a_parameter():
+    """Joint1.b in N mm s/rad instead of N m s/rad (θ_k × 1000, its regressor column / 1000): the same choice."""
+    import dataclasses
+
+    rigid = RigidBodyModel.from_urdf(PENDUBOT)
+    model = with_joint_terms(rigid)
+    rng = np.random.default_rng(3)
+    theta_true = np.concatenate([rigid.nominal, [0.02, 0.01], [0.08, 0.09], [0.003, 0.004]])
+    T = 80
+    q, v, a = rng.uniform(-2, 2, (T, 2)), rng.normal(size=(T, 2)), rng.normal(size=(T, 2))
+    tau = model.regressor(q, v, a) @ theta_true + 0.01 * rng.normal(size=(T, 2))
+    problem = build_problem(model, Trajectory(np.arange(T) * 0.01, q, v, tau, a, coordinates=model.coordinates))
+    k, s = problem.parameters.index("Joint1.b"), 1000.0
+    Y = np.array(problem.Y)
+    Y[:, :, k] /= s
+    scaled = dataclasses.replace(problem, Y=Y)
+    theta0 = theta_true.copy()
+    theta0[:20] *= np.repeat([1.25, 0.8], 10)
+    theta0_s = theta0.copy()
+    theta0_s[k] *= s
+    a_, b_ = (plausible_in_region(pr, th, t0, unc, 0.95)
+              for pr, t0 in ((problem, theta0), (scaled, theta0_s)) for th, unc in [_fit(pr)])
+    back = b_.theta.copy()
+    back[k] /= s
+    np.testing.assert_allclose(back, a_.theta, rtol=1e-4, atol=1e-8)  # conic-solver accuracy (1.2e-5 seen); a unit bug is ×1000
+    np.testing.assert_allclose(b_.prior_share, a_.prior_share, atol=1e-4)  # μ from the solution: solver accuracy
+    assert b_.statistic == pytest.approx(a_.statistic, rel=1e-6) and b_.divergence == pytest.approx(a_.divergence, rel=1e-6)
