@@ -209,6 +209,32 @@ def _solve(cvx, z, solver: str, solver_options, chain: list[str], what: str, usa
     return None
 
 
+def solve_divergence(theta, z, x, point, scaled, blocks, theta0, constraints, P, solver, solver_options,
+                     chain: list[str]):
+    """Minimise the log-det divergence to the prior (plus TIE_BREAK·‖z‖²) over the cvxpy variable ``x`` (θ = the
+    affine expression ``theta`` of it; ``point``: x's value → θ), falling back to its second-order (pullback)
+    expansion when no strictly consistent θ is found (e.g. the data pin a body onto the consistency boundary).
+    Returns (the solved variable or None, "logdet" | "pullback"); every try is recorded in ``chain``."""
+    import cvxpy as cp
+
+    objective = "logdet"
+
+    def usable(x_value) -> bool:  # an inaccurate point is kept only when consistent (log-det: strictly)
+        th = point(x_value)
+        strict = objective == "pullback" or np.isfinite(regularizer_value("logdet", P, th, theta0))
+        return strict and P.is_consistent(th, tol=1e-7)
+
+    logdet = sum(-cp.log_det(C) + cp.sum(cp.multiply(C0inv, C)) for C, C0inv in scaled)
+    cvx = cp.Problem(cp.Minimize(logdet + TIE_BREAK * cp.sum_squares(z)), constraints)
+    solved = _solve(cvx, x, solver, solver_options, chain, "logdet", usable)
+    if solved is None:
+        objective = "pullback"
+        quad = sum(_pullback_term(theta, idx, V, C0, theta0) for idx, V, C0 in blocks)
+        cvx = cp.Problem(cp.Minimize(quad + TIE_BREAK * cp.sum_squares(z)), constraints)
+        solved = _solve(cvx, x, solver, solver_options, chain, "pullback", usable)
+    return solved, objective
+
+
 def plausible_parameters(problem: IdentificationProblem, theta_hat, theta0, solver: str = "CLARABEL",
                          solver_options: dict | None = None) -> PlausibleParameters:
     """θ_p closest to the prior θ₀ among the θ with the training predictions of θ̂ (module docstring).
@@ -258,20 +284,8 @@ def plausible_parameters(problem: IdentificationProblem, theta_hat, theta0, solv
     constraints = [C >> 0 for C, _ in scaled] + _bounds(theta, P)
     chain: list[str] = []
 
-    def usable(z_value) -> bool:  # an inaccurate point is kept only when consistent (log-det: strictly)
-        th = centre + NG @ z_value
-        strict = objective == "pullback" or np.isfinite(regularizer_value("logdet", P, th, theta0))
-        return strict and P.is_consistent(th, tol=1e-7)
-
-    objective = "logdet"
-    logdet = sum(-cp.log_det(C) + cp.sum(cp.multiply(C0inv, C)) for C, C0inv in scaled)
-    cvx = cp.Problem(cp.Minimize(logdet + TIE_BREAK * cp.sum_squares(z)), constraints)
-    solved = _solve(cvx, z, solver, solver_options, chain, "logdet", usable)
-    if solved is None:  # e.g. the data pin a body onto the consistency boundary: no θ with det C_b > 0
-        objective = "pullback"
-        quad = sum(_pullback_term(theta, idx, V, C0, theta0) for idx, V, C0 in blocks)
-        cvx = cp.Problem(cp.Minimize(quad + TIE_BREAK * cp.sum_squares(z)), constraints)
-        solved = _solve(cvx, z, solver, solver_options, chain, "pullback", usable)
+    solved, objective = solve_divergence(theta, z, z, lambda z_value: centre + NG @ z_value, scaled, blocks, theta0,
+                                         constraints, P, solver, solver_options, chain)
     if solved is None:
         raise SolverError(f"plausible_parameters: no physically consistent θ with the training predictions of θ̂ "
                           f"was found: {' → '.join(chain)}", status="all_solvers_failed")

@@ -48,15 +48,13 @@ from dualid.estimators.plausible import (
     PREDICTION_RTOL,
     PRIOR,
     PRIOR_SHARE,
-    TIE_BREAK,
     PlausibleParameters,
     _bounds,
     _clear_boundary,
     _prior_metric,
-    _pullback_term,
     _scaled_block,
-    _solve,
     plausible_parameters,
+    solve_divergence,
 )
 from dualid.estimators.uncertainty import BaseUncertainty
 from dualid.model.consistency import prior_blocks, pullback_metric, regularizer_value
@@ -171,20 +169,8 @@ def plausible_in_region(problem: IdentificationProblem, theta_hat, theta0, uncer
         u_value = x_value[:k] / max(1.0, float(np.linalg.norm(x_value[:k])))
         return centre + ER @ u_value + NG @ x_value[k:]
 
-    def usable(x_value) -> bool:  # an inaccurate point is kept only when consistent (log-det: strictly)
-        th = point(x_value)
-        strict = objective == "pullback" or np.isfinite(regularizer_value("logdet", P, th, theta0))
-        return strict and P.is_consistent(th, tol=1e-7)
-
-    objective = "logdet"
-    logdet = sum(-cp.log_det(C) + cp.sum(cp.multiply(C0inv, C)) for C, C0inv in scaled)
-    cvx = cp.Problem(cp.Minimize(logdet + TIE_BREAK * cp.sum_squares(z)), constraints)
-    solved = _solve(cvx, x, solver, solver_options, chain, "logdet", usable)
-    if solved is None:  # the data pin a body onto the consistency boundary even within the region
-        objective = "pullback"
-        quad = sum(_pullback_term(theta, idx, V, C0, theta0) for idx, V, C0 in blocks)
-        cvx = cp.Problem(cp.Minimize(quad + TIE_BREAK * cp.sum_squares(z)), constraints)
-        solved = _solve(cvx, x, solver, solver_options, chain, "pullback", usable)
+    solved, objective = solve_divergence(theta, z, x, point, scaled, blocks, theta0, constraints, P, solver,
+                                         solver_options, chain)
     if solved is None:
         raise SolverError(f"plausible_in_region: no physically consistent θ with base parameters in the {level:g} "
                           f"confidence region was found: {' → '.join(chain)}", status="all_solvers_failed")

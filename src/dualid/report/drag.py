@@ -27,7 +27,7 @@ from dualid.report.fit_report import png, preprocessing_table, run_section
 from dualid.report.io import jsonable, markdown_table, write_json
 from dualid.report.metadata import run_metadata
 from dualid.report.outdir import write_output
-from dualid.report.render import to_html, to_markdown
+from dualid.report.render import write_report
 from dualid.report.robot import method_entry_record
 from dualid.robot.drag_fit import DragFitOutcome
 
@@ -110,13 +110,7 @@ def _write(outcome: DragFitOutcome, out: Path, meta: dict) -> dict[str, Path]:
     written["parameters.json"] = write_json(out / "parameters.json", record)
     (out / "identifiability.txt").write_text(outcome.identifiability.describe() + "\n")
     written["identifiability.txt"] = out / "identifiability.txt"
-    report = drag_report(outcome, meta)
-    for image in report.images:
-        (out / image.name).write_bytes(image.png)
-        written[image.name] = out / image.name
-    (out / "report.md").write_text(to_markdown(report))
-    (out / "report.html").write_text(to_html(report))
-    written["report.md"], written["report.html"] = out / "report.md", out / "report.html"
+    write_report(drag_report(outcome, meta), out, written)
     return written
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import base64
 import re
+from pathlib import Path
 
 import jinja2
 
@@ -53,3 +54,14 @@ def to_markdown(report: Report) -> str:
 
 def to_html(report: Report) -> str:
     return _ENV.get_template("report.html.j2").render(report=report)
+
+
+def write_report(report: Report, out: Path, written: dict[str, Path]) -> None:
+    """report.md with its PNGs beside it, and report.html (the same report, figures embedded), in ``out``
+    (a folder the output-directory policy of ``report.outdir`` handed out); ``written`` gains their paths."""
+    for image in report.images:
+        (out / image.name).write_bytes(image.png)
+        written[image.name] = out / image.name
+    (out / "report.md").write_text(to_markdown(report))
+    (out / "report.html").write_text(to_html(report))
+    written["report.md"], written["report.html"] = out / "report.md", out / "report.html"

@@ -21,13 +21,12 @@ import yaml
 from dualid.estimators.methods import method as method_entry
 from dualid.evaluation.validation import Validation
 from dualid.report.base_parameters import UNCERTAINTY_NOTE, definitions, method_record
-from dualid.report.document import Report
 from dualid.report.fit_report import fit_report, report_data, score_table, validation_report
 from dualid.report.io import jsonable, write_json
 from dualid.report.metadata import run_metadata
 from dualid.report.model_files import plausible_record, write_model_files
 from dualid.report.outdir import write_output
-from dualid.report.render import to_html, to_markdown
+from dualid.report.render import write_report
 from dualid.robot.fit import FitOutcome
 
 __all__ = ["parameters_record", "score_table", "write_fit", "write_validation"]
@@ -130,16 +129,6 @@ def write_fit(outcome: FitOutcome, out: str | Path, force: bool = False, command
     return write_output(out, force, lambda d: _write_fit(outcome, d, meta))
 
 
-def _write_report(report: Report, out: Path, written: dict[str, Path]) -> None:
-    """report.md with its PNGs beside it, and report.html (the same report, figures embedded)."""
-    for image in report.images:
-        (out / image.name).write_bytes(image.png)
-        written[image.name] = out / image.name
-    (out / "report.md").write_text(to_markdown(report))
-    (out / "report.html").write_text(to_html(report))
-    written["report.md"], written["report.html"] = out / "report.md", out / "report.html"
-
-
 def _write_fit(outcome: FitOutcome, out: Path, meta: dict) -> dict[str, Path]:
     written, files = write_model_files(outcome, out)
     urdfs = {m: e["urdf"] for m, e in files.items()}
@@ -150,7 +139,7 @@ def _write_fit(outcome: FitOutcome, out: Path, meta: dict) -> dict[str, Path]:
     written["parameters.yaml"], written["parameters.json"] = out / "parameters.yaml", out / "parameters.json"
     (out / "identifiability.txt").write_text(outcome.identifiability_text() + "\n")
     written["identifiability.txt"] = out / "identifiability.txt"
-    _write_report(fit_report(data), out, written)
+    write_report(fit_report(data), out, written)
     return written
 
 
@@ -171,5 +160,5 @@ def _write_validation(validation: Validation, out: Path, meta: dict, run: dict, 
     write_json(out / "validation.json", record)
     written = {"validation.json": out / "validation.json"}
     report = validation_report(validation, str(meta.get("model", validation.label)), run, xcorr_window)
-    _write_report(report, out, written)
+    write_report(report, out, written)
     return written
