@@ -77,3 +77,16 @@ def test_a_reference_of_the_wrong_size_is_a_data_error(problem):
     prob, _ = problem
     with pytest.raises(DataError, match=r"^OLS: guard_reference has 2 entries, the problem has p = 9 parameters$"):
         OLS(guard_reference=[1.0, 2.0]).fit(prob)
+
+
+def test_a_large_problem_is_guarded_on_evenly_strided_samples(problem, monkeypatch):
+    """Above GUARD_SAMPLES the recorded guard is that of every k-th sample, and says how many it looked at."""
+    import dualid.estimators.metric_guard as mg
+
+    prob, theta = problem
+    monkeypatch.setattr(mg.guard_sample, "__defaults__", (30,))  # 80 samples > 30: every 3rd, 27 samples
+    info = DualMetric(guard_reference=theta * 1e-3).fit(prob).info
+    expected = guard_info(prob.subset(slice(0, None, 3)), DualMetric().fit(prob).theta, theta * 1e-3)
+    assert info["metric_guard_samples"] == 27
+    assert info["metric_ratio_max"] == pytest.approx(expected["metric_ratio_max"], rel=1e-9)
+    assert DualMetric().fit(prob).info["metric_guard_reference"] == "wls fit on 27 strided samples"

@@ -25,7 +25,13 @@ from dualid.estimators.base import (
     parameter_scale,
     solve_cvxpy,
 )
-from dualid.estimators.metric_guard import DEFAULT_BOUND, check_guard_options, given_reference, reference_guard
+from dualid.estimators.metric_guard import (
+    DEFAULT_BOUND,
+    check_guard_options,
+    given_reference,
+    guard_sample,
+    reference_guard,
+)
 from dualid.estimators.newton import fit_dual_metric_newton
 from dualid.estimators.result import IdentificationResult
 from dualid.model.consistency import cvxpy_constraints
@@ -294,9 +300,10 @@ class DualMetric:
         if ref is None:
             from dualid.estimators.least_squares import WLS
 
+            some, count = guard_sample(problem)  # the reference on the samples the guard looks at
             try:
-                ref = WLS(constrained=self.constrained, allow_unidentifiable=True).fit(problem).theta
-                label = "wls fit"
+                ref = WLS(constrained=self.constrained, allow_unidentifiable=True).fit(some).theta
+                label = "wls fit" + ("" if count is None else f" on {count} strided samples")
             except SolverError as exc:  # recorded: the fit is then not certified
                 label = f"the WLS reference failed: {str(exc)[:160]}"
         guard = reference_guard(problem, result.theta, ref, label, self.guard_bound)
