@@ -302,7 +302,7 @@ class RegularizedWLS(_Common):
     covariance: np.ndarray | None = None  # (n, n); None: from the unregularized (OLS) residuals
     per_equation: bool = True  # γ_eff = γ·N·n: with W = Σ̂⁻¹ the data term is ≈ N·n at its optimum,
     # so a per-equation γ weighs the prior the same against 20 samples as against 20,000
-    # each body's principal second moments in θ₀ lifted to ≥ prior_floor × its largest (model.prior_lift; 0: off),
+    # each body's principal second moments in θ₀ lifted to ≥ prior_floor · m_b ℓ² (model.prior_lift; 0: off),
     # recorded in info["prior_lifted"]: a prior on the consistency boundary (e.g. a constrained fit) is not solvable
     prior_floor: float = PRIOR_FLOOR
 

@@ -5,12 +5,14 @@ pseudo-inertia at θ₀. A prior taken from a constrained fit sits on the cone b
 second moments Σ_c (eigenvalues σ₁ ≥ σ₂ ≥ σ₃ ≥ 0, the mass distribution's principal spreads) have σ₃ ≈ 0, so C_b0
 has a condition number ~1e11 and both Clarabel and dualid's interior-point method fail on the prior term.
 
-``lift_prior`` raises every body's principal second moments to at least ``floor · σ₁`` (the body's largest),
-keeping its mass, centre of mass and principal axes. In terms of the pseudo-inertia this is a floor on the
-generalised eigenvalues of C_b0 against a reference body of the same mass and centre of mass with isotropic
-spread (σ₁ + σ₂ + σ₃)/3, so it commutes with any rigid change of the body frame and any change of units: the
-lifted prior is the same body in every chart. Bodies with m ≤ 0 or σ₁ = 0 (a point mass: no length scale of
-their own) are left as they are and reported. Non-rigid blocks (drag, joint terms) are not changed.
+``lift_prior`` raises every body's principal second moments to at least ``floor · m_b ℓ²``, keeping its mass,
+centre of mass and principal axes; ℓ² = max_b σ₁,b / m_b is the largest squared radius of gyration among the
+prior's bodies (the model's own length scale). In terms of the pseudo-inertia this is a floor on the generalised
+eigenvalues of C_b0 against a reference body of the same mass and centre of mass with isotropic spread m_b ℓ², so
+it commutes with any rigid change of a body frame and any change of units: the lifted prior is the same body in
+every chart. A floor relative to each body's own largest moment is not enough: a constrained fit also shrinks
+whole bodies to near point masses (σ₁ ~ 1e-8 m L², measured on the stress corpus). Bodies with m ≤ 0 are left as
+they are and reported. Non-rigid blocks (drag, joint terms) are not changed.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ import pinocchio as pin
 
 from dualid.model.parameters import ParameterSpace
 
-DEFAULT_FLOOR = 1e-6  # σ_min / σ_max below this is lifted; a real thin rod (r/L = 0.01) has ~1e-4 and is untouched
+DEFAULT_FLOOR = 1e-4  # σ_k / (m ℓ²) below this is lifted (a rod with r/L ≥ 0.006 is not)
 
 
 def centred_moments(theta_b: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
@@ -33,31 +35,35 @@ def centred_moments(theta_b: np.ndarray) -> tuple[float, np.ndarray, np.ndarray,
 
 
 def lift_prior(parameters: ParameterSpace, theta0: np.ndarray, floor: float = DEFAULT_FLOOR) -> tuple[np.ndarray, dict]:
-    """(θ₀ with every rigid body's σ_k ≥ floor·σ_max, report {body: {...}} of the bodies changed or skipped).
+    """(θ₀ with every rigid body's σ_k ≥ floor · m_b ℓ², report {body: {...}} of the bodies changed or skipped).
 
-    floor = 0 returns θ₀ unchanged and an empty report."""
+    ℓ² = max_b σ_max,b / m_b is the largest squared radius of gyration among the prior's bodies (one length scale
+    for the whole model, so a body whose every second moment vanished, a point mass, is lifted too). floor = 0
+    returns θ₀ unchanged and an empty report."""
     theta = np.array(theta0, dtype=float)
     report: dict = {}
     if floor <= 0:
         return theta, report
+    bodies = {}
     for b in parameters.blocks:
         if b.kind != "rigid_body":
             continue
         idx = list(b.indices)
-        th = theta[idx]
-        if not th[0] > 0:
-            report[b.name] = {"lifted": False, "reason": f"mass {th[0]:.3g} ≤ 0"}
+        if not theta[idx][0] > 0:
+            report[b.name] = {"lifted": False, "reason": f"mass {theta[idx][0]:.3g} ≤ 0"}
             continue
-        m, c, sigma, R = centred_moments(th)
-        if not sigma[-1] > 0:
-            report[b.name] = {"lifted": False, "reason": "point mass (no second moment to scale a floor by)"}
+        bodies[b.name] = (idx, *centred_moments(theta[idx]))
+    ell2 = max((max(sigma[-1], 0.0) / m for _, m, _, sigma, _ in bodies.values()), default=0.0)
+    if not ell2 > 0:
+        return theta, report
+    for name, (idx, m, c, sigma, R) in bodies.items():
+        level = floor * m * ell2
+        if sigma[0] >= level:
             continue
-        ratio = float(sigma[0] / sigma[-1])
-        if ratio >= floor:
-            continue
-        lifted = np.maximum(sigma, floor * sigma[-1])
+        lifted = np.maximum(sigma, level)
         S = (R * lifted) @ R.T
         Ic = np.trace(S) * np.eye(3) - S
         theta[idx] = pin.Inertia(m, c, Ic).toDynamicParameters()
-        report[b.name] = {"lifted": True, "sigma_ratio_before": ratio, "sigma_ratio_after": float(floor)}
+        report[name] = {"lifted": True, "sigma_min_before": float(sigma[0] / (m * ell2)),
+                        "sigma_min_after": float(floor)}
     return theta, report
