@@ -130,3 +130,21 @@ def test_prior_floor_is_checked_and_an_inconsistent_prior_is_still_refused():
     bad[4] = -1.0  # Ixx < 0: not a body, lifting must not repair it
     with pytest.raises(ConsistencyError, match="nominal θ₀ is not physically consistent"):
         RegularizedWLS(theta0=bad, allow_unidentifiable=True).fit(problem)
+
+
+def test_a_prior_outside_the_cone_by_rounding_only_is_lifted_with_the_floor_and_refused_without():
+    """A constrained fit leaves a body at margin ~ −1e-12 (N = 12 data, the Crazyflie base in the corpus): within
+    ParameterSpace.is_consistent's tolerance, so the lift moves it inside (recorded); prior_floor=0 refuses it."""
+    from dualid import RegularizedWLS
+
+    problem, theta = [c for c in cases(large=False) if c.name.startswith("chain RR,")][0].build()
+    m, c, sigma, R = centred_moments(theta[:10])
+    sigma[0] = -1e-13 * sigma[-1]
+    S = (R * sigma) @ R.T
+    prior = theta.copy()
+    prior[:10] = pin.Inertia(m, c, np.trace(S) * np.eye(3) - S).toDynamicParameters()
+    assert min(problem.parameters.consistency_margins(prior).values()) < 0
+    result = RegularizedWLS(theta0=prior, allow_unidentifiable=True).fit(problem)
+    assert result.info["prior_lifted"]["j0"]["lifted"] and result.info["prior_lifted"]["j0"]["sigma_min_before"] < 0
+    with pytest.raises(ConsistencyError, match="nominal θ₀ is not physically consistent: block 'j0'"):
+        RegularizedWLS(theta0=prior, allow_unidentifiable=True, prior_floor=0.0).fit(problem)
