@@ -23,8 +23,8 @@ QUICK = [c for c in cases(large=False) if c.quick and c.name != "chain RR, 2 dof
 # (a status other than optimal, or an error), never passed off as optimal. A fix makes its entry fail here: remove it.
 KNOWN = {
     ("rank-deficient 4 dof, N = 12", "ols", "", "default"): "Clarabel inaccurate, the interior-point fallback jams",
-    ("rank-deficient 4 dof, N = 12", "logdet", "prior = constrained OLS", "default"): "the OLS prior is inconsistent",
-    ("rank-deficient 4 dof, N = 12", "pullback", "prior = constrained OLS", "default"): "the OLS prior is inconsistent",
+    ("rank-deficient 4 dof, N = 12", "logdet", "prior = constrained OLS", "default"): "no reference: both fail",
+    ("rank-deficient 4 dof, N = 12", "pullback", "prior = constrained OLS", "default"): "Clarabel optimal, 4.2e-2 above",
     ("rank-deficient 4 dof, N = 12", "wls", "", "default"): "no reference: the interior point and SCS fail",
     ("point-mass link, 3 dof, 5 %", "energy", "", "default"): "no reference: the interior point and SCS fail",
     ("rank-deficient 4 dof, N = 12", "dm", "", "newton"): "its OLS/WLS pilot is inaccurate",

@@ -332,10 +332,12 @@ class RegularizedWLS(_Common):
         except ConsistencyError:
             # … unless it is consistent to the library's tolerance (a constrained fit's rounding, margin ~ −1e-12)
             # and the lift is on: then the lift (recorded) moves it inside, and the strict check below confirms it
-            if not (self.prior_floor > 0 and problem.parameters.is_consistent(np.asarray(self.theta0))):
+            given = np.asarray(self.theta0, dtype=float)
+            if not (self.prior_floor > 0 and given.shape == (problem.parameters.p,) and np.all(np.isfinite(given))
+                    and problem.parameters.is_consistent(given)):
                 check_nominal(problem.parameters, self.theta0, strict=True)
                 raise
-            theta0 = np.asarray(self.theta0, dtype=float)
+            theta0 = given
         theta0, lifted = lift_prior(problem.parameters, theta0, float(self.prior_floor))
         theta0 = check_nominal(problem.parameters, theta0, strict=True)
         W, info = covariance_weight(problem, self.covariance, self)
