@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from dualid.errors import ConfigError, DataError, SolverError
+from dualid.errors import ConfigError, ConsistencyError, DataError, SolverError
 from dualid.estimators.base import (
     SOLVERS,
     captured_warnings,
@@ -31,6 +31,8 @@ from dualid.estimators.result import IdentificationResult
 from dualid.estimators.statistics import Statistics, energy_statistics, statistics
 from dualid.linalg import gram_eigh, gram_rank
 from dualid.model.consistency import cvxpy_constraints, prior_blocks, pullback_metric, regularizer_value
+from dualid.model.prior_lift import DEFAULT_FLOOR as PRIOR_FLOOR
+from dualid.model.prior_lift import lift_prior
 from dualid.problem import IdentificationProblem, sample_blocks
 
 
@@ -98,13 +100,12 @@ def fit_quadratic(
             th = theta[idx]
             k, m, _ = V.shape
             if kind == "logdet":
-                # congruence S C S with S = diag(C0)^-1/2: the cone sees O(1) entries, and
-                # −log det C + tr(C0⁻¹C) changes only by the constant 2 log det S
-                S = 1.0 / np.sqrt(np.diag(C0))
-                VS = V * S[None, :, None] * S[None, None, :]
+                # whitened block L⁻¹ C L⁻ᵀ with C0 = L Lᵀ (the prior's own chart, I at θ₀): the cone sees O(1)
+                # entries even for an ill-conditioned C0, and −log det C + tr(C0⁻¹C) changes only by a constant
+                Li = np.linalg.inv(np.linalg.cholesky(0.5 * (C0 + C0.T)))
+                VS = np.einsum("ab,kbc,dc->kad", Li, V, Li)
                 C = cp.reshape(VS.reshape(k, m * m).T @ th, (m, m), order="C")
-                C0inv = np.linalg.inv(C0 * np.outer(S, S))
-                reg = reg - cp.log_det(0.5 * (C + C.T)) + cp.sum(cp.multiply(C0inv, C))
+                reg = reg - cp.log_det(0.5 * (C + C.T)) + cp.trace(C)
             else:
                 G = pullback_metric(V, C0)
                 # G = F Fᵀ exactly (eigen-factor): a ridge added for a Cholesky factor (1e-12·tr G) changes the
@@ -301,6 +302,9 @@ class RegularizedWLS(_Common):
     covariance: np.ndarray | None = None  # (n, n); None: from the unregularized (OLS) residuals
     per_equation: bool = True  # γ_eff = γ·N·n: with W = Σ̂⁻¹ the data term is ≈ N·n at its optimum,
     # so a per-equation γ weighs the prior the same against 20 samples as against 20,000
+    # each body's principal second moments in θ₀ lifted to ≥ prior_floor · m_b ℓ² (model.prior_lift; 0: off),
+    # recorded in info["prior_lifted"]: a prior on the consistency boundary (e.g. a constrained fit) is not solvable
+    prior_floor: float = PRIOR_FLOOR
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -315,18 +319,33 @@ class RegularizedWLS(_Common):
         if not isinstance(self.gamma, (int, float, np.number)) or not (np.isfinite(self.gamma) and self.gamma >= 0):
             raise ConfigError(f"RegularizedWLS: gamma must be a finite number ≥ 0, got {self.gamma!r}")
         object.__setattr__(self, "covariance", check_covariance(self.covariance, "RegularizedWLS"))
+        if not isinstance(self.prior_floor, (int, float, np.number)) or not 0 <= self.prior_floor < 1:
+            raise ConfigError(f"RegularizedWLS: prior_floor must be a number in [0, 1), got {self.prior_floor!r}")
 
     @property
     def name(self) -> str:
         return f"{self.regularizer}_wls"
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
-        theta0 = check_nominal(problem.parameters, self.theta0, strict=True)
+        try:  # a body on the boundary (margin 0) is lifted below; one outside the cone is refused as before …
+            theta0 = check_nominal(problem.parameters, self.theta0, strict=False)
+        except ConsistencyError:
+            # … unless it is consistent to the library's tolerance (a constrained fit's rounding, margin ~ −1e-12)
+            # and the lift is on: then the lift (recorded) moves it inside, and the strict check below confirms it
+            given = np.asarray(self.theta0, dtype=float)
+            if not (self.prior_floor > 0 and given.shape == (problem.parameters.p,) and np.all(np.isfinite(given))
+                    and problem.parameters.is_consistent(given)):
+                check_nominal(problem.parameters, self.theta0, strict=True)
+                raise
+            theta0 = given
+        theta0, lifted = lift_prior(problem.parameters, theta0, float(self.prior_floor))
+        theta0 = check_nominal(problem.parameters, theta0, strict=True)
         W, info = covariance_weight(problem, self.covariance, self)
         gamma = float(self.gamma) * (problem.N * problem.n if self.per_equation else 1.0)
         return self._guarded(fit_quadratic(
             problem, statistics(problem, W), method=self.name, constrained=self.constrained, solver=self.solver,
             solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
             regularizer=(self.regularizer, theta0, gamma),
-            info={"covariance": info["covariance"], "covariance_matrix": info["covariance_matrix"], "gamma": gamma},
+            info={"covariance": info["covariance"], "covariance_matrix": info["covariance_matrix"], "gamma": gamma,
+                  "prior_floor": float(self.prior_floor), "prior_lifted": lifted},
         ), problem, theta0, "prior θ₀")

@@ -1,0 +1,150 @@
+"""Fast subset of the stress corpus (benchmarks/stress_corpus.py): every method of the method table, with
+each solver where there is a choice, on small corpus problems (prismatic and continuous joints, N = 12,
+a point-mass link on the consistency boundary, a coordinate in units ×1e6). Every fit must end optimal,
+without a raw warning reaching the caller, and agree with its reference (``dualid.bench.corpus_run``).
+Also: the prior lift (``model.prior_lift``) is chart-invariant, recorded, and makes the boundary-prior fits
+solvable that fail without it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from dualid.bench.corpus import cases
+from dualid.bench.corpus_run import fits
+from dualid.errors import ConfigError, ConsistencyError, SolverError
+from dualid.model.parameters import rigid_body_space
+from dualid.model.prior_lift import centred_moments, lift_prior
+
+QUICK = [c for c in cases(large=False) if c.quick and c.name != "chain RR, 2 dof, exact"]
+# What the corpus measured the library NOT to do yet (benchmarks/stress_corpus/results.md): each must be reported
+# (a status other than optimal, or an error), never passed off as optimal. A fix makes its entry fail here: remove it.
+KNOWN = {
+    ("rank-deficient 4 dof, N = 12", "ols", "", "default"): "Clarabel inaccurate, the interior-point fallback jams",
+    ("rank-deficient 4 dof, N = 12", "logdet", "prior = constrained OLS", "default"): "no reference: both fail",
+    ("rank-deficient 4 dof, N = 12", "pullback", "prior = constrained OLS", "default"): "Clarabel optimal, 4.2e-2 above",
+    ("rank-deficient 4 dof, N = 12", "wls", "", "default"): "no reference: the interior point and SCS fail",
+    ("point-mass link, 3 dof, 5 %", "energy", "", "default"): "no reference: the interior point and SCS fail",
+    ("rank-deficient 4 dof, N = 12", "dm", "", "newton"): "its OLS/WLS pilot is inaccurate",
+    ("rank-deficient 4 dof, N = 12", "dm", "", "CLARABEL"): "its OLS/WLS pilot is inaccurate",
+    ("rank-deficient 4 dof, N = 12", "dm-paper", "", "newton"): "Newton: no convergence in 100 iterations",
+    ("rank-deficient 4 dof, N = 12", "dm-bfp", "", "newton"): "objective 1.6e-5 above the CLARABEL solve",
+    ("point-mass link, 3 dof, 5 %", "logdet", "prior = constrained OLS", "default"): "Clarabel inaccurate, fallback fails",
+    ("point-mass link, 3 dof, 5 %", "dm", "", "newton"): "objective 1.3e-6 above the CLARABEL solve",
+    ("point-mass link, 3 dof, 5 %", "dm-bfp", "", "newton"): "objective 2.8e-6 above the CLARABEL solve",
+    ("point-mass link, 3 dof, 5 %", "dm-paper", "", "newton"): "Newton: no convergence where the SDP is optimal",
+    ("units 1e6 on q1, 3 dof, 5 %", "energy", "", "default"): "Clarabel inaccurate, the interior-point fallback jams",
+    ("units 1e6 on q1, 3 dof, 5 %", "logdet", "prior = constrained OLS", "default"): "Clarabel optimal, 1.1e-5 above",
+    ("units 1e6 on q1, 3 dof, 5 %", "pullback", "prior = constrained OLS", "default"): "Clarabel optimal, 6.7e-5 above",
+}
+
+
+@pytest.fixture(scope="module", params=QUICK, ids=[c.name for c in QUICK])
+def corpus_rows(request):
+    problem, theta = request.param.build()
+    return request.param.name, fits(problem, theta, sdp=request.param.sdp)
+
+
+def _good(r) -> bool:
+    return (r["status"] == "optimal" and r["raw_warnings"] == 0 and r.get("rel_gap") is not None
+            and abs(r["rel_gap"]) <= 1e-6 and r["pred_diff"] <= 1e-5)
+
+
+def test_every_method_and_solver_is_optimal_and_agrees_with_its_reference(corpus_rows):
+    case, rows = corpus_rows
+    rows = [r for r in rows if "floor off" not in r["variant"]]
+    assert {r["method"] for r in rows} == {"ols", "wls", "energy", "logdet", "pullback", "dm", "dm-paper", "dm-bfp"}
+    assert {r["solver_choice"] for r in rows if r["method"] == "dm-paper"} == {"newton", "sdp_clarabel"}
+    for r in rows:
+        key = (case, r["method"], r["variant"], r["solver_choice"])
+        what = f"{key}: {r['status']} gap {r.get('rel_gap')} {r.get('error') or r.get('chain')}"
+        assert r["raw_warnings"] == 0, what
+        if key in KNOWN:
+            assert not _good(r), f"{what}: fixed? remove it from KNOWN"
+            # reported: a status other than optimal, a measured gap, or the failed reference recorded
+            assert r["status"] != "optimal" or r.get("rel_gap") is not None or "ref_error" in r, what
+            continue
+        assert _good(r), what
+
+
+def _thin_body(rng):
+    """10 parameters of a body whose smallest centred second moment is 1e-12 of its largest (a boundary prior)."""
+    R = pin.exp3(rng.normal(size=3))
+    S = R @ np.diag([1e-14, 1e-3, 4e-3]) @ R.T
+    return pin.Inertia(2.0, np.array([0.1, -0.05, 0.2]), np.trace(S) * np.eye(3) - S).toDynamicParameters()
+
+
+def test_prior_lift_raises_small_second_moments_and_commutes_with_frame_and_unit_changes():
+    rng = np.random.default_rng(0)
+    space = rigid_body_space(["a", "b"])
+    fine = pin.Inertia.FromBox(1.0, 0.3, 0.1, 0.05).toDynamicParameters()  # ℓ² = 0.3²/12 = 0.0075 m²
+    theta = np.concatenate([_thin_body(rng), fine])
+    lifted, report = lift_prior(space, theta, 1e-3)
+    assert list(report) == ["a"] and report["a"]["lifted"]
+    np.testing.assert_array_equal(lifted[10:], fine)  # a body above the floor is untouched
+    m, c, sigma, _ = centred_moments(lifted[:10])
+    assert m == pytest.approx(2.0) and np.allclose(c, [0.1, -0.05, 0.2])
+    np.testing.assert_allclose(sigma, [1e-3 * 2.0 * 0.0075, 1e-3, 4e-3], rtol=1e-6)
+    # a rigid change of body a's frame, then lengths in mm and mass in g: lift ∘ change = change ∘ lift
+    M = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3))
+
+    def change(th):
+        a = pin.Inertia.FromDynamicParameters(th[:10]).se3Action(M)
+        b = pin.Inertia.FromDynamicParameters(th[10:])
+        return np.concatenate([pin.Inertia(1e3 * I.mass, 1e3 * I.lever, 1e9 * I.inertia).toDynamicParameters()
+                               for I in (a, b)])
+
+    np.testing.assert_allclose(lift_prior(space, change(theta), 1e-3)[0], change(lifted), rtol=1e-7)
+    assert lift_prior(space, theta, 0.0) == (pytest.approx(theta), {})
+
+
+def test_boundary_prior_fails_without_the_lift_and_is_solved_and_recorded_with_it():
+    """A log-det / pullback prior taken from a constrained OLS fit (σ_min/σ_max ~ 1e-11): without the floor
+    Clarabel and the interior-point fallback fail or are inaccurate; with it both fits are optimal and the
+    result says which bodies were lifted."""
+    from dualid.estimators.methods import make_estimator
+
+    problem, _ = [c for c in cases(large=False) if c.name.startswith("chain RPR")][0].build()
+    theta_ols = make_estimator("ols", allow_unidentifiable=True).fit(problem).theta
+    for kind in ("logdet", "pullback"):
+        before = make_estimator(kind, theta0=theta_ols, allow_unidentifiable=True, options={"prior_floor": 0.0})
+        try:
+            failed = before.fit(problem).status != "optimal"
+        except SolverError:
+            failed = True
+        assert failed, kind
+        after = make_estimator(kind, theta0=theta_ols, allow_unidentifiable=True).fit(problem)
+        assert after.status == "optimal"
+        assert after.info["prior_floor"] == 1e-4 and set(after.info["prior_lifted"]) == {"j0", "j1", "j2"}
+
+
+def test_prior_floor_is_checked_and_an_inconsistent_prior_is_still_refused():
+    from dualid import RegularizedWLS
+
+    with pytest.raises(ConfigError, match=r"prior_floor must be a number in \[0, 1\), got -1"):
+        RegularizedWLS(theta0=np.ones(20), prior_floor=-1)
+    problem, theta = [c for c in cases(large=False) if c.name.startswith("chain RR,")][0].build()
+    bad = theta.copy()
+    bad[4] = -1.0  # Ixx < 0: not a body, lifting must not repair it
+    with pytest.raises(ConsistencyError, match="nominal θ₀ is not physically consistent"):
+        RegularizedWLS(theta0=bad, allow_unidentifiable=True).fit(problem)
+
+
+def test_a_prior_outside_the_cone_by_rounding_only_is_lifted_with_the_floor_and_refused_without():
+    """A constrained fit leaves a body at margin ~ −1e-12 (N = 12 data, the Crazyflie base in the corpus): within
+    ParameterSpace.is_consistent's tolerance, so the lift moves it inside (recorded); prior_floor=0 refuses it."""
+    from dualid import RegularizedWLS
+
+    problem, theta = [c for c in cases(large=False) if c.name.startswith("chain RR,")][0].build()
+    m, c, sigma, R = centred_moments(theta[:10])
+    sigma[0] = -1e-13 * sigma[-1]
+    S = (R * sigma) @ R.T
+    prior = theta.copy()
+    prior[:10] = pin.Inertia(m, c, np.trace(S) * np.eye(3) - S).toDynamicParameters()
+    assert min(problem.parameters.consistency_margins(prior).values()) < 0
+    result = RegularizedWLS(theta0=prior, allow_unidentifiable=True).fit(problem)
+    assert result.info["prior_lifted"]["j0"]["lifted"] and result.info["prior_lifted"]["j0"]["sigma_min_before"] < 0
+    with pytest.raises(ConsistencyError, match="nominal θ₀ is not physically consistent: block 'j0'"):
+        RegularizedWLS(theta0=prior, allow_unidentifiable=True, prior_floor=0.0).fit(problem)
