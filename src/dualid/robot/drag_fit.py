@@ -33,6 +33,7 @@ from dualid.robot.config import FitConfig
 from dualid.robot.fit import (
     MethodFit,
     Progress,
+    RunOutcome,
     choose_preprocessing,
     column_map,
     estimator,
@@ -70,7 +71,7 @@ def load_drag_runs(paths, cmap: ColumnMap, coordinates: tuple[str, ...], steps) 
 
 
 @dataclass(frozen=True, eq=False)
-class DragFitOutcome:
+class DragFitOutcome(RunOutcome):
     config: FitConfig
     model: DragModel
     columns: ColumnMap
@@ -82,14 +83,6 @@ class DragFitOutcome:
     prior: str = ""
     warnings: tuple[str, ...] = ()
     preprocessing_note: str = ""
-
-    @property
-    def complete(self) -> bool:
-        return all(f.ok for f in self.fits.values())
-
-    @property
-    def steps(self) -> list:
-        return list(self.train[0].meta.get("steps", [])) if self.train else []
 
 
 def fit_drag(config: FitConfig, progress: Progress | None = None) -> DragFitOutcome:

@@ -236,8 +236,26 @@ class MethodFit:
         return self.result is not None
 
 
+class RunOutcome:
+    """What every fit outcome (rigid-body ``FitOutcome``, ``robot.drag_fit.DragFitOutcome``) derives from its
+    ``fits`` and ``train`` fields."""
+
+    fits: dict[str, MethodFit]
+    train: tuple[Trajectory, ...]
+
+    @property
+    def complete(self) -> bool:
+        """True when every requested method succeeded."""
+        return all(f.ok for f in self.fits.values())
+
+    @property
+    def steps(self) -> list:
+        """The preprocessing steps the training runs went through."""
+        return list(self.train[0].meta.get("steps", [])) if self.train else []
+
+
 @dataclass(frozen=True, eq=False)
-class FitOutcome:
+class FitOutcome(RunOutcome):
     config: FitConfig
     rigid: RigidBodyModel
     model: JointTermsModel | RigidBodyModel
@@ -251,15 +269,6 @@ class FitOutcome:
     prior: str = ""  # where θ₀ of the regularized methods came from
     warnings: tuple[str, ...] = ()  # the DualidWarnings raised while loading, checking and fitting
     preprocessing_note: str = ""  # how the default preprocessing was derived from the data ("" if configured)
-
-    @property
-    def complete(self) -> bool:
-        """True when every requested method succeeded."""
-        return all(f.ok for f in self.fits.values())
-
-    @property
-    def steps(self) -> list:
-        return list(self.train[0].meta.get("steps", [])) if self.train else []
 
     def identifiability_text(self) -> str:
         ident = self.identifiability
