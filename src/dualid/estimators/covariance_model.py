@@ -50,21 +50,29 @@ def moment_estimate(r: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, float]:
     return x[:n], float(x[n] / m_scale)
 
 
+def _gaussian_nll(C: np.ndarray, r: np.ndarray):
+    """(mean of log det C_i + r_iᵀ C_i⁻¹ r_i, its derivative G_i = C_i⁻¹ − C_i⁻¹r_i r_iᵀC_i⁻¹ in C_i (N, n, n)), or
+    None when some C_i is not positive definite."""
+    try:
+        L = np.linalg.cholesky(C)
+    except np.linalg.LinAlgError:
+        return None
+    logdet = 2.0 * np.sum(np.log(np.diagonal(L, axis1=1, axis2=2)), axis=1)
+    Ci = np.linalg.inv(C)
+    w = np.einsum("nab,nb->na", Ci, r)
+    return float(np.mean(logdet + np.einsum("na,na->n", r, w))), Ci - w[:, :, None] * w[:, None, :]
+
+
 def _nll(x: np.ndarray, r: np.ndarray, M: np.ndarray, m_scale: float):
     """Mean of log det C_i + r_iᵀ C_i⁻¹ r_i and its gradient in x = (σ, κ·m_scale)."""
     n = r.shape[1]
     sigma, kappa = x[:n], x[n] / m_scale
     C = kappa * M
     C[:, np.arange(n), np.arange(n)] += sigma
-    try:
-        L = np.linalg.cholesky(C)
-    except np.linalg.LinAlgError:
+    value = _gaussian_nll(C, r)
+    if value is None:
         return np.inf, np.zeros_like(x)
-    logdet = 2.0 * np.sum(np.log(np.diagonal(L, axis1=1, axis2=2)), axis=1)
-    Ci = np.linalg.inv(C)
-    w = np.einsum("nab,nb->na", Ci, r)
-    f = float(np.mean(logdet + np.einsum("na,na->n", r, w)))
-    G = Ci - w[:, :, None] * w[:, None, :]  # ∂/∂C_i of log det C_i + rᵀC_i⁻¹r
+    f, G = value
     grad = np.concatenate([np.mean(np.einsum("naa->na", G), axis=0), [float(np.mean(np.sum(G * M, axis=(1, 2)))) / m_scale]])
     return f, grad
 
@@ -105,15 +113,10 @@ def _nll_full(x: np.ndarray, r: np.ndarray, M: np.ndarray, floor: float):
     L[il] = x[:-1]
     C = x[-1] * M
     C += L @ L.T + floor * np.eye(n)
-    try:
-        Lc = np.linalg.cholesky(C)
-    except np.linalg.LinAlgError:
+    value = _gaussian_nll(C, r)
+    if value is None:
         return np.inf, np.zeros_like(x)
-    logdet = 2.0 * np.sum(np.log(np.diagonal(Lc, axis1=1, axis2=2)), axis=1)
-    Ci = np.linalg.inv(C)
-    w = np.einsum("nab,nb->na", Ci, r)
-    f = float(np.mean(logdet + np.einsum("na,na->n", r, w)))
-    G = Ci - w[:, :, None] * w[:, None, :]  # ∂/∂C_i, symmetric
+    f, G = value  # G symmetric
     gL = 2.0 * np.mean(G, axis=0) @ L
     return f, np.concatenate([gL[il], [float(np.mean(np.sum(G * M, axis=(1, 2))))]])
 
