@@ -235,6 +235,18 @@ def solve_divergence(theta, z, x, point, scaled, blocks, theta0, constraints, P,
     return solved, objective
 
 
+def checked_prior(P, theta0, solver: str, who: str) -> np.ndarray:
+    """θ₀ as a strictly consistent array (ConsistencyError otherwise: the divergence needs C_b(θ₀)⁻¹), with
+    ``solver`` checked (ConfigError); ``who`` names the caller in the messages."""
+    try:
+        theta0 = check_nominal(P, theta0, strict=True)
+    except ConsistencyError as exc:
+        raise ConsistencyError(f"{who}: the prior {exc}") from None
+    if solver not in SOLVERS:
+        raise ConfigError(f"{who}: solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+    return theta0
+
+
 def plausible_parameters(problem: IdentificationProblem, theta_hat, theta0, solver: str = "CLARABEL",
                          solver_options: dict | None = None) -> PlausibleParameters:
     """θ_p closest to the prior θ₀ among the θ with the training predictions of θ̂ (module docstring).
@@ -248,12 +260,7 @@ def plausible_parameters(problem: IdentificationProblem, theta_hat, theta0, solv
     theta_hat = np.asarray(theta_hat, dtype=float)
     if theta_hat.shape != (P.p,) or not np.all(np.isfinite(theta_hat)):
         raise DataError(f"plausible_parameters: θ̂ must be {P.p} finite numbers, got shape {theta_hat.shape}")
-    try:
-        theta0 = check_nominal(P, theta0, strict=True)
-    except ConsistencyError as exc:
-        raise ConsistencyError(f"plausible_parameters: the prior {exc}") from None
-    if solver not in SOLVERS:
-        raise ConfigError(f"plausible_parameters: solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+    theta0 = checked_prior(P, theta0, solver, "plausible_parameters")
     N, rank, _ = _null_basis(problem)
     blocks = prior_blocks("logdet", P, theta0)
     scale = np.linalg.norm(problem.Y.reshape(-1, P.p), axis=0)

@@ -41,8 +41,7 @@ import numpy as np
 import scipy.linalg
 import scipy.stats
 
-from dualid.errors import ConfigError, ConsistencyError, DataError, SolverError
-from dualid.estimators.base import SOLVERS, check_nominal
+from dualid.errors import ConfigError, DataError, SolverError
 from dualid.estimators.plausible import (
     DATA,
     PREDICTION_RTOL,
@@ -53,6 +52,7 @@ from dualid.estimators.plausible import (
     _clear_boundary,
     _prior_metric,
     _scaled_block,
+    checked_prior,
     plausible_parameters,
     solve_divergence,
 )
@@ -135,12 +135,7 @@ def plausible_in_region(problem: IdentificationProblem, theta_hat, theta0, uncer
         exact = plausible_parameters(problem, theta_hat, theta0, solver, solver_options)
         return dataclasses.replace(exact, form=EXACT, training_rmse_hat=rmse_hat,
                                    training_rmse=training_rmse(problem, exact.theta))
-    try:
-        theta0 = check_nominal(P, theta0, strict=True)
-    except ConsistencyError as exc:
-        raise ConsistencyError(f"plausible_in_region: the prior {exc}") from None
-    if solver not in SOLVERS:
-        raise ConfigError(f"plausible_in_region: solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+    theta0 = checked_prior(P, theta0, solver, "plausible_in_region")
     r = base.rank
     radius2 = float(scipy.stats.chi2.ppf(level, r if joint else 1)) if r else 0.0
     scale = np.linalg.norm(problem.Y.reshape(-1, P.p), axis=0)
