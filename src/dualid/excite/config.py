@@ -27,7 +27,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from dualid.errors import ConfigError, MissingFileError
+from dualid.errors import ConfigError
 
 Criterion = Literal["dm", "logdet", "cond"]
 CRITERIA: tuple[str, ...] = ("dm", "logdet", "cond")
@@ -89,18 +89,9 @@ class ExciteConfig(_Section):
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> "ExciteConfig":
-        import yaml
+        from dualid.data.files import read_mapping
 
-        path = Path(path)
-        if not path.is_file():
-            raise MissingFileError(f"excite config not found: {path}")
-        try:
-            d = yaml.safe_load(path.read_text())
-        except yaml.YAMLError as exc:
-            mark = getattr(exc, "problem_mark", None)
-            at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-            raise ConfigError(f"excite config {path}: YAML syntax error{at}: {getattr(exc, 'problem', '') or exc}") from None
-        return cls.from_dict(d, where=f"excite config {path}")
+        return cls.from_dict(read_mapping(path, "excite config"), where=f"excite config {path}")
 
     def with_overrides(self, **changes) -> "ExciteConfig":
         """A copy with the given (not None) settings changed, checked again."""

@@ -268,7 +268,7 @@ class FitConfig:
     @staticmethod
     def from_yaml(path: str | Path) -> "FitConfig":
         """Read a YAML config; relative paths in it are relative to its folder."""
-        from dualid.robot.files import read_mapping
+        from dualid.data.files import read_mapping
 
         path = Path(path)
         from dualid.robot.schema import check_shape

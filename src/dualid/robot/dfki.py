@@ -41,7 +41,7 @@ CROSS_AXIS_RATIO = 0.1  # along-link / across-link central inertia of the invent
 
 def load_reference(yml_path: str | Path) -> dict[str, float]:
     """The lab's parameters as floats; KeyError-free: missing names raise ValueError."""
-    from dualid.robot.files import read_mapping
+    from dualid.data.files import read_mapping
 
     path = Path(yml_path)
     d = read_mapping(path, "DFKI reference parameters")

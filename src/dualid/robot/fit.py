@@ -23,6 +23,7 @@ from typing import Callable
 import cvxpy as cp
 import numpy as np
 
+from dualid.data.files import read_mapping
 from dualid.data.io import ColumnMap, load_log, read_table
 from dualid.data.preprocessing import preprocess
 from dualid.data.trajectory import Trajectory
@@ -41,7 +42,6 @@ from dualid.model.urdf_check import read_urdf
 from dualid.problem import Identifiability, IdentificationProblem, build_problem
 from dualid.robot.config import FitConfig
 from dualid.robot.defaults import adaptive_preprocessing, warn_far_from_data
-from dualid.robot.files import read_mapping
 from dualid.robot.inputs import array_column_map, check_floating, check_runs_differ, check_units
 from dualid.robot.plausible_step import choose_plausible
 from dualid.robot.uncertainty import method_uncertainty, parameter_errors

@@ -1,5 +1,5 @@
-"""Reading the YAML/JSON files a fit names (configs, reference and prior parameters) with errors
-that name the file and the line."""
+"""Reading the YAML/JSON files dualid is given (fit and excite configs, reference and prior parameters) with
+errors that name the file and the line."""
 
 from __future__ import annotations
 
