@@ -15,7 +15,7 @@ from typing import Callable
 import numpy as np
 from matplotlib.figure import Figure
 
-from dualid.evaluation.validation import Validation, validate
+from dualid.evaluation.validation import Validation
 from dualid.report.base_parameters import base_section
 from dualid.report.document import (
     Bullets,
@@ -117,14 +117,10 @@ class FitReportData:
 
 def report_data(outcome: FitOutcome, urdfs: dict[str, str], meta: dict) -> FitReportData:
     """The held-out validations of the outcome and the same scores on the training runs (θ̂ of each
-    method and reference predicting the data it was fitted on)."""
-    window = outcome.config.xcorr_window
-    thetas = {m: f.result.theta for m, f in outcome.fits.items() if f.ok}
-    thetas.update({lab: th for lab, (th, _) in outcome.references.items()})
-    train = {lab: validate(outcome.model, th, list(outcome.train), lab, window) for lab, th in thetas.items()}
+    method and reference predicting the data it was fitted on; computed by ``robot.fit``)."""
     held = {m: f.validation for m, f in outcome.fits.items() if f.ok and f.validation is not None}
     held.update({lab: v for lab, (_, v) in outcome.references.items() if v is not None})
-    return FitReportData(outcome, urdfs, meta, train, held)
+    return FitReportData(outcome, urdfs, meta, dict(outcome.training), held)
 
 
 def _summary(d: FitReportData) -> Section:

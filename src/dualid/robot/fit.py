@@ -269,6 +269,7 @@ class FitOutcome(RunOutcome):
     prior: str = ""  # where θ₀ of the regularized methods came from
     warnings: tuple[str, ...] = ()  # the DualidWarnings raised while loading, checking and fitting
     preprocessing_note: str = ""  # how the default preprocessing was derived from the data ("" if configured)
+    training: dict[str, Validation] = field(default_factory=dict)  # label → scores on the training runs
 
     def identifiability_text(self) -> str:
         ident = self.identifiability
@@ -377,5 +378,8 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
         _say(progress, f"validating the reference parameters {label}")
         theta_ref = reference_theta(path, model)
         references[label] = (theta_ref, validate(model, theta_ref, test, label, config.xcorr_window) if test else None)
+    _say(progress, "scoring every fit on the training runs")
+    thetas = {m: f.result.theta for m, f in fits.items() if f.ok} | {lab: th for lab, (th, _) in references.items()}
+    training = {lab: validate(model, th, train, lab, config.xcorr_window) for lab, th in thetas.items()}
     return FitOutcome(config, rigid, model, cmap, tuple(train), tuple(test), problem, ident, fits, references, prior_text,
-                      preprocessing_note=steps_note)
+                      preprocessing_note=steps_note, training=training)
