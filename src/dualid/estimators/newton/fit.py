@@ -23,6 +23,8 @@ from dualid.problem import IdentificationProblem
 WARM_TOL = 1e-8  # the subsample's tolerance (a tight one costs iterations on 50,000 samples, not passes over N) …
 MIN_WARM = 5_000  # smallest default warm-start subsample
 WARM_GAP = 1e-6  # … and the duality gap (× f) the full problem's dual variables are re-centred at
+WARM_MAX_ITER = 10  # full-data iterations a warm start may take before the cold start takes over (it needs 3–4 where
+# it helps; where the subsample's optimum is no guide — e.g. an optimum at infinity — each further one is a wasted pass)
 
 
 PUSH = 10.0  # the re-solve's lower bound: this many times the main components' values at θ̂
@@ -132,8 +134,8 @@ def fit_dual_metric_newton(
         # primal warm start; duals re-centred at θ with a small gap (WARM_GAP f): the subsample's own duals sit
         # too close to its boundary for the full problem and would jam the iterations
         try:
-            theta, Z, z, info = _interior_point(problem, cons, warm[0], None, None, tol, max_iter, chunk, verbose,
-                                                der=warm[1], gap0=WARM_GAP, f_scale=f_scale)
+            theta, Z, z, info = _interior_point(problem, cons, warm[0], None, None, tol, min(max_iter, WARM_MAX_ITER),
+                                                chunk, verbose, der=warm[1], gap0=WARM_GAP, f_scale=f_scale)
         except SolverError as exc:  # the subsample's optimum can sit near a boundary the full data move away from
             warm = None
             failed_warm = f"{start} failed ({exc.status}); "
