@@ -229,3 +229,21 @@ def test_every_fit_records_the_metric_guard_against_the_urdf(outcome, written):
     record = yaml.safe_load((written / "parameters.yaml").read_text())
     assert set(record["methods"]["dm"]["metric_guard"]) >= {"metric_ratio_min", "degenerate"}
     assert "| metric vs URDF |" in (written / "report.md").read_text()
+
+
+def test_a_fit_parses_each_log_once_and_hands_out_read_only_arrays(monkeypatch):
+    import dualid.data.tables as tables
+
+    parsed = []
+    real = tables._read_table
+    monkeypatch.setattr(tables, "_read_table", lambda path: parsed.append(Path(path).name) or real(path))
+    fit_robot(FitConfig.from_dict(small_config(methods=["ols"])))
+    # the first log is looked at three times (column map, default preprocessing, loading), the test log once
+    assert sorted(parsed) == ["trajectory_00.csv", "trajectory_04.csv"]
+    with tables.reading_once():
+        data, _ = tables.read_table(DFKI / "trajectory_04.csv")
+        again, _ = tables.read_table(DFKI / "trajectory_04.csv")
+    assert data["time"] is again["time"] and not data["time"].flags.writeable
+    parsed.clear()
+    tables.read_table(DFKI / "trajectory_04.csv")
+    assert parsed == ["trajectory_04.csv"]  # outside the block every call parses the file

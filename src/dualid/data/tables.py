@@ -7,6 +7,9 @@ Unreadable files are DataErrors naming the file; duplicated CSV header names are
 from __future__ import annotations
 
 import zipfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from pathlib import Path
 
 import numpy as np
@@ -17,8 +20,37 @@ from dualid.errors import DataError
 FORMATS = (".csv", ".parquet", ".npz")
 
 
+_READ: ContextVar[dict | None] = ContextVar("dualid_tables_read", default=None)
+
+
+@contextmanager
+def reading_once() -> Iterator[None]:
+    """Inside this block read_table parses each file once (keyed by its resolved path, size and modification
+    time) and hands out read-only arrays; a workflow that checks, samples and then loads the same log reads it once."""
+    token = _READ.set({})
+    try:
+        yield
+    finally:
+        _READ.reset(token)
+
+
 def read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
     """All columns of the file as float arrays (name -> (T,)) and the column order."""
+    cache = _READ.get()
+    if cache is None:
+        return _read_table(path)
+    st = path.stat()
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+    if key not in cache:
+        data, columns = _read_table(path)
+        for x in data.values():
+            x.flags.writeable = False
+        cache[key] = (data, columns)
+    data, columns = cache[key]
+    return dict(data), list(columns)
+
+
+def _read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
     ext = path.suffix.lower()
     if ext not in FORMATS:
         raise DataError(f"{path}: unknown log format {path.suffix!r}; expected one of {', '.join(FORMATS)}")

@@ -26,6 +26,7 @@ import numpy as np
 from dualid.data.files import read_mapping
 from dualid.data.io import ColumnMap, load_log, read_table
 from dualid.data.preprocessing import preprocess
+from dualid.data.tables import reading_once
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError, DualidError, DualidWarning, MissingFileError
 from dualid.estimators import IdentificationResult
@@ -301,7 +302,8 @@ def fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", DualidWarning)
-            outcome = _fit_robot(config, progress)
+            with reading_once():  # the first log is checked, sampled and loaded: parsed once
+                outcome = _fit_robot(config, progress)
     finally:  # re-issued (each once) also when an error follows: a warning may explain it
         for w in {(str(w.message), w.category): w for w in caught}.values():
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dualid.data.tables import reading_once
 from dualid.errors import DataError, MissingFileError, ModelError
 from dualid.evaluation.validation import Validation, validate
 from dualid.model.joint_terms import JointTermsModel, with_joint_terms
@@ -64,7 +65,8 @@ def validate_urdf(urdf, data, columns=None, preprocessing=None, xcorr_window: fl
         [terms[j]["friction"] for j in joints],
         [terms[j]["armature"] for j in joints],
     ])
-    cmap = column_map(columns, tuple(rigid.coordinates), data[0])
-    steps, _ = choose_preprocessing(preprocessing, data[0], cmap, tuple(rigid.coordinates))
-    runs = load_runs(data, cmap, tuple(rigid.coordinates), steps, rigid)
+    with reading_once():  # the first log is checked, sampled and loaded: parsed once
+        cmap = column_map(columns, tuple(rigid.coordinates), data[0])
+        steps, _ = choose_preprocessing(preprocessing, data[0], cmap, tuple(rigid.coordinates))
+        runs = load_runs(data, cmap, tuple(rigid.coordinates), steps, rigid)
     return model, theta, validate(model, theta, runs, label or urdf.stem, xcorr_window)
