@@ -42,6 +42,7 @@ import numpy as np
 from dualid.errors import ConfigError, MetricError, SolverError
 from dualid.estimators.base import check_identifiable, freeze_options
 from dualid.estimators.covariance_model import full_likelihood_estimate, likelihood_estimate, moment_estimate
+from dualid.estimators.covariance_select import select_structure
 from dualid.estimators.least_squares import OLS, WLS, fit_quadratic, residual_covariance
 from dualid.estimators.metric_guard import DEFAULT_BOUND, given_reference, reference_guard
 from dualid.estimators.result import IdentificationResult
@@ -53,7 +54,7 @@ SOLVERS = ("newton", "CLARABEL", "SCS")
 COVARIANCE_MODELS = ("likelihood", "moments")
 COVARIANCE_SAMPLES = 20_000  # (Σ, κ) (at most n(n+1)/2 + 1 numbers) from at most this many evenly strided samples: the likelihood
 # makes one pass over the samples it is given per L-BFGS iteration (recorded in info["covariance_samples"])
-SIGMA_STRUCTURES = ("full", "diagonal")
+SIGMA_STRUCTURES = ("full", "diagonal", "auto")  # auto: chosen by cross-validation (estimators.covariance_select)
 __all__ = ["FeasibleGLS", "fit_weighted", "full_likelihood_estimate", "likelihood_estimate", "moment_estimate"]
 
 
@@ -82,7 +83,7 @@ class FeasibleGLS:
 
     pilot: str = "wls"
     covariance_model: str = "likelihood"  # "likelihood" | "moments"
-    sigma_structure: str = "full"  # "full" n×n Σ | "diagonal" (the likelihood model; "moments" is always diagonal)
+    sigma_structure: str = "full"  # "full" n×n Σ | "diagonal" | "auto" (the likelihood model; "moments": diagonal)
     theta_ref: tuple | None = None  # (p,) fixed pilot θ
     sigma: tuple | None = None  # (n,) or (n, n) fixed sensor covariance Σ
     kappa: float | None = None  # fixed κ ≥ 0
@@ -194,6 +195,9 @@ class FeasibleGLS:
             sig, kappa = moment_estimate(rh, Mh)
             Sh = np.diag(np.maximum(sig, self.sigma_floor))
             info.update(covariance_model="moments", sigma_structure="diagonal")
+        elif self.sigma_structure == "auto":
+            Sh, kappa, info = select_structure(rh, Mh, self.sigma_floor)
+            info.update(covariance_model="likelihood")
         elif self.sigma_structure == "diagonal":
             sig, kappa, info = likelihood_estimate(rh, Mh, self.sigma_floor)
             Sh = np.diag(sig)
