@@ -26,6 +26,9 @@ by its residual rms (so the estimate is equivariant under unit changes):
   the unexplained torque is correlated across joints (a torque-sensor gain error scales τ, whose
   joints the inertia couples): on the statistical benchmark's sensor case the diagonal model left
   dm 1.04–1.33× the best of OLS/WLS, the full one 0.67–1.07×;
+- ``sigma_structure="auto"``: the diagonal, full or shrunk-full Σ with the best time-blocked cross-validated
+  likelihood (``estimators.covariance_select``; not the default: the likelihood does not track θ̂'s quality
+  under model error, docs/statistics.md);
 - ``"moments"``: non-negative least squares Σ_i ‖r_i r_iᵀ − Σ − κ M_i‖_F² (the prototype; diagonal Σ).
 The whole fit is done in the sensor chart; the final weighted problem is solved by whitening
 (r̃_i = L_i⁻¹ r_i, C_i = L_i L_iᵀ, a per-sample change of coordinates) and the quadratic machinery
