@@ -26,6 +26,9 @@ by its residual rms (so the estimate is equivariant under unit changes):
   the unexplained torque is correlated across joints (a torque-sensor gain error scales τ, whose
   joints the inertia couples): on the statistical benchmark's sensor case the diagonal model left
   dm 1.04–1.33× the best of OLS/WLS, the full one 0.67–1.07×;
+- ``sigma_structure="auto"``: the diagonal, full or shrunk-full Σ with the best time-blocked cross-validated
+  likelihood (``estimators.covariance_select``; not the default: the likelihood does not track θ̂'s quality
+  under model error, docs/statistics.md);
 - ``"moments"``: non-negative least squares Σ_i ‖r_i r_iᵀ − Σ − κ M_i‖_F² (the prototype; diagonal Σ).
 The whole fit is done in the sensor chart; the final weighted problem is solved by whitening
 (r̃_i = L_i⁻¹ r_i, C_i = L_i L_iᵀ, a per-sample change of coordinates) and the quadratic machinery
@@ -42,6 +45,7 @@ import numpy as np
 from dualid.errors import ConfigError, MetricError, SolverError
 from dualid.estimators.base import check_identifiable, freeze_options
 from dualid.estimators.covariance_model import full_likelihood_estimate, likelihood_estimate, moment_estimate
+from dualid.estimators.covariance_select import select_structure
 from dualid.estimators.least_squares import OLS, WLS, fit_quadratic, residual_covariance
 from dualid.estimators.metric_guard import DEFAULT_BOUND, given_reference, reference_guard
 from dualid.estimators.result import IdentificationResult
@@ -53,7 +57,7 @@ SOLVERS = ("newton", "CLARABEL", "SCS")
 COVARIANCE_MODELS = ("likelihood", "moments")
 COVARIANCE_SAMPLES = 20_000  # (Σ, κ) (at most n(n+1)/2 + 1 numbers) from at most this many evenly strided samples: the likelihood
 # makes one pass over the samples it is given per L-BFGS iteration (recorded in info["covariance_samples"])
-SIGMA_STRUCTURES = ("full", "diagonal")
+SIGMA_STRUCTURES = ("full", "diagonal", "auto")  # auto: chosen by cross-validation (estimators.covariance_select)
 __all__ = ["FeasibleGLS", "fit_weighted", "full_likelihood_estimate", "likelihood_estimate", "moment_estimate"]
 
 
@@ -82,7 +86,7 @@ class FeasibleGLS:
 
     pilot: str = "wls"
     covariance_model: str = "likelihood"  # "likelihood" | "moments"
-    sigma_structure: str = "full"  # "full" n×n Σ | "diagonal" (the likelihood model; "moments" is always diagonal)
+    sigma_structure: str = "full"  # "full" n×n Σ | "diagonal" | "auto" (the likelihood model; "moments": diagonal)
     theta_ref: tuple | None = None  # (p,) fixed pilot θ
     sigma: tuple | None = None  # (n,) or (n, n) fixed sensor covariance Σ
     kappa: float | None = None  # fixed κ ≥ 0
@@ -194,6 +198,9 @@ class FeasibleGLS:
             sig, kappa = moment_estimate(rh, Mh)
             Sh = np.diag(np.maximum(sig, self.sigma_floor))
             info.update(covariance_model="moments", sigma_structure="diagonal")
+        elif self.sigma_structure == "auto":
+            Sh, kappa, info = select_structure(rh, Mh, self.sigma_floor)
+            info.update(covariance_model="likelihood")
         elif self.sigma_structure == "diagonal":
             sig, kappa, info = likelihood_estimate(rh, Mh, self.sigma_floor)
             Sh = np.diag(sig)
