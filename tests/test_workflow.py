@@ -247,3 +247,8 @@ def test_a_fit_parses_each_log_once_and_hands_out_read_only_arrays(monkeypatch):
     parsed.clear()
     tables.read_table(DFKI / "trajectory_04.csv")
     assert parsed == ["trajectory_04.csv"]  # outside the block every call parses the file
+
+
+def test_report_says_which_covariance_structure_dm_used(written):
+    text = (written / "report.md").read_text()
+    assert "dm: covariance model: likelihood" in text and "dm: sigma structure: full" in text
