@@ -11,6 +11,7 @@ from dualid.estimators.newton.objective import (
     _NotPositiveDefinite,
     dual_metric_derivatives,
 )
+from dualid.estimators.newton.trace import constraint_only_growth, iteration_diagnostics
 from dualid.model.consistency import (
     FeasibleSet,
     _max_step_psd,
@@ -154,6 +155,7 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
         history.append(f)
         if verbose:
             print(f"newton {it:3d}: f {f:.15g} gap {gap:.3g} kkt {kkt:.3g}")
+            print("      " + iteration_diagnostics(cons, theta, Z, gap, system))
         if gap + kkt <= tol * f_ref:
             info = {"objective": f, "iterations": it, "duality_gap": gap, "kkt_residual": float(np.sqrt(kkt)),
                     "relative_gap": (gap + kkt) / f_ref, "objective_start": f_start,
@@ -177,6 +179,7 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
         d = system.solve(rhs)
         slope = -float(rhs @ d)
         alpha = min(1.0, 0.99 * cons.max_step(theta, d)) if nu else 1.0
+        alpha_max = alpha  # fraction to the boundary, before the line search
         phi0 = f + target * _barrier(cons, theta)
         der_trial, first = None, True
         while True:  # backtracking: every C_b ≻ 0, every Cholesky of M_i succeeds, Armijo on φ
@@ -219,7 +222,8 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
         Z = [_repair_psd(Zb + alpha_dual * dZb) for Zb, dZb in zip(Z, dZ)]  # PD up to rounding
         z = z + alpha_dual * dz
         if verbose:
-            print(f"            sigma {sigma:.3g} alpha {alpha:.3g} alpha_dual {alpha_dual:.3g}")
+            print(f"            sigma {sigma:.3g} alpha {alpha:.3g} (to boundary {alpha_max:.3g}) "
+                  f"alpha_dual {alpha_dual:.3g}")
     away = diverging_iterates(thetas, history)
     if away["optimum_at_infinity"]:
         raise SolverError(
@@ -231,6 +235,7 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
         )
     raise SolverError(
         f"dual-metric Newton: no convergence in {max_iter} iterations; relative gap reached "
-        f"{(gap + kkt) / f_ref:.3g} (duality gap {gap:.3g}, KKT residual {np.sqrt(kkt):.3g}, tol {tol:g})",
+        f"{(gap + kkt) / f_ref:.3g} (duality gap {gap:.3g}, KKT residual {np.sqrt(kkt):.3g}, tol {tol:g})"
+        + constraint_only_growth(cons, der, thetas, getattr(getattr(problem, "parameters", None), "names", None)),
         status="max_iterations",
     )
