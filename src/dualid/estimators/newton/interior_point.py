@@ -134,6 +134,7 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
     (then problem is unused): the same method for any smooth convex f under these constraints.
     """
     p = len(theta)
+    dual_metric = objective is None  # the candidate direction below is for fit_dual_metric_newton (fit.pushed_out)
     if objective is None:
         def objective(th, order):
             return dual_metric_derivatives(problem, th, order, chunk)
@@ -184,7 +185,7 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
                 # test that direction (fit.pushed_out): the parameters f cannot see, rather than the iterates' last run
                 info["constraint_only_growth"] = grew.removeprefix("; ")
                 d_free = constraint_only_direction(cons, der, thetas)
-                if not info["optimum_at_infinity"] and d_free.any():
+                if dual_metric and not info["optimum_at_infinity"] and d_free.any():
                     k = int(np.flatnonzero(d_free)[0])
                     info.update(diverging_candidate=d_free, diverging_steps=it,
                                 theta_norm_growth=abs(thetas[-1][k]) / max(abs(thetas[0][k]), 1e-300))

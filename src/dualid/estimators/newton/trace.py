@@ -70,8 +70,8 @@ def constraint_only_growth(cons, der, thetas, names, growth_min: float = GROWTH)
     """Why the iteration may not converge: parameters that f does not depend on (their gradient and Hessian
     rows are exactly 0 — zero columns of Y and of the metric, e.g. the mass and off-axis second moments of the
     link next to a fixed base) enter only the constraints, where growing loosens them. If such parameters grew
-    ≥ growth_min× (default GROWTH) over the iterations, the infimum is likely approached only as they go to infinity (not attained);
-    an SDP then stops at a tolerance-dependent θ. Returns a message suffix naming them, or ''."""
+    ≥ growth_min× (default GROWTH) over the iterations, the infimum is likely approached only as they go to
+    infinity (not attained); an SDP then stops at a tolerance-dependent θ. Returns a message suffix naming them, or ''."""
     free = _constraint_only(cons, der, thetas)
     if not free:
         return ""
