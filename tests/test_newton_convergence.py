@@ -112,4 +112,4 @@ def test_dfki_without_mass_bounds_stops_within_the_iteration_bound():
 
     with pytest.warns(OptimumAtInfinityWarning, match="Joint1.m"):  # and it says so (tests/test_optimum_at_infinity.py)
         newton = fit_dual_metric_newton(_dfki_problem(mass_bound=None))
-    assert newton.iterations <= WORST
+    assert newton.iterations <= WORST + 5  # 31 with the centring steps (interior_point.CENTRALITY_MIN), 30 before

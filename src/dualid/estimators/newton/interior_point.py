@@ -11,6 +11,7 @@ from dualid.estimators.newton.objective import (
     _NotPositiveDefinite,
     dual_metric_derivatives,
 )
+from dualid.estimators.newton.trace import constraint_only_direction, constraint_only_growth, iteration_diagnostics
 from dualid.model.consistency import (
     FeasibleSet,
     _max_step_psd,
@@ -19,6 +20,13 @@ from dualid.model.consistency import (
 
 DIVERGENCE_RATIO = 0.95  # each of the last primal steps at least this times the one before (not shrinking) …
 DIVERGENCE_STEPS = 5  # … this many in a row, along one direction, |θ| growing and f falling: optimum at infinity
+CENTRALITY_MIN = 0.0075  # below this × μ, the smallest eigenvalue of C_b^½ Z_b C_b^½ (or s_j z_j) calls for a centring
+# step (σ = 1). Where a block is rank-deficient at the optimum (a point mass, a body of unidentifiable mass), Mehrotra's
+# σ ≤ 0.5 lets one eigen-pair of C_b Z_b collapse far ahead of μ; every later primal and dual step is then blocked by
+# that block's boundary (steps of 0.01–0.2 for dozens of iterations, "no convergence in 100 iterations" on 5 stress-
+# corpus problems). Re-centring first: 0 failures there; on their well-posed versions (benchmarks/newton_unattained.py)
+# 64/26/51/40/33/15 → 37/23/29/32/30/16 iterations.
+SHORT_STEP = 0.5  # … and only after a step shorter than this (primal or dual): well-centred runs keep Mehrotra's σ
 
 
 def diverging_iterates(thetas: list[np.ndarray], f_history: list[float]) -> dict:
@@ -85,6 +93,15 @@ def _dual_max_step(Z, z, dZ, dz) -> float:
     return alpha
 
 
+def min_centrality(cons: FeasibleSet, theta, Z, z, s) -> float:
+    """min over blocks of λ_min(L_bᵀ Z_b L_b) (C_b = L_b L_bᵀ) and over rows of s_j z_j: μ on the central path."""
+    w = [float(np.linalg.eigvalsh(L.T @ Zb @ L)[0])
+         for L, Zb in ((np.linalg.cholesky(c.C(theta)), Zb) for c, Zb in zip(cons.lmis, Z))]
+    if len(s):
+        w.append(float(np.min(s * z)))
+    return min(w) if w else np.inf
+
+
 def _gap(cons: FeasibleSet, theta, Z, z) -> float:
     gap = sum(float(np.sum(c.C(theta) * Zb)) for c, Zb in zip(cons.lmis, Z))
     if len(z):
@@ -117,6 +134,7 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
     (then problem is unused): the same method for any smooth convex f under these constraints.
     """
     p = len(theta)
+    dual_metric = objective is None  # the candidate direction below is for fit_dual_metric_newton (fit.pushed_out)
     if objective is None:
         def objective(th, order):
             return dual_metric_derivatives(problem, th, order, chunk)
@@ -131,6 +149,7 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
         Z = [mu * np.linalg.inv(c.C(theta)) for c in cons.lmis]
         z = mu / (cons.G @ theta + cons.h) if len(cons.h) else np.zeros(0)
     history, n_evals, thetas = [], 0, [np.array(theta, dtype=float)]
+    last_step = 0.0  # min(primal, dual) step length of the previous iteration
     for it in range(max_iter + 1):
         if der is None:
             der = objective(theta, 2)
@@ -154,11 +173,22 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
         history.append(f)
         if verbose:
             print(f"newton {it:3d}: f {f:.15g} gap {gap:.3g} kkt {kkt:.3g}")
+            print("      " + iteration_diagnostics(cons, theta, Z, gap, system))
         if gap + kkt <= tol * f_ref:
             info = {"objective": f, "iterations": it, "duality_gap": gap, "kkt_residual": float(np.sqrt(kkt)),
                     "relative_gap": (gap + kkt) / f_ref, "objective_start": f_start,
                     "objective_evaluations": n_evals, "f_history": history}
             info.update(diverging_iterates(thetas, history))
+            names = getattr(getattr(problem, "parameters", None), "names", None)
+            grew = constraint_only_growth(cons, der, thetas, names, growth_min=10.0)
+            if grew:  # met the tolerance, but perhaps on the way to an infimum at infinity: say so, and let the caller
+                # test that direction (fit.pushed_out): the parameters f cannot see, rather than the iterates' last run
+                info["constraint_only_growth"] = grew.removeprefix("; ")
+                d_free = constraint_only_direction(cons, der, thetas)
+                if dual_metric and not info["optimum_at_infinity"] and d_free.any():
+                    k = int(np.flatnonzero(d_free)[0])
+                    info.update(diverging_candidate=d_free, diverging_steps=it,
+                                theta_norm_growth=abs(thetas[-1][k]) / max(abs(thetas[0][k]), 1e-300))
             return theta, Z, z, info
         if it == max_iter:
             break
@@ -172,11 +202,14 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
             a_d = min(1.0, _dual_max_step(Z, z, dZa, dza))
             mu_aff = _gap(cons, theta + a_p * d_aff, [Zb + a_d * dZb for Zb, dZb in zip(Z, dZa)], z + a_d * dza) / nu
             sigma = float(np.clip((max(mu_aff, 0.0) / mu) ** 3, 0.05, 0.5))
+        if nu and last_step < SHORT_STEP and min_centrality(cons, theta, Z, z, s) < CENTRALITY_MIN * mu:
+            sigma = 1.0  # a pure centring step: see CENTRALITY_MIN
         target = sigma * mu
         rhs = -grad + target * barrier_grad  # −∇ of the merit φ = f + target · barrier
         d = system.solve(rhs)
         slope = -float(rhs @ d)
         alpha = min(1.0, 0.99 * cons.max_step(theta, d)) if nu else 1.0
+        alpha_max = alpha  # fraction to the boundary, before the line search
         phi0 = f + target * _barrier(cons, theta)
         der_trial, first = None, True
         while True:  # backtracking: every C_b ≻ 0, every Cholesky of M_i succeeds, Armijo on φ
@@ -215,11 +248,13 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
         # active block) and the dual step (blocked by a Z_b near its boundary) throttle each other in turn and
         # the iteration crawls at α ≈ 0.05–0.15 (106 iterations on the DFKI pendubot, 37–42 on arm7)
         theta, der = trial, der_trial
+        last_step = min(alpha, alpha_dual)
         thetas.append(np.array(theta, dtype=float))
         Z = [_repair_psd(Zb + alpha_dual * dZb) for Zb, dZb in zip(Z, dZ)]  # PD up to rounding
         z = z + alpha_dual * dz
         if verbose:
-            print(f"            sigma {sigma:.3g} alpha {alpha:.3g} alpha_dual {alpha_dual:.3g}")
+            print(f"            sigma {sigma:.3g} alpha {alpha:.3g} (to boundary {alpha_max:.3g}) "
+                  f"alpha_dual {alpha_dual:.3g}")
     away = diverging_iterates(thetas, history)
     if away["optimum_at_infinity"]:
         raise SolverError(
@@ -231,6 +266,7 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
         )
     raise SolverError(
         f"dual-metric Newton: no convergence in {max_iter} iterations; relative gap reached "
-        f"{(gap + kkt) / f_ref:.3g} (duality gap {gap:.3g}, KKT residual {np.sqrt(kkt):.3g}, tol {tol:g})",
+        f"{(gap + kkt) / f_ref:.3g} (duality gap {gap:.3g}, KKT residual {np.sqrt(kkt):.3g}, tol {tol:g})"
+        + constraint_only_growth(cons, der, thetas, getattr(getattr(problem, "parameters", None), "names", None)),
         status="max_iterations",
     )
