@@ -22,22 +22,18 @@ QUICK = [c for c in cases(large=False) if c.quick and c.name != "chain RR, 2 dof
 # What the corpus measured the library NOT to do yet (benchmarks/stress_corpus/results.md): each must be reported
 # (a status other than optimal, or an error), never passed off as optimal. A fix makes its entry fail here: remove it.
 KNOWN = {
-    ("rank-deficient 4 dof, N = 12", "ols", "", "default"): "Clarabel inaccurate, the interior-point fallback jams",
-    ("rank-deficient 4 dof, N = 12", "logdet", "prior = constrained OLS", "default"): "no reference: both fail",
-    ("rank-deficient 4 dof, N = 12", "pullback", "prior = constrained OLS", "default"): "Clarabel optimal, 4.2e-2 above",
-    ("rank-deficient 4 dof, N = 12", "wls", "", "default"): "no reference: the interior point and SCS fail",
-    ("point-mass link, 3 dof, 5 %", "energy", "", "default"): "no reference: the interior point and SCS fail",
-    ("rank-deficient 4 dof, N = 12", "dm", "", "newton"): "its OLS/WLS pilot is inaccurate",
-    ("rank-deficient 4 dof, N = 12", "dm", "", "CLARABEL"): "its OLS/WLS pilot is inaccurate",
     ("rank-deficient 4 dof, N = 12", "dm-paper", "", "newton"): "Newton: no convergence in 100 iterations",
     ("rank-deficient 4 dof, N = 12", "dm-bfp", "", "newton"): "objective 1.6e-5 above the CLARABEL solve",
-    ("point-mass link, 3 dof, 5 %", "logdet", "prior = constrained OLS", "default"): "Clarabel inaccurate, fallback fails",
+    ("point-mass link, 3 dof, 5 %", "energy", "", "default"):
+        "Clarabel optimal, not certified (the interior point stalls at KKT residual ~1e-3): optimal_inaccurate",
+    ("point-mass link, 3 dof, 5 %", "logdet", "prior = constrained OLS", "default"):
+        "Clarabel inaccurate (3e-2 above the reference), the interior point stops with optimum_at_infinity",
     ("point-mass link, 3 dof, 5 %", "dm", "", "newton"): "objective 1.3e-6 above the CLARABEL solve",
     ("point-mass link, 3 dof, 5 %", "dm-bfp", "", "newton"): "objective 2.8e-6 above the CLARABEL solve",
     ("point-mass link, 3 dof, 5 %", "dm-paper", "", "newton"): "Newton: no convergence where the SDP is optimal",
-    ("units 1e6 on q1, 3 dof, 5 %", "energy", "", "default"): "Clarabel inaccurate, the interior-point fallback jams",
-    ("units 1e6 on q1, 3 dof, 5 %", "logdet", "prior = constrained OLS", "default"): "Clarabel optimal, 1.1e-5 above",
-    ("units 1e6 on q1, 3 dof, 5 %", "pullback", "prior = constrained OLS", "default"): "Clarabel optimal, 6.7e-5 above",
+    # the CLARABEL solve of dm is now certified by the interior point, which shows Newton's own inaccuracy here
+    ("units 1e6 on q1, 3 dof, 5 %", "dm", "", "newton"): "objective 1.5e-6 above the certified CLARABEL solve",
+    ("units 1e6 on q1, 3 dof, 5 %", "dm-bfp", "", "newton"): "objective 1.1e-6 above the certified CLARABEL solve",
 }
 
 
@@ -148,3 +144,11 @@ def test_a_prior_outside_the_cone_by_rounding_only_is_lifted_with_the_floor_and_
     assert result.info["prior_lifted"]["j0"]["lifted"] and result.info["prior_lifted"]["j0"]["sigma_min_before"] < 0
     with pytest.raises(ConsistencyError, match="nominal θ₀ is not physically consistent: block 'j0'"):
         RegularizedWLS(theta0=prior, allow_unidentifiable=True, prior_floor=0.0).fit(problem)
+
+
+def test_the_corpus_copy_of_the_default_preprocessing_is_the_library_default():
+    """bench does not import robot (layering), so corpus_extra copies robot.defaults' preprocessing: they agree."""
+    from dualid.bench.corpus_extra import DEFAULT_PREPROCESSING
+    from dualid.robot.defaults import FIXED_PREPROCESSING_0_1
+
+    assert DEFAULT_PREPROCESSING == FIXED_PREPROCESSING_0_1
