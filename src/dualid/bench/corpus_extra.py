@@ -16,6 +16,7 @@ Each builder returns (problem, θ_true or None, prior); nothing is written. The 
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -62,12 +63,11 @@ def chain_tiled(make_model, seed: int, n_states: int, reps: int, noise: float):
         v, a = rng.normal(size=(2, n_states, n))
         Y0 = rb.regressor(q, v, a)
         tau0 = Y0 @ rb.nominal
+        base = IdentificationProblem(owned(Y0), tau0, rb.metric(q), v, rb.parameters, coordinates=rb.coordinates)
+        tiled = base.subset(np.tile(np.arange(n_states), reps))  # (N, n, p): one copy of Y
         scale = noise * np.sqrt(np.mean(tau0**2, axis=0))
-        Y = np.tile(Y0, (reps, 1, 1))  # (N, n, p): the only copy
-        tau = np.tile(tau0, (reps, 1)) + scale * rng.normal(size=(n_states * reps, n))
-        M = np.tile(rb.metric(q), (reps, 1, 1))
-        problem = IdentificationProblem(owned(Y), tau, M, np.tile(v, (reps, 1)), rb.parameters,
-                                        coordinates=rb.coordinates)
+        tau = tiled.tau + scale * rng.normal(size=tiled.tau.shape)  # independent noise on every repeat
+        problem = dataclasses.replace(tiled, tau=tau)
         return problem, rb.nominal, None
     return build
 
