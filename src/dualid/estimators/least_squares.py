@@ -161,8 +161,14 @@ def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solve
     first = failure or f"{solver} returned {solved.status}"
     t0 = time.perf_counter()
     try:
-        theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, constrained=constrained,
-                                          regularizer=regularizer, start=None if solved is None else s * solved.value)
+        try:  # cold start first (the same path whatever rounding cvxpy's end point has), then from that end point
+            theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, constrained=constrained,
+                                              regularizer=regularizer)
+        except SolverError:
+            if solved is None:
+                raise
+            theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, constrained=constrained,
+                                              regularizer=regularizer, start=s * solved.value)
     except SolverError as exc:
         if solved is None:
             raise SolverError(f"{method} fit: {first}; then dualid's interior-point method failed: {exc}",
