@@ -99,7 +99,10 @@ def fits(problem, theta_true, sdp: bool = True, prior_seed: int = 0, sdp_max_n: 
         except Exception as exc:  # then SCS to a tight tolerance, if it is optimal
             f_ref, th_ref = None, None
             row["ref_error"] = f"{type(exc).__name__}: {exc}"[:200]
-            scs, _ = _record(dataclasses.replace(est, solver="SCS", solver_options=SCS_TIGHT), problem)
+            same = {}  # the fit's own weights: SCS's pilot OLS would give slightly different ones (another problem)
+            if r is not None and "covariance_matrix" in r.info and hasattr(est, "covariance"):
+                same["covariance"] = np.asarray(r.info["covariance_matrix"])
+            scs, _ = _record(dataclasses.replace(est, solver="SCS", solver_options=SCS_TIGHT, **same), problem)
             if scs is not None and scs.status == "optimal" and scs.solver == "SCS":
                 f_ref, th_ref, row["reference"] = float(scs.objective), np.asarray(scs.theta), "SCS"
             elif scs is not None:  # SCS's end point polished by the interior point (a different start than the fit's)
