@@ -92,16 +92,19 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "stress_corpus")
     ap.add_argument("--quick", action="store_true", help="only the cases of the fast test subset")
-    ap.add_argument("--no-large", action="store_true", help="without the N = 1e5 problem")
+    ap.add_argument("--no-large", action="store_true", help="without the N = 1e5 and 1e6 problems")
+    ap.add_argument("--case", default="", help="only the cases whose name contains this text")
     args = ap.parse_args()
     t_start, load0 = time.time(), os.getloadavg()
     rows = []
     for c in cases(large=not args.no_large):
         if args.quick and not c.quick:
             continue
+        if args.case and args.case not in c.name:
+            continue
         t0 = time.perf_counter()
-        problem, theta = c.build()
-        for row in fits(problem, theta, sdp=c.sdp):
+        problem, theta, prior = (*c.build(), None)[:3]
+        for row in fits(problem, theta, sdp=c.sdp, prior=prior, methods=c.methods):
             rows.append({"case": c.name, "family": c.family, **row})
             print(f"{c.name} | {row['method']} {row['variant']} {row['solver_choice']} | {row['status']} "
                   f"| {_fmt(row.get('rel_gap'), '.1e')} | {row.get('error', '')[:100]}", flush=True)

@@ -22,17 +22,16 @@ QUICK = [c for c in cases(large=False) if c.quick and c.name != "chain RR, 2 dof
 # What the corpus measured the library NOT to do yet (benchmarks/stress_corpus/results.md): each must be reported
 # (a status other than optimal, or an error), never passed off as optimal. A fix makes its entry fail here: remove it.
 KNOWN = {
-    ("rank-deficient 4 dof, N = 12", "logdet", "prior = constrained OLS", "default"): "no reference: both fail",
     ("rank-deficient 4 dof, N = 12", "dm", "", "newton"): "objective 6.3e-6 above the CLARABEL solve",
     ("rank-deficient 4 dof, N = 12", "dm-bfp", "", "newton"): "objective 1.4e-5 above the CLARABEL solve",
     # no finite minimiser (j0.m → ∞, tests/test_newton_unattained.py; flagged optimum_at_infinity): Newton and the SDP
     # stop at tolerance-dependent points
     ("rank-deficient 4 dof, N = 12", "dm-paper", "", "newton"): "infimum not attained: 7.3e-6 from the SDP's stop",
-    ("point-mass link, 3 dof, 5 %", "logdet", "prior = constrained OLS", "default"): "Clarabel inaccurate, fallback fails",
+    ("point-mass link, 3 dof, 5 %", "logdet", "prior = constrained OLS", "default"):
+        "Clarabel inaccurate, the interior point stops with optimum_at_infinity (a false alarm: f is coercive)",
     ("point-mass link, 3 dof, 5 %", "dm", "", "newton"): "objective 2.1e-6 above the CLARABEL solve",
     ("point-mass link, 3 dof, 5 %", "dm-bfp", "", "newton"): "objective 1.5e-6 above the CLARABEL solve",
     ("point-mass link, 3 dof, 5 %", "dm-paper", "", "newton"): "infimum not attained: 3.4e-5 from the SDP's stop",
-    ("units 1e6 on q1, 3 dof, 5 %", "logdet", "prior = constrained OLS", "default"): "Clarabel optimal, 3.2e-3 above",
 }
 
 
@@ -143,3 +142,11 @@ def test_a_prior_outside_the_cone_by_rounding_only_is_lifted_with_the_floor_and_
     assert result.info["prior_lifted"]["j0"]["lifted"] and result.info["prior_lifted"]["j0"]["sigma_min_before"] < 0
     with pytest.raises(ConsistencyError, match="nominal θ₀ is not physically consistent: block 'j0'"):
         RegularizedWLS(theta0=prior, allow_unidentifiable=True, prior_floor=0.0).fit(problem)
+
+
+def test_the_corpus_copy_of_the_default_preprocessing_is_the_library_default():
+    """bench does not import robot (layering), so corpus_extra copies robot.defaults' preprocessing: they agree."""
+    from dualid.bench.corpus_extra import DEFAULT_PREPROCESSING
+    from dualid.robot.defaults import FIXED_PREPROCESSING_0_1
+
+    assert DEFAULT_PREPROCESSING == FIXED_PREPROCESSING_0_1

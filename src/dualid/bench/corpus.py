@@ -99,9 +99,10 @@ def cad_prior(theta: np.ndarray, seed: int) -> np.ndarray:
 class Case:
     name: str
     family: str
-    build: Callable[[], tuple]  # () -> (problem, θ_true)
+    build: Callable[[], tuple]  # () -> (problem, θ_true) or (problem, θ_true or None, prior)
     sdp: bool = True  # the SDP reference is affordable (small N)
     quick: bool = False  # in the fast test subset
+    methods: tuple[str, ...] | None = None  # None: every method; else only these (large N: no SDP, no prior fits)
 
 
 def _chain(seed, kinds, N, noise, units=None, **kw):
@@ -117,7 +118,18 @@ def _crazyflie(N, noise, units=None):
 
 
 def cases(large: bool = True) -> list[Case]:
-    """The corpus (names are unique); ``large`` adds the N = 1e5 problem."""
+    """The corpus (names are unique); ``large`` adds the N = 1e5 and 1e6 problems. Real DFKI data, the paper's
+    systems and N = 1e6: ``corpus_extra``."""
+    from dualid.bench.corpus_extra import (
+        DEFAULT_PREPROCESSING,
+        DFKI,
+        EXAMPLE_PREPROCESSING,
+        SCALABLE,
+        chain_tiled,
+        dfki,
+        system,
+    )
+
     out = [
         Case("chain RR, 2 dof, exact", "chain", _chain(1, "RR", 200, 0.0), quick=True),
         Case("chain RPR, 3 dof, 5 %", "chain", _chain(2, "RPR", 200, 0.05), quick=True),
@@ -139,6 +151,17 @@ def cases(large: bool = True) -> list[Case]:
     ]
     if large:
         out.append(Case("crazyflie, N = 1e5, 5 %", "large N", _crazyflie(100_000, 0.05), sdp=False))
+    if DFKI.is_dir():  # real logs, in the source tree only
+        out += [Case("DFKI pendubot runs 00-03 tiled x10, default preprocessing", "real data",
+                     dfki(DEFAULT_PREPROCESSING), sdp=False),
+                Case("DFKI pendubot runs 00-03 tiled x10, example preprocessing", "real data",
+                     dfki(EXAMPLE_PREPROCESSING), sdp=False)]
+    out += [Case("crazyflie system (paper), realistic noise", "paper system", system("crazyflie")),
+            Case("landsalp system (paper), realistic noise", "paper system", system("landsalp"))]
+    if large:
+        chain = lambda: random_chain(np.random.default_rng(14), "RP")  # noqa: E731
+        out.append(Case("chain RP, 2 dof, N = 1e6, 5 %", "large N", chain_tiled(chain, 14, 10_000, 100, 0.05),
+                        sdp=False, methods=SCALABLE))
     return out
 
 

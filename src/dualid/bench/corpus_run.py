@@ -10,7 +10,8 @@ Runs per problem (``fits``):
 The reference of each run (``ref_objective``, ``rel_gap`` = (f − f_ref)/|f_ref|, ``pred_diff`` = ‖Y(θ − θ_ref)‖/‖Yθ_ref‖):
 dm-paper: the SDP (Clarabel) when it is optimal; dm, dm-bfp: the lower of the two solvers' objectives;
 quadratic and regularized fits: dualid's interior-point method run directly on the same sufficient statistics
-(``quadratic_newton``; where it fails, SCS to 1e-9 when it says optimal), or the fit itself if lower.
+(``quadratic_newton``; where it fails, SCS to 1e-9 when it says optimal, else SCS's end point polished by the interior
+point), or the fit itself if lower.
 Failures are rows, never dropped; raw warnings reaching the caller are counted.
 """
 
@@ -41,7 +42,7 @@ def _record(est, problem):
                "raw_warnings": len(caught), "prior_lifted": sorted(r.info.get("prior_lifted") or {})}
 
 
-def _quadratic_reference(est, problem, theta0=None):
+def _quadratic_reference(est, problem, start=None):
     """(objective, θ) of est's problem solved by dualid's interior point on the same statistics."""
     from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS, covariance_weight
     from dualid.estimators.quadratic_newton import fit_quadratic_newton
@@ -61,7 +62,7 @@ def _quadratic_reference(est, problem, theta0=None):
             reg = (est.regularizer, th0, float(est.gamma) * problem.N * problem.n)
     else:
         return None, None
-    theta, _ = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, regularizer=reg)
+    theta, _ = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, regularizer=reg, start=start)
     f = stats.objective(problem, theta)
     if reg is not None:
         f += reg[2] * regularizer_value(reg[0], problem.parameters, theta, reg[1])
@@ -78,8 +79,11 @@ def _agreement(row, r, f_ref, theta_ref, problem):
     row["pred_diff"] = float(np.linalg.norm(Y @ (np.asarray(r.theta) - theta_ref)) / max(base, 1e-300))
 
 
-def fits(problem, theta_true, sdp: bool = True, prior_seed: int = 0, sdp_max_n: int = SDP_MAX_N) -> list[dict]:
-    """Every (method, variant, solver) run on ``problem`` (see the module doc), as row dicts."""
+def fits(problem, theta_true, sdp: bool = True, prior_seed: int = 0, sdp_max_n: int = SDP_MAX_N, prior=None,
+         methods=None) -> list[dict]:
+    """Every (method, variant, solver) run on ``problem`` (see the module doc), as row dicts. ``prior``: the CAD-like
+    prior (default: ``cad_prior(theta_true)``); ``methods``: run only these (large N: ols, wls, dm, dm-paper by
+    Newton: no prior fits, no CLARABEL solve of dm, no SDP)."""
     from dualid.bench.corpus import cad_prior
     from dualid.estimators.dual_metric import DualMetric
     from dualid.estimators.methods import make_estimator
@@ -95,9 +99,18 @@ def fits(problem, theta_true, sdp: bool = True, prior_seed: int = 0, sdp_max_n: 
         except Exception as exc:  # then SCS to a tight tolerance, if it is optimal
             f_ref, th_ref = None, None
             row["ref_error"] = f"{type(exc).__name__}: {exc}"[:200]
-            scs, _ = _record(dataclasses.replace(est, solver="SCS", solver_options=SCS_TIGHT), problem)
+            same = {}  # the fit's own weights: SCS's pilot OLS would give slightly different ones (another problem)
+            if r is not None and "covariance_matrix" in r.info and hasattr(est, "covariance"):
+                same["covariance"] = np.asarray(r.info["covariance_matrix"])
+            scs, _ = _record(dataclasses.replace(est, solver="SCS", solver_options=SCS_TIGHT, **same), problem)
             if scs is not None and scs.status == "optimal" and scs.solver == "SCS":
                 f_ref, th_ref, row["reference"] = float(scs.objective), np.asarray(scs.theta), "SCS"
+            elif scs is not None:  # SCS's end point polished by the interior point (a different start than the fit's)
+                try:
+                    f_ref, th_ref = _quadratic_reference(est, problem, start=np.asarray(scs.theta))
+                    row["reference"] = "SCS + newton polish"
+                except Exception as exc2:
+                    row["ref_error"] += f"; from SCS: {type(exc2).__name__}: {exc2}"[:200]
         if r is not None and f_ref is not None and row["objective"] < f_ref:
             f_ref, th_ref = row["objective"], np.asarray(r.theta)
         _agreement(row, r, f_ref, th_ref, problem)
@@ -105,20 +118,26 @@ def fits(problem, theta_true, sdp: bool = True, prior_seed: int = 0, sdp_max_n: 
         return r
 
     kw = dict(allow_unidentifiable=True)
-    ols = quad("ols", "", make_estimator("ols", **kw))
-    quad("wls", "", make_estimator("wls", **kw))
-    quad("energy", "", make_estimator("energy", **kw))
-    priors = {"prior CAD-like": cad_prior(theta_true, prior_seed)}
+    run = set(methods or ("ols", "wls", "energy", "logdet", "pullback", "dm", "dm-bfp", "dm-paper"))
+    ols = quad("ols", "", make_estimator("ols", **kw)) if "ols" in run else None
+    for m in ("wls", "energy"):
+        if m in run:
+            quad(m, "", make_estimator(m, **kw))
+    priors = {"prior CAD-like": cad_prior(theta_true, prior_seed) if prior is None else np.asarray(prior)}
     if ols is not None:
         priors["prior = constrained OLS"] = np.asarray(ols.theta)
     for m in ("logdet", "pullback"):
+        if m not in run:
+            continue
         for label, th0 in priors.items():
             quad(m, label, make_estimator(m, theta0=th0, **kw))
             if label != "prior CAD-like":
                 quad(m, label + ", floor off", make_estimator(m, theta0=th0, options={"prior_floor": 0.0}, **kw))
     for m in ("dm", "dm-bfp"):
+        if m not in run:
+            continue
         pair = []
-        for solver in ("newton", "CLARABEL"):
+        for solver in ("newton", "CLARABEL") if methods is None else ("newton",):
             r, row = _record(make_estimator(m, options={"solver": solver}, **kw), problem)
             row.update(method=m, variant="", solver_choice=solver)
             rows.append(row)
@@ -128,6 +147,8 @@ def fits(problem, theta_true, sdp: bool = True, prior_seed: int = 0, sdp_max_n: 
             f_ref, r_ref = min(ok, key=lambda x: x[0])
             for r, row in pair:
                 _agreement(row, r, f_ref, np.asarray(r_ref.theta), problem)
+    if "dm-paper" not in run:
+        return _sized(rows, problem)
     newton, nrow = _record(DualMetric(solver="newton", fallback=(), **kw), problem)
     nrow.update(method="dm-paper", variant="", solver_choice="newton")
     rows.append(nrow)
@@ -138,6 +159,10 @@ def fits(problem, theta_true, sdp: bool = True, prior_seed: int = 0, sdp_max_n: 
         if s is not None and s.status == "optimal":
             _agreement(nrow, newton, srow["objective"], np.asarray(s.theta), problem)
             _agreement(srow, s, srow["objective"], np.asarray(s.theta), problem)
+    return _sized(rows, problem)
+
+
+def _sized(rows, problem):
     for row in rows:
         row.update(N=problem.N, n=problem.n, p=problem.p)
     return rows

@@ -135,6 +135,7 @@ def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solve
     solver_warnings); an inaccurate cvxpy result is returned only, and labelled, if that fails too."""
     import time
 
+    from dualid.estimators.certify import polish
     from dualid.estimators.quadratic_newton import fit_quadratic_newton
 
     solved, failure = None, None
@@ -147,14 +148,27 @@ def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solve
             failure = f"{solver} failed ({exc.status}): {exc}"
     if notes:
         info["solver_warnings"] = " | ".join(notes)
-    if solved is not None and solved.status == "optimal":
-        info.update(solver_chain=f"{solver} optimal", fallback_used=False)
-        return s * solved.value, solved.status, solved.solver, solved.iterations, solved.solve_time
+    if solved is not None and solved.status == "optimal":  # certified (or polished) by dualid's interior point
+        t0 = time.perf_counter()
+        theta, label, polished, certified, checked = polish(s * solved.value, stats, problem.parameters,
+                                                            constrained, regularizer, solver)
+        info.update(checked, solver_chain=label, fallback_used=polished)
+        if polished:
+            info["fallback_reason"] = label
+            return theta, "optimal", "newton", checked["certify_iterations"], time.perf_counter() - t0
+        status = "optimal" if certified else "optimal_inaccurate"
+        return theta, status, solved.solver, solved.iterations, solved.solve_time
     first = failure or f"{solver} returned {solved.status}"
     t0 = time.perf_counter()
     try:
-        theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, constrained=constrained,
-                                          regularizer=regularizer)
+        try:  # cold start first (the same path whatever rounding cvxpy's end point has), then from that end point
+            theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, constrained=constrained,
+                                              regularizer=regularizer)
+        except SolverError:
+            if solved is None:
+                raise
+            theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, constrained=constrained,
+                                              regularizer=regularizer, start=s * solved.value)
     except SolverError as exc:
         if solved is None:
             raise SolverError(f"{method} fit: {first}; then dualid's interior-point method failed: {exc}",

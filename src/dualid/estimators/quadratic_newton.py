@@ -88,14 +88,13 @@ def quadratic_objective(H: np.ndarray, g: np.ndarray, c: float, parameters, regu
 
 
 def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regularizer=None, tol: float = 1e-9,
-                         max_iter: int = 100) -> tuple[np.ndarray, dict]:
-    """(θ̂, info) minimising the module's f under the constraints; raises SolverError when it does not converge."""
+                         max_iter: int = 300, start: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """(θ̂, info) minimising the module's f under the constraints; raises SolverError when it does not converge.
+
+    ``start`` (e.g. a cvxpy solution on the cone's boundary): tried first, moved just inside the cones and started
+    close to the central path (a polish); when that does not converge, the cold start below runs as without it."""
     cons = feasible_set(parameters, constrained)
     objective, theta_ls = quadratic_objective(H, g, c, parameters, regularizer)
-    candidates = [_central_point(theta_ls, cons)]
-    if regularizer is not None:
-        candidates.append(np.asarray(regularizer[1], dtype=float))  # θ₀ (strictly consistent)
-        candidates.append(_central_point(candidates[-1], cons))
 
     def value(theta):
         if not cons.empty and cons.margin(theta) <= 0:
@@ -105,11 +104,38 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
         except _NotPositiveDefinite:
             return np.inf
 
+    f_scale = max(float(c), 1e-300)
+    failure = None
+    if start is not None:
+        warm = _central_point(np.asarray(start, dtype=float), cons, eps=1e-7)
+        if np.isfinite(value(warm)):
+            try:
+                theta, info = _run(cons, warm, tol, max_iter, objective, f_scale, gap0=1e-6)
+                info["start"] = "warm"
+                return theta, info
+            except SolverError as exc:
+                failure = f"warm start failed ({exc.status})"
+    candidates = [_central_point(theta_ls, cons)]
+    if regularizer is not None:
+        candidates.append(np.asarray(regularizer[1], dtype=float))  # θ₀ (strictly consistent)
+        candidates.append(_central_point(candidates[-1], cons))
     values = [value(t) for t in candidates]
     k = int(np.argmin(values))
     if not np.isfinite(values[k]):
         raise SolverError("quadratic Newton: found no strictly feasible start", status="no_start")
-    theta, _, _, info = _interior_point(None, cons, candidates[k], None, None, tol, max_iter, 0, False,
-                                        objective=objective, f_scale=max(float(c), 1e-300))
+    theta, info = _run(cons, candidates[k], tol, max_iter, objective, f_scale)
+    info["start"] = "cold" + (f" ({failure})" if failure else "")
+    return theta, info
+
+
+def _run(cons, theta, tol, max_iter, objective, f_scale, gap0=1.0):
+    """_interior_point on the module's f; an arithmetic failure inside it (e.g. a duality gap that underflows to 0)
+    is a SolverError of this solver, so that the caller's fallback or certification sees a failed solve."""
+    try:
+        theta, _, _, info = _interior_point(None, cons, theta, None, None, tol, max_iter, 0, False, gap0=gap0,
+                                            objective=objective, f_scale=f_scale)
+    except (ArithmeticError, np.linalg.LinAlgError) as exc:
+        raise SolverError(f"quadratic Newton: numerical failure: {type(exc).__name__}: {exc}",
+                          status="numerical_error") from exc
     info.pop("f_history", None)
     return theta, info
