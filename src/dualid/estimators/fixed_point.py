@@ -48,11 +48,6 @@ def _in_basis(U_new: np.ndarray, U: np.ndarray, lam: np.ndarray) -> np.ndarray:
     return np.einsum("nik,nk->ni", P * P, lam)
 
 
-def _compose(L, lam, U):
-    LU = L @ U
-    return (LU * lam[:, None, :]) @ np.swapaxes(LU, 1, 2)
-
-
 @dataclass(frozen=True)
 class BoundedFixedPoint:
     """θ_{k+1} = argmin Σ r_iᵀ M̄_i(θ_k)⁻¹ r_i with M̄ the metric clipped to [1/c, c]·M(θ_ref), damped."""
@@ -93,19 +88,22 @@ class BoundedFixedPoint:
         theta_ref, pilot = helper.reference(sensor)
         chunk = CHUNK
         N, n = sensor.N, sensor.n
-        for start in range(0, N, chunk):  # M_i(θ_ref) ≻ 0 everywhere (the pencil's reference)
+        # the weight's state, per sample: pencil eigenvalues (log) and the eigenbasis carried by the reference's
+        # factor, LU_i = L_i U_i (M_i(θ_ref) = L_i L_iᵀ); storing L_i U_i instead of U_i saves evaluating and
+        # factoring M_i(θ_ref) in every weighted pass (two per outer iteration), at the same memory
+        log_lam = np.zeros((N, n))
+        LU = np.empty((N, n, n))
+        for start in range(0, N, chunk):  # M_i(θ_ref) ≻ 0 everywhere (the pencil's reference); U_i = I at first
             try:
-                np.linalg.cholesky(sensor.metric.evaluate(theta_ref, slice(start, start + chunk)))
+                rows = slice(start, start + chunk)
+                LU[rows] = np.linalg.cholesky(sensor.metric.evaluate(theta_ref, rows))
             except np.linalg.LinAlgError as exc:
                 raise MetricError(f"{self.name}: the pilot's metric M_i(θ_ref) is not positive definite") from exc
         c = float(self.bound)
-        # the weight's state, per sample: pencil eigenvalues (log) and eigenbasis; everything else per block
-        log_lam = np.zeros((N, n))
-        U = np.broadcast_to(np.eye(n), (N, n, n)).copy()
 
         def weight(block, rows):  # M̄_i = L_i U_i diag(λ_i) U_iᵀ L_iᵀ for a block of samples
-            L = np.linalg.cholesky(sensor.metric.evaluate(theta_ref, rows))
-            return _compose(L, np.exp(log_lam[rows]), U[rows])
+            G = LU[rows]
+            return (G * np.exp(log_lam[rows])[:, None, :]) @ np.swapaxes(G, 1, 2)
 
         theta = theta_ref
         history, clipped, converged = [], 0.0, False
@@ -115,15 +113,15 @@ class BoundedFixedPoint:
             step, n_clipped = 0.0, 0
             for start in range(0, N, chunk):
                 rows = slice(start, start + chunk)
-                _, lam, U_new = _pencil(sensor.metric.evaluate(theta_ref, rows), sensor.metric.evaluate(theta, rows))
+                L, lam, U_new = _pencil(sensor.metric.evaluate(theta_ref, rows), sensor.metric.evaluate(theta, rows))
                 lam_c = np.clip(lam, 1.0 / c, c)
                 n_clipped += int(np.sum((lam < 1.0 / c) | (lam > c)))
                 # damping: geometric mean of the previous weight and the new one, in the new eigenbasis
-                Ub = U[rows]
+                Ub = _tri_inverse(L) @ LU[rows]  # U_i = L_i⁻¹ (L_i U_i)
                 old_in_new = np.log(np.clip(_in_basis(U_new, Ub, np.exp(log_lam[rows])), 1e-300, None))
                 new_log = (1 - self.damping) * old_in_new + self.damping * np.log(lam_c)
                 step = max(step, float(np.max(np.abs(new_log - old_in_new))))
-                log_lam[rows], U[rows] = new_log, U_new
+                log_lam[rows], LU[rows] = new_log, L @ U_new
             clipped = n_clipped / (N * n)
             history.append(step)
             if step < self.tol:
