@@ -76,15 +76,6 @@ def _dual_direction(cons: FeasibleSet, Z, z, Cinv, s, d, target):
     return dZ, dz
 
 
-def _lmi_hessian(V, Zb, Ci) -> np.ndarray:
-    """(k, k): tr(V_k Z V_l C⁻¹) as one GEMM of (V_k Z) against (V_l C⁻¹)ᵀ (a 4-operand einsum was the slowest
-    part of a quadratic fit's iteration)."""
-    k, m, _ = V.shape
-    P = (V @ Zb).reshape(k, m * m)  # (V_k Z)_{ac}
-    Q = np.swapaxes(V @ Ci, 1, 2).reshape(k, m * m)  # (V_l C⁻¹)_{ca}
-    return P @ Q.T
-
-
 def _dual_max_step(Z, z, dZ, dz) -> float:
     alpha = np.inf
     if Z and len({Zb.shape for Zb in Z}) == 1:  # equal blocks: one batched call
@@ -155,7 +146,7 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
         for c, Zb, Ci in zip(cons.lmis, Z, Cinv):
             r_dual[c.idx] -= np.einsum("kab,ba->k", c.V, Zb)
             barrier_grad[c.idx] += np.einsum("kab,ba->k", c.V, Ci)
-            K[np.ix_(c.idx, c.idx)] += _lmi_hessian(c.V, Zb, Ci)
+            K[np.ix_(c.idx, c.idx)] += np.einsum("kab,bc,lcd,da->kl", c.V, Zb, c.V, Ci)
         if len(s):
             r_dual -= cons.G.T @ z
             barrier_grad += cons.G.T @ (1.0 / s)
