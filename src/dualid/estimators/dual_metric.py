@@ -297,17 +297,19 @@ class DualMetric:
         """The fit (``_solve``), with the metric guard against guard_reference or a WLS fit in its info."""
         result = self._solve(problem)
         ref, label = given_reference(problem, self.guard_reference, "DualMetric"), "given guard_reference"
+        solved_by = {}
         if ref is None:
-            from dualid.estimators.least_squares import WLS
+            from dualid.estimators.guard_reference import wls_reference
 
             some, count = guard_sample(problem)  # the reference on the samples the guard looks at
-            try:
-                ref = WLS(constrained=self.constrained, allow_unidentifiable=True).fit(some).theta
+            try:  # dualid's interior point on the statistics (cvxpy only if it fails: guard_reference.py)
+                ref, how = wls_reference(some, self.constrained)
                 label = "wls fit" + ("" if count is None else f" on {count} strided samples")
+                solved_by = {"metric_guard_solver": how}
             except SolverError as exc:  # recorded: the fit is then not certified
                 label = f"the WLS reference failed: {str(exc)[:160]}"
         guard = reference_guard(problem, result.theta, ref, label, self.guard_bound)
-        return replace(result, info={**result.info, **guard})
+        return replace(result, info={**result.info, **guard, **solved_by})
 
     def _solve(self, problem: IdentificationProblem) -> IdentificationResult:
         if not self.allow_unidentifiable:

@@ -26,6 +26,7 @@ from dualid.errors import ConfigError, DataError, MetricError
 from dualid.estimators.base import freeze_options
 from dualid.estimators.gls import PILOTS, FeasibleGLS, fit_weighted
 from dualid.estimators.metric_guard import DEFAULT_BOUND, guard_info
+from dualid.estimators.newton.objective import _tri_inverse
 from dualid.problem import IdentificationProblem
 
 CHUNK = 8192  # samples per block: the weight and the pencil are computed blockwise (no (N, n, n) temporaries)
@@ -34,15 +35,17 @@ CHUNK = 8192  # samples per block: the weight and the pencil are computed blockw
 def _pencil(M_ref: np.ndarray, M: np.ndarray):
     """(L, λ, U): M_ref = L Lᵀ, L⁻¹ M L⁻ᵀ = U diag(λ) Uᵀ."""
     L = np.linalg.cholesky(M_ref)
-    X = np.linalg.solve(L, M)
-    A = np.linalg.solve(L, np.swapaxes(X, 1, 2))
+    Li = _tri_inverse(L)  # batched L⁻¹ (np.linalg.solve ran a general LU per sample)
+    A = Li @ M @ np.swapaxes(Li, 1, 2)
     lam, U = np.linalg.eigh(0.5 * (A + np.swapaxes(A, 1, 2)))
     return L, lam, U
 
 
-def _compose(L, lam, U):
-    LU = L @ U
-    return (LU * lam[:, None, :]) @ np.swapaxes(LU, 1, 2)
+def _in_basis(U_new: np.ndarray, U: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """(c, n): diag(U_newᵀ U diag(λ) Uᵀ U_new) = Σ_k (U_newᵀ U)_ik² λ_k, O(n³) per sample (the 5-operand einsum
+    this replaces looped over n⁵ index tuples per sample: most of dm-bfp's time at large N)."""
+    P = np.swapaxes(U_new, 1, 2) @ U
+    return np.einsum("nik,nk->ni", P * P, lam)
 
 
 @dataclass(frozen=True)
@@ -85,19 +88,22 @@ class BoundedFixedPoint:
         theta_ref, pilot = helper.reference(sensor)
         chunk = CHUNK
         N, n = sensor.N, sensor.n
-        for start in range(0, N, chunk):  # M_i(θ_ref) ≻ 0 everywhere (the pencil's reference)
+        # the weight's state, per sample: pencil eigenvalues (log) and the eigenbasis carried by the reference's
+        # factor, LU_i = L_i U_i (M_i(θ_ref) = L_i L_iᵀ); storing L_i U_i instead of U_i saves evaluating and
+        # factoring M_i(θ_ref) in every weighted pass (two per outer iteration), at the same memory
+        log_lam = np.zeros((N, n))
+        LU = np.empty((N, n, n))
+        for start in range(0, N, chunk):  # M_i(θ_ref) ≻ 0 everywhere (the pencil's reference); U_i = I at first
             try:
-                np.linalg.cholesky(sensor.metric.evaluate(theta_ref, slice(start, start + chunk)))
+                rows = slice(start, start + chunk)
+                LU[rows] = np.linalg.cholesky(sensor.metric.evaluate(theta_ref, rows))
             except np.linalg.LinAlgError as exc:
                 raise MetricError(f"{self.name}: the pilot's metric M_i(θ_ref) is not positive definite") from exc
         c = float(self.bound)
-        # the weight's state, per sample: pencil eigenvalues (log) and eigenbasis; everything else per block
-        log_lam = np.zeros((N, n))
-        U = np.broadcast_to(np.eye(n), (N, n, n)).copy()
 
         def weight(block, rows):  # M̄_i = L_i U_i diag(λ_i) U_iᵀ L_iᵀ for a block of samples
-            L = np.linalg.cholesky(sensor.metric.evaluate(theta_ref, rows))
-            return _compose(L, np.exp(log_lam[rows]), U[rows])
+            G = LU[rows]
+            return (G * np.exp(log_lam[rows])[:, None, :]) @ np.swapaxes(G, 1, 2)
 
         theta = theta_ref
         history, clipped, converged = [], 0.0, False
@@ -107,16 +113,15 @@ class BoundedFixedPoint:
             step, n_clipped = 0.0, 0
             for start in range(0, N, chunk):
                 rows = slice(start, start + chunk)
-                _, lam, U_new = _pencil(sensor.metric.evaluate(theta_ref, rows), sensor.metric.evaluate(theta, rows))
+                L, lam, U_new = _pencil(sensor.metric.evaluate(theta_ref, rows), sensor.metric.evaluate(theta, rows))
                 lam_c = np.clip(lam, 1.0 / c, c)
                 n_clipped += int(np.sum((lam < 1.0 / c) | (lam > c)))
                 # damping: geometric mean of the previous weight and the new one, in the new eigenbasis
-                Ub = U[rows]
-                old_in_new = np.log(np.clip(np.einsum("nji,njk,nk,nlk,nli->ni", U_new, Ub, np.exp(log_lam[rows]), Ub,
-                                                      U_new), 1e-300, None))
+                Ub = _tri_inverse(L) @ LU[rows]  # U_i = L_i⁻¹ (L_i U_i)
+                old_in_new = np.log(np.clip(_in_basis(U_new, Ub, np.exp(log_lam[rows])), 1e-300, None))
                 new_log = (1 - self.damping) * old_in_new + self.damping * np.log(lam_c)
                 step = max(step, float(np.max(np.abs(new_log - old_in_new))))
-                log_lam[rows], U[rows] = new_log, U_new
+                log_lam[rows], LU[rows] = new_log, L @ U_new
             clipped = n_clipped / (N * n)
             history.append(step)
             if step < self.tol:

@@ -23,6 +23,12 @@ import numpy as np
 from dualid.errors import ConfigError, DataError, MetricError
 from dualid.problem import IdentificationProblem, sample_blocks
 
+
+def _tri_inverse(L):
+    from dualid.estimators.newton.objective import _tri_inverse as inverse  # lazy: keeps this module light to import
+
+    return inverse(L)
+
 DEFAULT_BOUND = 100.0  # c: generalised eigenvalues outside [1/c, c] flag the fit as degenerate
 GUARD_SAMPLES = 20_000  # the guard an estimator records itself looks at most this many evenly strided samples
 # (at N = 10⁶ the full pass costs more than a least-squares fit); recorded in info["metric_guard_samples"]
@@ -60,8 +66,8 @@ def generalized_eigenvalues(
                 f"but it is not at {bad} of {len(lam)} samples in rows {start}.. (smallest eigenvalue "
                 f"{lam.min():.3g}); choose a reference with every body massive (a WLS fit or the prior)"
             ) from exc
-        X = np.linalg.solve(L, M)  # L⁻¹ M
-        A = np.linalg.solve(L, np.swapaxes(X, 1, 2))  # L⁻¹ (L⁻¹ M)ᵀ = L⁻¹ M L⁻ᵀ
+        Li = _tri_inverse(L)  # batched L⁻¹ (np.linalg.solve ran a general LU per sample)
+        A = Li @ M @ np.swapaxes(Li, 1, 2)  # L⁻¹ M L⁻ᵀ
         out[start : start + M.shape[0]] = np.linalg.eigvalsh(0.5 * (A + np.swapaxes(A, 1, 2)))
     return out
 

@@ -15,6 +15,7 @@ from dualid.estimators.newton.trace import constraint_only_direction, constraint
 from dualid.model.consistency import (
     FeasibleSet,
     _max_step_psd,
+    _max_step_psd_batched,
     _repair_psd,
 )
 
@@ -85,8 +86,11 @@ def _dual_direction(cons: FeasibleSet, Z, z, Cinv, s, d, target):
 
 def _dual_max_step(Z, z, dZ, dz) -> float:
     alpha = np.inf
-    for Zb, dZb in zip(Z, dZ):
-        alpha = min(alpha, _max_step_psd(Zb, dZb))
+    if Z and len({Zb.shape for Zb in Z}) == 1:  # equal blocks: one batched call
+        alpha = _max_step_psd_batched(np.stack(Z), np.stack(dZ))
+    else:
+        for Zb, dZb in zip(Z, dZ):
+            alpha = min(alpha, _max_step_psd(Zb, dZb))
     neg = dz < 0
     if neg.any():
         alpha = min(alpha, float(np.min(-z[neg] / dz[neg])))

@@ -107,6 +107,6 @@ def _force_scale(problem, theta, chunk) -> float:
     total = 0.0
     for block, rows, _ in sample_blocks(problem, chunk):
         L = np.linalg.cholesky(block.metric.evaluate(theta, rows))
-        z = np.linalg.solve(L, block.tau[rows][..., None])
+        z = _forward(L, block.tau[rows])  # L⁻¹ τ_i
         total += float(np.sum(z * z))
     return total

@@ -1,0 +1,77 @@
+"""dm-paper by Newton against the SDP (Clarabel), side by side in one run, at any N (issue 12, point 6).
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/newton_vs_sdp.py --sizes 1000,20000 --out benchmarks/newton_vs_sdp.md
+
+``dualid bench`` only runs N = 100, 1,000, 10,000, …; the targets are at 1,000 and 20,000. Every (problem,
+solver, N) runs in its own Python process, one at a time (``dualid.bench.runner.run_in_subprocess``: the same
+problems, estimators and timing as ``dualid bench``: wall time of ``estimator.fit(problem)`` as a user calls
+it, the metric guard included). The machine's load average is recorded before and after each run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import tempfile
+import time
+from pathlib import Path
+
+from dualid.bench.runner import BASE_SAMPLES, run_in_subprocess
+
+
+def _load() -> float:
+    return os.getloadavg()[0]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=Path("benchmarks/newton_vs_sdp.md"))
+    ap.add_argument("--problems", default="crazyflie,arm7")
+    ap.add_argument("--solvers", default="newton,sdp_clarabel")
+    ap.add_argument("--sizes", default="1000,20000")
+    ap.add_argument("--timeout", type=float, default=1200.0)
+    ap.add_argument("--force", action="store_true", help="overwrite --out and its .json")
+    args = ap.parse_args()
+    out_json = args.out.with_suffix(".json")
+    if not args.force and (args.out.exists() or out_json.exists()):
+        raise SystemExit(f"{args.out} exists; pass --force to overwrite it")
+    sizes = [int(s) for s in args.sizes.split(",")]
+    cache = Path(tempfile.mkdtemp(prefix="dualid-bench-"))
+    rows = []
+    for name in args.problems.split(","):
+        for N in sizes:
+            for solver in args.solvers.split(","):
+                before, t0 = _load(), time.strftime("%H:%M:%S", time.gmtime())
+                row = run_in_subprocess(name, solver, N, cache, min(N, BASE_SAMPLES), args.timeout)
+                row.update(started_utc=t0, load_before=before, load_after=_load())
+                print(json.dumps(row), flush=True)
+                rows.append(row)
+    out_json.write_text(json.dumps({"command": "python benchmarks/newton_vs_sdp.py " + " ".join(
+        f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items() if k not in ("out", "force")), "rows": rows},
+        indent=1))
+    lines = ["| problem | N | Newton [s] (it.) | Clarabel [s] (it.) | Clarabel ÷ Newton | objective gap (N − C)/C | "
+             "peak RSS N / C [GB] | load before → after |", "| --- | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
+    by = {(r["problem"], r["N"], r["solver"]): r for r in rows}
+    for name in args.problems.split(","):
+        for N in sizes:
+            a, b = by.get((name, N, "newton"), {}), by.get((name, N, "sdp_clarabel"), {})
+
+            def cell(r):
+                return r["error"][:60] if "error" in r else f"{r['wall_time_s']:.3f} ({r['iterations']})"
+
+            ratio = gap = "—"
+            if "wall_time_s" in a and "wall_time_s" in b:
+                ratio = f"{b['wall_time_s'] / a['wall_time_s']:.0f}×"
+                fa, fb = a.get("dual_metric_objective"), b.get("dual_metric_objective")
+                if fa is not None and fb:
+                    gap = f"{(fa - fb) / fb:.1e}"
+            rss = f"{a.get('peak_rss_GB', float('nan')):.2f} / {b.get('peak_rss_GB', float('nan')):.2f}"
+            loads = f"{a.get('load_before', float('nan')):.1f} → {b.get('load_after', float('nan')):.1f}"
+            lines.append(f"| {name} | {N:,} | {cell(a)} | {cell(b)} | {ratio} | {gap} | {rss} | {loads} |")
+    args.out.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
