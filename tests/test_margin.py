@@ -163,3 +163,19 @@ def test_bad_margins_raise_config_errors(eps, reference, prior, message):
     with pytest.raises(ConfigError) as exc:
         with_margin(problem, eps, reference, prior)
     assert str(exc.value) == message
+
+
+def test_the_study_puts_every_method_under_the_margin_against_a_wls_pilot():
+    """run_study(margin=ε): each training set gets its own WLS pilot; every fit records and satisfies the margin."""
+    from dualid.paper.study import run_study
+    from dualid.problem import build_problem
+    from dualid.systems.base import make_system
+
+    system = make_system("pan-tilt", seed=0, noise="realistic", size="small")
+    r = run_study(system, case="high", methods=("ols", "dm-paper"), margin=0.9)
+    assert r.config["margin_epsilon"] == 0.9
+    problem = build_problem(system.model, list(system.train))
+    pilot, _ = margin_reference(problem, "wls")
+    for rec in r.records:
+        assert rec.ok and rec.info["margin_reference"] == "wls pilot", rec.method
+        assert generalized_eigenvalues(problem, np.array(rec.theta), pilot).min() >= 0.9 * (1 - 1e-6), rec.method
