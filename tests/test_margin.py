@@ -179,3 +179,16 @@ def test_the_study_puts_every_method_under_the_margin_against_a_wls_pilot():
     for rec in r.records:
         assert rec.ok and rec.info["margin_reference"] == "wls pilot", rec.method
         assert generalized_eigenvalues(problem, np.array(rec.theta), pilot).min() >= 0.9 * (1 - 1e-6), rec.method
+
+
+def test_the_sandwich_sees_the_margin_as_the_active_constraint(rigid):
+    """uncertainty.active_constraints: where the margin binds, C_b(θ̂) − ε·C_b(θ_ref) is singular (C_b(θ̂) is not)."""
+    from dualid.estimators.uncertainty import active_constraints
+
+    problem = rigid[0]
+    shifted = margined(problem, binding_reference(problem))
+    r = DualMetric(allow_unidentifiable=True).fit(shifted)
+    _, names = active_constraints(shifted, r.theta)
+    active = set(r.info["margin_active"].split(", "))
+    assert active and {n.split(" (")[0] for n in names} >= active
+    assert not active_constraints(problem, r.theta)[1]  # without the margin nothing is on the boundary
