@@ -63,3 +63,17 @@ def test_prior_reference_in_a_config_file(tmp_path):
     assert result.exit_code == 0, _out(result)
     info = yaml.safe_load((out / "parameters.yaml").read_text())["methods"]["ols"]["margin"]
     assert info["reference"] == "prior" and info["min_ratio"] >= 0.1 - 1e-6
+
+
+def test_the_drag_workflow_applies_the_margin_too():
+    from pathlib import Path
+
+    from dualid.robot.drag_fit import fit_drag
+
+    example = Path(__file__).resolve().parents[1] / "examples" / "drag"
+    raw = yaml.safe_load((example / "drag.yaml").read_text())
+    raw.update(methods=["ols", "dm-paper"], test=[], margin={"epsilon": 0.5})
+    fits = fit_drag(FitConfig.from_dict(raw, example)).fits
+    for m in ("ols", "dm-paper"):
+        info = fits[m].result.info
+        assert info["margin_reference"] == "wls pilot" and info["margin_min_ratio"] >= 0.5 - 1e-6, m

@@ -15,6 +15,9 @@ import numpy as np
 
 from dualid.errors import ConfigError
 
+RANGE_RTOL = 1e-6  # reference directions below this × the block's largest are not compared (a reference on the
+# boundary of consistency, e.g. a WLS pilot's damping at 1e-11: the margin there is plain consistency, and a
+# ratio against it would measure solver tolerance)
 ACTIVE_RTOL = 1e-3  # a block's margin is "active" at θ̂ when its ratio is within ε·(1 + 1e-3) (+1e-6)
 
 
@@ -49,7 +52,7 @@ def check_margin(parameters, theta_ref, epsilon) -> tuple[tuple[float, ...], flo
 def _ratio(C: np.ndarray, C_ref: np.ndarray) -> float:
     """Smallest generalised eigenvalue of (C, C_ref) on the range of C_ref (inf when C_ref = 0)."""
     lam, U = np.linalg.eigh(0.5 * (C_ref + C_ref.T))
-    keep = lam > 1e-12 * max(lam.max(), 0.0)
+    keep = lam > RANGE_RTOL * max(lam.max(), 0.0)
     if not keep.any():
         return float("inf")
     W = U[:, keep] / np.sqrt(lam[keep])  # C_ref^{-1/2} on its range
@@ -58,7 +61,8 @@ def _ratio(C: np.ndarray, C_ref: np.ndarray) -> float:
 
 def margin_ratios(parameters, theta) -> dict[str, float]:
     """Per constrained block (per row for diagonal blocks): min generalised eigenvalue of C_b(θ̂) against
-    C_b(θ_ref) — ≥ ε when the margin holds; chart- and unit-invariant."""
+    C_b(θ_ref) on the range of C_b(θ_ref) (directions above RANGE_RTOL × its largest eigenvalue) — ≥ ε when
+    the margin holds; chart- and unit-invariant."""
     ref = np.asarray(parameters.margin_reference)
     theta = np.asarray(theta, dtype=float)
     out = {}
@@ -66,8 +70,9 @@ def margin_ratios(parameters, theta) -> dict[str, float]:
         if b.constraint_basis is None:
             continue
         if b.kind in ("drag_diagonal", "nonnegative"):
+            top = max(float(ref[list(b.indices)].max()), 0.0)
             for i in b.indices:
-                if ref[i] > 0:
+                if ref[i] > RANGE_RTOL * top:
                     out[parameters.names[i]] = float(theta[i] / ref[i])
             continue
         out[b.name] = _ratio(b.constraint_matrix(theta), b.constraint_matrix(ref))
