@@ -55,6 +55,8 @@ def fit(
     config: Optional[Path] = typer.Option(None, "--config", help="fit.yaml (columns, preprocessing, ...); flags override it"),
     out: Optional[Path] = typer.Option(None, "--out", help="output directory"),
     force: bool = typer.Option(False, "--force", metavar=FLAG, help="write into an existing non-empty output directory"),
+    margin: Optional[float] = typer.Option(None, "--margin", metavar="EPS", help="every method under M(θ) ⪰ EPS·M(θ_ref), "
+                                           "θ_ref a WLS pilot (or the config's margin.reference); 0 ≤ EPS < 1"),
 ) -> None:
     """Identify a robot's inertial parameters, joint friction and armature from a URDF and logs (or a drag
     model's drag and damping: model.kind: drag in the config)."""
@@ -65,6 +67,7 @@ def fit(
 
     from dualid.report.robot import score_table, write_fit
     from dualid.robot.fit import fit_robot
+    from dualid.robot.margin_config import with_epsilon
 
     cfg = _config(config, model, data)
     cfg = cfg.with_overrides(
@@ -74,6 +77,7 @@ def fit(
         methods=tuple(method) or None,
         solver=_solver_overrides(cfg, solver),
         out=out,
+        margin=with_epsilon(cfg.margin, margin),
     )
     if cfg.out is None:
         fail("no output directory: pass --out DIR (or set 'out' in the config)")

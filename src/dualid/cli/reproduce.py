@@ -23,6 +23,8 @@ def reproduce(
     size: str = typer.Option("default", "--size", help="default or small (a quick smoke run)"),
     ablation: str = typer.Option(None, "--ablation", help="'units': fit in re-charted coordinates (mm, degrees)"),
     force: bool = typer.Option(False, "--force", metavar=FLAG, help="overwrite an existing output directory"),
+    margin: float = typer.Option(None, "--margin", metavar="EPS", help="every method under M(θ) ⪰ EPS·M(θ_WLS), a "
+                                 "constrained WLS pilot per training set (docs/margin.md); 0 ≤ EPS < 1"),
 ) -> None:
     """Simulate SYSTEM, fit every estimator in the low- and high-data cases and write
     results.json, results.md and the score and trajectory figures."""
@@ -46,6 +48,8 @@ def reproduce(
         fail(f"--base-drag: only the crazyflie has a floating base to put drag on, got {system!r}")
     if ablation is not None and ablation != "units":
         fail(f"--ablation: expected units, got {ablation!r}")
+    if margin is not None and not 0.0 <= margin < 1.0:
+        fail(f"--margin: expected a number in [0, 1), got {margin!r}")
     if seeds < 1:
         fail(f"--seeds: expected a positive number of seeds, got {seeds}")
     out = out or Path("results") / system
@@ -55,7 +59,7 @@ def reproduce(
         with Progress(*columns, console=console) as progress:
             result = run(system, out, case=case, seeds=seeds, noise=noise, size=size, ablation=ablation,
                          overwrite=force, progress=progress, data_seeds=data_seeds,
-                         **({"base_drag": True} if base_drag else {}))
+                         **({"base_drag": True} if base_drag else {}), **({} if margin is None else {"margin": margin}))
     except FileExistsError as exc:
         fail(f"{exc}; pass --force to overwrite it")
     console.print(study_markdown(result), markup=False)

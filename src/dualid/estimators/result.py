@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dualid.model.consistency import BodyProperties, body_properties
+from dualid.model.margin import margin_info
 from dualid.model.parameters import ParameterSpace
 
 
@@ -29,6 +30,9 @@ class IdentificationResult:
         theta = np.array(self.theta, dtype=float)
         theta.setflags(write=False)
         object.__setattr__(self, "theta", theta)
+        if self.parameters.margin_reference is not None and theta.shape == (self.parameters.p,):
+            # every estimator's result records the margin it was fitted under (dualid.model.margin)
+            object.__setattr__(self, "info", {**self.info, **margin_info(self.parameters, theta, self.constrained)})
 
     @property
     def bodies(self) -> tuple[BodyProperties, ...]:

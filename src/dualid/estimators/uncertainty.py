@@ -257,8 +257,10 @@ def active_constraints(problem: IdentificationProblem, theta: np.ndarray, tol: f
         V = b.constraint_basis
         if V is None:
             continue
-        lam, U = np.linalg.eigh(b.constraint_matrix(theta))
-        size = float(np.abs(lam).max())
+        shift = P.margin_shift(b)  # with a margin the constraint is C_b(θ) − ε·C_b(θ_ref) ⪰ 0 (scale: C_b(θ)'s)
+        C = b.constraint_matrix(theta)
+        lam, U = np.linalg.eigh(C if shift is None else C - shift)
+        size = float(np.abs(lam).max() if shift is None else np.abs(np.linalg.eigvalsh(C)).max())
         if b.kind in ("nonnegative", "drag_diagonal"):  # scalars: no other eigenvalue to compare with
             size = max(size, float(np.max(signal[list(b.indices)])))
         act = np.flatnonzero(lam <= tol * max(size, 1e-300))

@@ -172,7 +172,8 @@ def _max_step_psd_batched(X: np.ndarray, dX: np.ndarray) -> float:
 
 
 def feasible_set(parameters, constrained: bool = True, fixed: np.ndarray | None = None) -> FeasibleSet:
-    """LMIs for rigid-body and drag-matrix blocks; linear rows for diagonal blocks and bounds."""
+    """LMIs for rigid-body and drag-matrix blocks; linear rows for diagonal blocks and bounds. With a margin
+    (ParameterSpace.with_margin) every block is shifted: C0 = −ε·C_b(θ_ref), rows θ_k ≥ ε·θ_ref,k."""
     p = parameters.p
     lmis, rows, h, names = [], [], [], []
     if constrained:
@@ -181,13 +182,16 @@ def feasible_set(parameters, constrained: bool = True, fixed: np.ndarray | None 
             if V is None:
                 continue
             idx = np.asarray(b.indices)
+            shift = parameters.margin_shift(b)  # ε·C_b(θ_ref): the margin C_b(θ) ⪰ ε·C_b(θ_ref), or None
             if b.kind in ("drag_diagonal", "nonnegative"):
-                for i in idx:
+                for j, i in enumerate(idx):
                     g = np.zeros(p)
                     g[i] = 1.0
-                    rows.append(g), h.append(0.0), names.append(f"{parameters.names[i]} ≥ 0")
+                    lo = 0.0 if shift is None else float(shift[j, j])
+                    rows.append(g), h.append(-lo), names.append(f"{parameters.names[i]} ≥ {lo:g}")
                 continue
-            lmis.append(LMI(b.name, idx, np.asarray(V, dtype=float), np.zeros(V.shape[1:])))
+            C0 = np.zeros(V.shape[1:]) if shift is None else -shift
+            lmis.append(LMI(b.name, idx, np.asarray(V, dtype=float), C0))
         for bound, sign in ((parameters.lower, 1.0), (parameters.upper, -1.0)):
             if bound is None:
                 continue
@@ -203,7 +207,7 @@ def feasible_set(parameters, constrained: bool = True, fixed: np.ndarray | None 
 
 # --- cvxpy ------------------------------------------------------------------------------------
 def cvxpy_constraints(theta, parameters: ParameterSpace) -> list:
-    """cvxpy constraints C_b(θ_b) ⪰ 0 for every block, and the per-parameter bounds."""
+    """cvxpy constraints C_b(θ_b) ⪰ 0 (⪰ ε·C_b(θ_ref) with a margin) for every block, and the bounds."""
     import cvxpy as cp
 
     cons = []
@@ -212,12 +216,13 @@ def cvxpy_constraints(theta, parameters: ParameterSpace) -> list:
         if V is None:
             continue
         th = theta[list(b.indices)]
+        shift = parameters.margin_shift(b)  # ε·C_b(θ_ref): the margin C_b(θ) ⪰ ε·C_b(θ_ref), or None
         if b.kind in ("drag_diagonal", "nonnegative"):
-            cons.append(th >= 0)  # diag(θ_b) ⪰ 0 is plain non-negativity
+            cons.append(th >= (0 if shift is None else np.diag(shift)))  # diag(θ_b) ⪰ 0 is non-negativity
             continue
         k, m, _ = V.shape
         C = cp.reshape(V.reshape(k, m * m).T @ th, (m, m), order="C")
-        cons.append(0.5 * (C + C.T) >> 0)
+        cons.append(0.5 * (C + C.T) >> (0 if shift is None else shift))
     if parameters.lower is not None:
         lo = np.asarray(parameters.lower)
         fin = np.isfinite(lo)

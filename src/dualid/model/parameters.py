@@ -14,6 +14,7 @@ positive semidefinite for the parameters to be physically consistent:
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -108,6 +109,10 @@ class ParameterSpace:
     blocks: tuple[ParameterBlock, ...] = ()
     lower: tuple[float, ...] | None = None  # per-parameter lower bounds (−inf for none)
     upper: tuple[float, ...] | None = None
+    # the margin C_b(θ) ⪰ ε·C_b(θ_ref) on every constrained block (None: off); see ``with_margin``
+    margin_reference: tuple[float, ...] | None = None  # θ_ref (p,)
+    margin_epsilon: float = 0.0  # ε ∈ [0, 1)
+    margin_label: str = ""  # where θ_ref came from ("prior", "wls pilot", …), for reports
     _index: dict = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -129,6 +134,8 @@ class ParameterSpace:
         for label, bound in (("lower", self.lower), ("upper", self.upper)):
             if bound is not None and len(bound) != p:
                 raise ModelError(f"ParameterSpace: {label} bounds have {len(bound)} entries, expected {p}")
+        if self.margin_reference is not None and len(self.margin_reference) != p:
+            raise ModelError(f"ParameterSpace: margin reference has {len(self.margin_reference)} entries, expected {p}")
         object.__setattr__(self, "_index", {n: i for i, n in enumerate(self.names)})
 
     @property
@@ -163,7 +170,29 @@ class ParameterSpace:
             self.blocks,
             as_tuple(lower, -np.inf) if lower is not None else self.lower,
             as_tuple(upper, np.inf) if upper is not None else self.upper,
+            self.margin_reference,
+            self.margin_epsilon,
+            self.margin_label,
         )
+
+    def with_margin(self, theta_ref, epsilon: float, label: str = "") -> "ParameterSpace":
+        """A copy whose feasible set is C_b(θ) ⪰ ε·C_b(θ_ref) for every constrained block b (θ_k ≥ ε θ_ref,k
+        on non-negative rows): θ − εθ_ref is physically consistent, so M_i(θ) ⪰ ε·M_i(θ_ref) at every
+        configuration, seen or not (dualid.model.margin checks the arguments; ε = 0 is plain consistency)."""
+        from dualid.model.margin import check_margin
+
+        ref, eps = check_margin(self, theta_ref, epsilon)
+        return dataclasses.replace(self, margin_reference=ref, margin_epsilon=eps, margin_label=str(label))
+
+    def without_margin(self) -> "ParameterSpace":
+        return dataclasses.replace(self, margin_reference=None, margin_epsilon=0.0, margin_label="")
+
+    def margin_shift(self, block: "ParameterBlock") -> np.ndarray | None:
+        """ε·C_b(θ_ref) (m, m) of one block, or None when there is no margin (or the block is free)."""
+        if self.margin_reference is None or self.margin_epsilon == 0.0:
+            return None
+        C = block.constraint_matrix(np.asarray(self.margin_reference))
+        return None if C is None else self.margin_epsilon * C
 
     def concatenate(self, other: "ParameterSpace") -> "ParameterSpace":
         """θ = [θ_self, θ_other]: the other space's blocks are shifted by self.p."""
@@ -179,6 +208,8 @@ class ParameterSpace:
             b = b if b is not None else (fill,) * pb
             return tuple(a) + tuple(b)
 
+        if self.margin_reference is not None or other.margin_reference is not None:
+            raise ModelError("concatenate: add the margin (with_margin) after concatenating the parameter spaces")
         return ParameterSpace(
             self.names + other.names,
             self.units + other.units,

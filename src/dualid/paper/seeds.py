@@ -80,6 +80,7 @@ def run_data_seeds(
     ablation=None,
     methods=None,
     progress=None,
+    margin: float | None = None,
     **system_options,
 ) -> StudyResult:
     """Simulate one data set per seed, run the study on each and pool them (see ``pool``)."""
@@ -89,7 +90,7 @@ def run_data_seeds(
     studies = []
     for seed in data_list:
         system = make_system(system_name, seed=seed, noise=noise, size=size, **system_options)
-        kw = {} if methods is None else {"methods": methods}
+        kw = ({} if methods is None else {"methods": methods}) | ({} if margin is None else {"margin": margin})
         study = run_study(system, case=case, seeds=seeds, progress=progress, ablation=ablation, **kw)
         studies.append(replace(study, config={**study.config, "noise": noise, "size": size, "system_seed": seed}))
     return pool(studies, data_list)

@@ -32,6 +32,7 @@ import numpy as np
 from dualid.errors import ConfigError, DualidError, IdentifiabilityError
 from dualid.estimators import methods as methods_table
 from dualid.estimators.guards import guard_info
+from dualid.estimators.margin import with_margin
 from dualid.evaluation.prediction import PredictionData, measured_signal
 from dualid.evaluation.scores import metric_rmse, rmse, score_run, shift_window
 from dualid.paper.results import FitRecord, StudyResult, Summary, Trace
@@ -170,6 +171,7 @@ def run_study(
     progress: Callable[[int, int, str], None] | Any | None = None,
     ablation: None | str | np.ndarray = None,
     trace_run: int = 0,
+    margin: float | None = None,
 ) -> StudyResult:
     """Fit each method in each case, predict every test run, score; see the module docstring.
 
@@ -178,6 +180,8 @@ def run_study(
     progress: a callback progress(done, total, description) or a rich Progress.
     ablation: None, "units" (see ``units_chart``) or a constant chart B ((n,) diagonal or (n, n)).
     trace_run: index of the test run whose predicted signals are kept for trajectory plots.
+    margin: ε of the chart-invariant margin C_b(θ) ⪰ ε·C_b(θ_WLS) on every method (dualid.estimators.margin),
+    against a constrained WLS pilot on each training set in the simulated chart (before an ablation's chart).
     """
     cases = {"both": ("low", "high"), "low": ("low",), "high": ("high",)}.get(case)
     if cases is None:
@@ -225,6 +229,8 @@ def run_study(
             train = problem.subset(idx)
         else:
             train = problem
+        if margin is not None:
+            train = with_margin(train, margin, "wls")
         if B is not None:
             train = train.in_coordinates(B)
         for method, estimator in estimators.items():
@@ -257,6 +263,7 @@ def run_study(
         "gamma": system.gamma,
         "ablation": None if ablation is None else (ablation if isinstance(ablation, str) else "chart"),
         "ablation_B_diag": None if B is None else np.diag(B).tolist(),
+        "margin_epsilon": margin,
         "elapsed_s": time.perf_counter() - t0,
         "description": system.description,
     }

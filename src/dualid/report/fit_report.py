@@ -156,6 +156,15 @@ def guard_cell(info: dict) -> str:
     return f"degenerate {cell}" if info.get("degenerate") else cell
 
 
+def margin_note(method: str, info: dict) -> str:
+    """The margin M(θ) ⪰ ε·M(θ_ref) a fit was constrained by (dualid.model.margin), flagged where it binds."""
+    active = info.get("margin_active") or ""
+    where = f"ACTIVE at {active} (the data pulled θ̂ onto the margin)" if active else "not active"
+    enforced = "" if info.get("margin_enforced", True) else " — NOT enforced (unconstrained fit)"
+    return (f"{method}: margin ε = {fmt_value(info['margin_epsilon'])} against the {info.get('margin_reference')}: "
+            f"smallest ratio C_b(θ̂) : C_b(θ_ref) {fmt_value(info.get('margin_min_ratio'))}, {where}{enforced}")
+
+
 def _fits(d: FitReportData) -> Section:
     rows, notes = [], []
     for m, f in d.outcome.fits.items():
@@ -171,6 +180,7 @@ def _fits(d: FitReportData) -> Section:
         notes += [f"{m}: solver chain: {chain}"] if "→" in chain and not r.info.get("fallback_used") else []
         notes += [f"{m}: {k.replace('_', ' ')}: {fmt_value(r.info[k])}" for k in SOLVER_NOTES
                   if k in r.info]
+        notes += [margin_note(m, r.info)] if "margin_epsilon" in r.info else []
     table = Table(("method", "status", "solver", "fallback", "time [s]", "iterations", "consistent",
                    "metric vs URDF", "URDF"), tuple(rows),
                   note="fallback: when used, the solvers tried in order and the one that produced θ̂. "

@@ -72,6 +72,8 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str], meta: dict | N
         methods[m].update({
             "metric_guard": {k: r.info[k] for k in ("metric_ratio_min", "metric_ratio_max", "degenerate",
                                                     "metric_guard_reference", "metric_guard_error") if k in r.info},
+            **({"margin": {k.removeprefix("margin_"): v for k, v in r.info.items() if k.startswith("margin_")}}
+               if "margin_epsilon" in r.info else {}),  # C_b(θ) ⪰ ε·C_b(θ_ref) (dualid.model.margin)
             "iterations": r.iterations,
             "urdf": urdfs.get(m),
             "mjcf": (files or {}).get(m, {}).get("mjcf"),

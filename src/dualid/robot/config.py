@@ -35,12 +35,13 @@ from dualid.estimators.methods import METHODS, make_estimator
 from dualid.estimators.methods import method as method_entry  # the one list of method names
 from dualid.model.drag_spec import DragSpec
 from dualid.robot.drag_config import check_kind, drag_spec
+from dualid.robot.margin_config import MarginConfig, margin_option
 from dualid.robot.plausible_step import PLAUSIBLE_LEVEL, plausible_dict, plausible_option
 from dualid.robot.uncertainty import UncertaintyConfig
 
 _TOP_KEYS = (
     "model", "columns", "train", "test", "preprocessing", "joint_terms", "bounds", "methods", "solver", "prior",
-    "validation", "references", "out", "uncertainty",
+    "validation", "references", "out", "uncertainty", "margin",
 )
 _MODEL_KEYS = ("urdf", "floating_base", "gravity", "kind", "drag")
 _JOINT_TERM_KEYS = ("viscous", "coulomb", "coulomb_velocity", "armature", "joints")
@@ -137,6 +138,7 @@ class FitConfig:
     references: tuple[tuple[str, Path], ...] = ()  # (label, DFKI reference_parameters yml)
     out: Path | None = None
     uncertainty: UncertaintyConfig = field(default_factory=UncertaintyConfig)
+    margin: MarginConfig | None = None  # C_b(θ) ⪰ ε·C_b(θ_ref) on every method (robot/margin_config.py); None: off
 
     def __post_init__(self) -> None:
         if not self.train:
@@ -263,6 +265,7 @@ class FitConfig:
             references=tuple((str(k), _path(v, base, f"references.{k}")) for k, v in refs.items()),
             out=None if d.get("out") is None else _path(d["out"], base, "out"),
             uncertainty=UncertaintyConfig.from_dict(d.get("uncertainty")),
+            margin=margin_option(d.get("margin")),
         )
 
     @staticmethod
@@ -311,4 +314,5 @@ class FitConfig:
             "references": {k: str(v) for k, v in self.references},
             "out": None if self.out is None else str(self.out),
             "uncertainty": self.uncertainty.as_dict(),
+            **({} if self.margin is None else {"margin": self.margin.as_dict()}),
         }

@@ -41,6 +41,7 @@ from dualid.robot.fit import (
     with_bounds,
 )
 from dualid.robot.inputs import check_runs_differ
+from dualid.robot.margin_config import apply_margin
 from dualid.robot.uncertainty import method_uncertainty, parameter_errors
 
 
@@ -111,8 +112,10 @@ def _fit_drag(config: FitConfig, say: Progress) -> DragFitOutcome:
     test = load_drag_runs(config.test, cmap, coords, steps)
     say("building regressors")
     problem = with_bounds(build_problem(model, train), config.bounds)
-    ident = problem.identifiability()
     theta0, prior_text = model.nominal, ""
+    if config.margin is not None:  # every method under C_b(θ) ⪰ ε·C_b(θ_ref) (robot/margin_config.py)
+        problem = apply_margin(problem, config.margin, lambda: theta0)  # prior: model.drag's nominal values
+    ident = problem.identifiability()
     if theta0 is not None:
         prior_text = "the nominal values of model.drag"
     fits: dict[str, MethodFit] = {}

@@ -44,6 +44,7 @@ from dualid.problem import Identifiability, IdentificationProblem, build_problem
 from dualid.robot.config import FitConfig
 from dualid.robot.defaults import adaptive_preprocessing, warn_far_from_data
 from dualid.robot.inputs import array_column_map, check_floating, check_runs_differ, check_units
+from dualid.robot.margin_config import apply_margin
 from dualid.robot.plausible_step import choose_plausible
 from dualid.robot.uncertainty import method_uncertainty, parameter_errors
 
@@ -329,6 +330,10 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
     test = load_runs(config.test, cmap, joints, steps, rigid)
     _say(progress, "building regressors")
     problem = with_bounds(build_problem(model, train), config.bounds)
+    if config.margin is not None:  # every method under C_b(θ) ⪰ ε·C_b(θ_ref) (robot/margin_config.py)
+        _say(progress, f"margin ε = {config.margin.epsilon:g} against the {config.margin.reference} reference")
+        problem = apply_margin(problem, config.margin, lambda: prior_theta(
+            config, rigid, model, None if model is rigid else estimator("ols").fit(problem).theta)[0])
     ident = problem.identifiability()
 
     fits: dict[str, MethodFit] = {}

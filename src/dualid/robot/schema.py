@@ -13,6 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from dualid.errors import ConfigError
 from dualid.estimators.methods import METHODS
 from dualid.robot.drag_schema import DragSection
+from dualid.robot.margin_schema import MarginSection
 
 Method = Literal[tuple(METHODS)]  # type: ignore[valid-type]
 
@@ -138,6 +139,8 @@ class FitConfigSchema(_Section):
     references: dict[str, str] | None = None
     out: str | None = None
     uncertainty: UncertaintySection | None = None
+    margin: MarginSection | float | None = Field(
+        None, description="chart-invariant margin M_i(θ) ⪰ ε·M_i(θ_ref) on every method; a number: ε against a WLS pilot")
 
 
 def json_schema() -> dict:
