@@ -16,26 +16,13 @@ from __future__ import annotations
 import argparse
 import time
 import warnings
-from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
+from dualid.bench.corpus import with_mass_bounds
 
 CASES = ["rank-deficient 4 dof, N = 12", "rank-deficient 6 dof, N = 30", "point-mass link, 3 dof, 5 %",
          "nearly massless link, 4 dof, 5 %", "chain 7 dof RRRRRRR, 10 %", "chain CRP, 3 dof, 20 %"]
 BOUND = 10.0
-
-
-def bounded(problem, bound=BOUND):
-    P = problem.parameters
-    lo = np.asarray(P.lower if P.lower is not None else [-np.inf] * problem.p, dtype=float).copy()
-    hi = np.asarray(P.upper if P.upper is not None else [np.inf] * problem.p, dtype=float).copy()
-    for i, n in enumerate(P.names):
-        if n.endswith(".m"):
-            hi[i] = min(hi[i], bound)
-        if n.startswith("j0.mc"):
-            lo[i], hi[i] = max(lo[i], -bound), min(hi[i], bound)
-    return replace(problem, parameters=P.with_bounds(lo, hi))
 
 
 def newton(problem):
@@ -82,7 +69,7 @@ def main() -> None:
         it = "" if n["it"] is None else n["it"]
         f = "" if n["f"] is None else f"{n['f']:.10g}"
         rows_a.append(f"| {name} | {n['status']} | {it} | {f} | {n['why']} | {sdp_cells} |")
-        bp = bounded(pb)
+        bp = with_mass_bounds(pb, BOUND)
         nb = newton(bp)
         st, fs, _ = sdp(bp, 1e-10)
         rel = "" if nb["f"] is None else f"{(nb['f'] - fs) / abs(fs):.1e}"

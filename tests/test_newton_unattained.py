@@ -12,12 +12,10 @@ The case is the smallest failing one of the corpus (``dualid.bench.corpus``: "ra
 
 from __future__ import annotations
 
-from dataclasses import replace
-
-import numpy as np
 import pytest
 
 from dualid.bench.corpus import problem as corpus_problem
+from dualid.bench.corpus import with_mass_bounds
 from dualid.errors import OptimumAtInfinityWarning, SolverError
 from dualid.estimators.dual_metric import DualMetric, fit_dual_metric_sdp
 from dualid.estimators.newton import fit_dual_metric_newton
@@ -28,19 +26,6 @@ CASE = "rank-deficient 4 dof, N = 12"
 @pytest.fixture(scope="module")
 def case():
     return corpus_problem(CASE)[0]
-
-
-def _bounded(problem, bound=10.0):
-    """Every mass ≤ bound and the first link's first moments in [−bound, bound] (kg, kg·m)."""
-    P = problem.parameters
-    lo = np.asarray(P.lower if P.lower is not None else [-np.inf] * problem.p, dtype=float).copy()
-    hi = np.asarray(P.upper if P.upper is not None else [np.inf] * problem.p, dtype=float).copy()
-    for i, n in enumerate(P.names):
-        if n.endswith(".m"):
-            hi[i] = min(hi[i], bound)
-        if n.startswith("j0.mc"):
-            lo[i], hi[i] = max(lo[i], -bound), min(hi[i], bound)
-    return replace(problem, parameters=P.with_bounds(lo, hi))
 
 
 def test_the_sdp_optimum_runs_off_with_its_tolerance(case):
@@ -64,11 +49,11 @@ def test_newton_names_the_constraint_only_parameters_that_grew(case):
         result = fit_dual_metric_newton(case)  # and pushing j0.m out to 10× confirms it (fit.pushed_out)
     assert result.status == "optimal" and result.iterations <= 60 and result.info["optimum_at_infinity"]
     assert result.info["constraint_only_growth"].startswith("the objective does not depend on j0.m, j0.mc_z")
-    assert "constraint_only_growth" not in fit_dual_metric_newton(_bounded(case)).info
+    assert "constraint_only_growth" not in fit_dual_metric_newton(with_mass_bounds(case)).info
 
 
 def test_bounded_base_link_newton_is_optimal_and_agrees_with_the_sdp(case):
-    bounded = _bounded(case)
+    bounded = with_mass_bounds(case)
     newton = fit_dual_metric_newton(bounded)
     sdp = DualMetric(solver="sdp", fallback=(), allow_unidentifiable=True).fit(bounded)
     assert newton.status == "optimal" and newton.iterations <= 100
@@ -77,4 +62,4 @@ def test_bounded_base_link_newton_is_optimal_and_agrees_with_the_sdp(case):
 
 @pytest.mark.xfail(strict=True, reason="degenerate optimum (LMIs rank-deficient, bounds active): 37 iterations")
 def test_bounded_base_link_newton_within_30_iterations(case):
-    assert fit_dual_metric_newton(_bounded(case)).iterations <= 30
+    assert fit_dual_metric_newton(with_mass_bounds(case)).iterations <= 30

@@ -171,3 +171,19 @@ def problem(name: str):
         if c.name == name:
             return c.build()
     raise ConfigError(f"unknown corpus case {name!r}; known: {', '.join(c.name for c in cases())}")
+
+
+def with_mass_bounds(problem, bound: float = 10.0):
+    """The problem with every mass ≤ bound (kg) and the first link's first moments in [−bound, bound] (kg m): the
+    well-posed version of the corpus problems whose dual-metric infimum is not attained (j0.m → ∞)."""
+    from dataclasses import replace
+
+    P = problem.parameters
+    lo = np.asarray(P.lower if P.lower is not None else [-np.inf] * problem.p, dtype=float).copy()
+    hi = np.asarray(P.upper if P.upper is not None else [np.inf] * problem.p, dtype=float).copy()
+    for i, n in enumerate(P.names):
+        if n.endswith(".m"):
+            hi[i] = min(hi[i], bound)
+        if n.startswith("j0.mc"):
+            lo[i], hi[i] = max(lo[i], -bound), min(hi[i], bound)
+    return replace(problem, parameters=P.with_bounds(lo, hi))
