@@ -60,3 +60,14 @@ def test_an_accurate_clarabel_solution_is_kept_and_certified():
     assert (result.status, result.solver, result.info["fallback_used"]) == ("optimal", "CLARABEL", False)
     assert result.info["solver_chain"].startswith("CLARABEL optimal (certified by newton: ")
     assert result.info["cvxpy_above_certified"] <= 1e-7 and result.info["certified_gap"] <= 1e-9
+
+
+@pytest.mark.parametrize("method", ["ols", "energy", "wls"])
+def test_exact_data_are_certified_at_the_rounding_floor(method):
+    """f(θ̂) ~ 1e-26 (exact torques): no relative test on f can pass, but f ≥ 0 certifies θ̂ to f(θ̂)/f(0)."""
+    problem, _ = corpus_problem("chain RR, 2 dof, exact")
+    result = make_estimator(method, allow_unidentifiable=True).fit(problem)
+    assert (result.status, result.solver) == ("optimal", "CLARABEL")
+    gap = result.info["certified_gap"]
+    assert gap <= certify.ROUNDING
+    assert result.info["solver_chain"] == f"CLARABEL optimal (certified: f at the rounding floor, {gap:.1e} of f(0))"
