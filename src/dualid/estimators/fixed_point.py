@@ -177,24 +177,28 @@ def _outer(est, sensor, theta_ref, theta_start, common, c):
     eta = est.damping if theta_start is None else 1.0
     history, clipped, converged = [], 0.0, False
     for k in range(est.max_iter):
-        result = _fit(sensor, weight, whiten, est, common, first=k == 0)
+        # the warm start's full phase skips the first fit's checks: the subsample passed them (its rows are a subset)
+        result = _fit(sensor, weight, whiten, est, common, first=k == 0 and theta_start is None)
         theta = result.theta
         step, n_clipped, f = 0.0, 0, 0.0
         for start in range(0, N, chunk):
             rows = slice(start, start + chunk)
-            e = whiten(sensor, rows)  # the objective of this fit, with the weight it was fitted with
+            W = Winv[rows]
+            e = np.exp(-0.5 * log_lam[rows])[:, :, None] * W  # the objective of this fit, with its weight
             e = np.einsum("cab,cb->ca", e, sensor.Y[rows] @ theta - sensor.tau[rows])
             f += float(np.sum(e * e))
-            L, lam, U_new = _pencil(sensor.metric.evaluate(theta_ref, rows), sensor.metric.evaluate(theta, rows))
+            # the pencil in the stored basis: W_i M_i(θ) W_iᵀ = U_iᵀ (L_i⁻¹ M_i(θ) L_i⁻ᵀ) U_i = V_i diag(λ) V_iᵀ, so
+            # the new basis is U_i V_i (W_i ← V_iᵀ W_i), and the old weight in it has the diagonal Σ_k V_ki² λ̄_k
+            # (no M_i(θ_ref), Cholesky or triangular inverse per pass)
+            A = W @ sensor.metric.evaluate(theta, rows) @ np.swapaxes(W, 1, 2)
+            lam, V = np.linalg.eigh(0.5 * (A + np.swapaxes(A, 1, 2)))
             lam_c = np.clip(lam, 1.0 / c, c)
             n_clipped += int(np.sum((lam < 1.0 / c) | (lam > c)))
             # damping: geometric mean of the previous weight and the new one, in the new eigenbasis
-            Li = _tri_inverse(L)
-            Ub = np.swapaxes(Winv[rows] @ L, 1, 2)  # U_i = (W_i L_i)ᵀ
-            old_in_new = np.log(np.clip(_in_basis(U_new, Ub, np.exp(log_lam[rows])), 1e-300, None))
+            old_in_new = np.log(np.clip(np.einsum("cki,ck->ci", V * V, np.exp(log_lam[rows])), 1e-300, None))
             new_log = (1 - eta) * old_in_new + eta * np.log(lam_c)
             step = max(step, float(np.max(np.abs(new_log - old_in_new))))
-            log_lam[rows], Winv[rows] = new_log, np.swapaxes(U_new, 1, 2) @ Li
+            log_lam[rows], Winv[rows] = new_log, np.swapaxes(V, 1, 2) @ W
         result = dataclasses.replace(result, objective=f)
         clipped = n_clipped / (N * n)
         if eta != est.damping and history and step > 0.5 * history[-1]:
