@@ -74,6 +74,13 @@ def test_subsample_warm_start_reaches_the_cold_fixed_point():
         lam, V = eigh(M[i], M_ref[i])  # Vᵀ M_ref V = I, Vᵀ M V = Λ: M̄⁻¹ = V clip(Λ)⁻¹ Vᵀ
         f += float(np.sum((V.T @ r[i]) ** 2 / np.clip(lam, 1 / 1.05, 1.05)))
     assert abs(warm.objective - f) < 1e-4 * f and abs(cold.objective - f) < 1e-4 * f
+    # the guard's ratios come from the last pencil pass: those of guard_info at θ̂ against the pilot
+    from dualid.estimators.metric_guard import guard_info
+
+    guard = guard_info(problem, warm.theta, ref, 100.0, "pilot (ols)")
+    for key in ("metric_ratio_min", "metric_ratio_max"):
+        assert abs(warm.info[key] - guard[key]) < 1e-10
+    assert warm.info["degenerate"] == guard["degenerate"]
     # invariant as the cold fit (the subsample is the same samples in every chart)
     for B in (random_chart(rng, problem.N, 3, True), np.diag([1e-6, 1.0, 1e6])):
         moved = BoundedFixedPoint(bound=1.05, pilot="ols", warm_start_samples=100).fit(problem.in_coordinates(B))

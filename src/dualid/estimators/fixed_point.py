@@ -25,7 +25,7 @@ import numpy as np
 from dualid.errors import ConfigError, DataError, MetricError, SolverError
 from dualid.estimators.base import freeze_options
 from dualid.estimators.gls import PILOTS, FeasibleGLS, fit_weighted
-from dualid.estimators.metric_guard import DEFAULT_BOUND, guard_info
+from dualid.estimators.metric_guard import DEFAULT_BOUND, guard_from_ratios
 from dualid.estimators.newton.objective import _tri_inverse
 from dualid.problem import IdentificationProblem
 
@@ -43,11 +43,10 @@ def _pencil(M_ref: np.ndarray, M: np.ndarray):
     return L, lam, U
 
 
-def _in_basis(U_new: np.ndarray, U: np.ndarray, lam: np.ndarray) -> np.ndarray:
-    """(c, n): diag(U_newᵀ U diag(λ) Uᵀ U_new) = Σ_k (U_newᵀ U)_ik² λ_k, O(n³) per sample (the 5-operand einsum
-    this replaces looped over n⁵ index tuples per sample: most of dm-bfp's time at large N)."""
-    P = np.swapaxes(U_new, 1, 2) @ U
-    return np.einsum("nik,nk->ni", P * P, lam)
+def _in_basis(V: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """(c, n): diag(V_iᵀ diag(λ_i) V_i) = Σ_k V_ki² λ_k: the old weight diag(λ) seen in the new eigenbasis V (both
+    in the old basis), O(n²) per sample (a 5-operand einsum here once looped over n⁵ index tuples per sample)."""
+    return np.einsum("cki,ck->ci", V * V, lam)
 
 
 @dataclass(frozen=True)
@@ -100,10 +99,10 @@ class BoundedFixedPoint:
         theta_start = None
         if m and sensor.N > 4 * m:
             sub = sensor.subset(slice(0, None, sensor.N // m))
-            theta_start, _, hist_sub, _, conv_sub, _ = _outer(self, sub, theta_ref, None, common, c)
+            theta_start, _, hist_sub, _, conv_sub, _, _ = _outer(self, sub, theta_ref, None, common, c)
             warm = {"warm_start_samples": sub.N, "iterations_outer_subsample": len(hist_sub),
                     "converged_subsample": conv_sub}
-        theta, result, history, clipped, converged, eta = _outer(self, sensor, theta_ref, theta_start, common, c)
+        theta, result, history, clipped, converged, eta, ratios = _outer(self, sensor, theta_ref, theta_start, common, c)
         if warm:
             warm.update(iterations_outer_full=len(history), damping_full=eta)
         info = {
@@ -119,7 +118,8 @@ class BoundedFixedPoint:
         }
         if not converged:
             info["fallback"] = f"stopped after max_iter = {self.max_iter} outer iterations (last step {history[-1]:.2g})"
-        info.update(guard_info(sensor, theta, theta_ref, self.guard_bound, f"pilot ({pilot})"))
+        # the guard: the pencil's extreme eigenvalues at θ̂ against θ_ref over every sample, from the last pencil pass
+        info.update(guard_from_ratios(*ratios, self.guard_bound, f"pilot ({pilot})"))
         return dataclasses.replace(result, method=self.name, info={**result.info, **info})
 
 
@@ -147,7 +147,7 @@ def _outer(est, sensor, theta_ref, theta_start, common, c):
     each step at least halves the last (near the fixed point the undamped map contracts faster than the damping
     η; the damping takes over otherwise). The fixed point and the stopping rule are the same (an undamped step
     |log λ̄_new − log λ̄_old| is ≥ the damped one, η times it). Returns (θ, last weighted fit with its objective,
-    step history, clipped share, converged, damping used last)."""
+    step history, clipped share, converged, damping used last, (min, max) pencil eigenvalue at θ)."""
     chunk = CHUNK
     N, n = sensor.N, sensor.n
     # the weight's state, per sample: pencil eigenvalues (log) and W_i = (L_i U_i)⁻¹ = U_iᵀ L_i⁻¹ (M_i(θ_ref) =
@@ -180,7 +180,7 @@ def _outer(est, sensor, theta_ref, theta_start, common, c):
         # the warm start's full phase skips the first fit's checks: the subsample passed them (its rows are a subset)
         result = _fit(sensor, weight, whiten, est, common, first=k == 0 and theta_start is None)
         theta = result.theta
-        step, n_clipped, f = 0.0, 0, 0.0
+        step, n_clipped, f, lo, hi = 0.0, 0, 0.0, np.inf, -np.inf
         for start in range(0, N, chunk):
             rows = slice(start, start + chunk)
             W = Winv[rows]
@@ -194,8 +194,9 @@ def _outer(est, sensor, theta_ref, theta_start, common, c):
             lam, V = np.linalg.eigh(0.5 * (A + np.swapaxes(A, 1, 2)))
             lam_c = np.clip(lam, 1.0 / c, c)
             n_clipped += int(np.sum((lam < 1.0 / c) | (lam > c)))
+            lo, hi = float(np.minimum(lo, lam[:, 0].min())), float(np.maximum(hi, lam[:, -1].max()))  # NaN stays
             # damping: geometric mean of the previous weight and the new one, in the new eigenbasis
-            old_in_new = np.log(np.clip(np.einsum("cki,ck->ci", V * V, np.exp(log_lam[rows])), 1e-300, None))
+            old_in_new = np.log(np.clip(_in_basis(V, np.exp(log_lam[rows])), 1e-300, None))
             new_log = (1 - eta) * old_in_new + eta * np.log(lam_c)
             step = max(step, float(np.max(np.abs(new_log - old_in_new))))
             log_lam[rows], Winv[rows] = new_log, np.swapaxes(V, 1, 2) @ W
@@ -207,4 +208,4 @@ def _outer(est, sensor, theta_ref, theta_start, common, c):
         if step < est.tol:
             converged = True
             break
-    return theta, result, history, clipped, converged, eta
+    return theta, result, history, clipped, converged, eta, (lo, hi)
