@@ -13,6 +13,11 @@ geometrically between iterations (M̄ ← M̄_prev^{1−η} M̄_new^η in the pe
 weighted least squares (estimators.gls.fit_weighted). The clip and the pencil are chart-invariant,
 and the pilot is fitted in the sensor chart, so the estimator is invariant under the charts the
 problem records.
+
+Large N (N > 4 × ``warm_start_samples``, default 20,000): the same damped iterations first run on an evenly
+strided subsample; all samples then start from the clipped pencil at the subsample's θ and iterate undamped
+while each step at least halves the last (the damping takes over otherwise), to the same stopping rule and the
+same fixed point (info: warm_start_samples, iterations_outer_subsample / _full, damping_full).
 """
 
 from __future__ import annotations
