@@ -73,5 +73,6 @@ def test_dm_bfp_pencil_and_damping_kernels_match_their_definitions():
         np.testing.assert_allclose(lam[i], scipy.linalg.eigh(M[i], M_ref[i], eigvals_only=True), rtol=1e-10)
     U_new = np.linalg.qr(rng.standard_normal((6, 5, 5)))[0]
     w = rng.uniform(0.5, 2.0, (6, 5))
-    expected = np.einsum("nji,njk,nk,nlk,nli->ni", U_new, U, w, U, U_new)
-    np.testing.assert_allclose(_in_basis(U_new, U, w), expected, rtol=1e-12)
+    expected = np.einsum("nji,njk,nk,nlk,nli->ni", U_new, U, w, U, U_new)  # diag(U_newᵀ U diag(w) Uᵀ U_new)
+    V = np.swapaxes(U, 1, 2) @ U_new  # the new basis in the old one
+    np.testing.assert_allclose(_in_basis(V, w), expected, rtol=1e-12)

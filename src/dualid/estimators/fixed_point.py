@@ -13,6 +13,11 @@ geometrically between iterations (M̄ ← M̄_prev^{1−η} M̄_new^η in the pe
 weighted least squares (estimators.gls.fit_weighted). The clip and the pencil are chart-invariant,
 and the pilot is fitted in the sensor chart, so the estimator is invariant under the charts the
 problem records.
+
+Large N (N > 4 × ``warm_start_samples``, default 20,000): the same damped iterations first run on an evenly
+strided subsample; all samples then start from the clipped pencil at the subsample's θ and iterate undamped
+while each step at least halves the last (the damping takes over otherwise), to the same stopping rule and the
+same fixed point (info: warm_start_samples, iterations_outer_subsample / _full, damping_full).
 """
 
 from __future__ import annotations
@@ -22,14 +27,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dualid.errors import ConfigError, DataError, MetricError
+from dualid.errors import ConfigError, DataError, MetricError, SolverError
 from dualid.estimators.base import freeze_options
 from dualid.estimators.gls import PILOTS, FeasibleGLS, fit_weighted
-from dualid.estimators.metric_guard import DEFAULT_BOUND, guard_info
+from dualid.estimators.metric_guard import DEFAULT_BOUND, guard_from_ratios
 from dualid.estimators.newton.objective import _tri_inverse
 from dualid.problem import IdentificationProblem
 
 CHUNK = 8192  # samples per block: the weight and the pencil are computed blockwise (no (N, n, n) temporaries)
+WARM_SAMPLES = 20_000  # default warm-start subsample: used when N > 4× this (smaller than Newton's 50,000: the subsample takes
+# ~15 damped outer iterations, the full data then ~4 undamped ones from there on the benchmark Crazyflie)
 
 
 def _pencil(M_ref: np.ndarray, M: np.ndarray):
@@ -41,11 +48,10 @@ def _pencil(M_ref: np.ndarray, M: np.ndarray):
     return L, lam, U
 
 
-def _in_basis(U_new: np.ndarray, U: np.ndarray, lam: np.ndarray) -> np.ndarray:
-    """(c, n): diag(U_newᵀ U diag(λ) Uᵀ U_new) = Σ_k (U_newᵀ U)_ik² λ_k, O(n³) per sample (the 5-operand einsum
-    this replaces looped over n⁵ index tuples per sample: most of dm-bfp's time at large N)."""
-    P = np.swapaxes(U_new, 1, 2) @ U
-    return np.einsum("nik,nk->ni", P * P, lam)
+def _in_basis(V: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """(c, n): diag(V_iᵀ diag(λ_i) V_i) = Σ_k V_ki² λ_k: the old weight diag(λ) seen in the new eigenbasis V (both
+    in the old basis), O(n²) per sample (a 5-operand einsum here once looped over n⁵ index tuples per sample)."""
+    return np.einsum("cki,ck->ci", V * V, lam)
 
 
 @dataclass(frozen=True)
@@ -62,6 +68,7 @@ class BoundedFixedPoint:
     solver_options: tuple | None = None
     allow_unidentifiable: bool = False
     guard_bound: float = DEFAULT_BOUND
+    warm_start_samples: int = WARM_SAMPLES  # N > 4× this: outer iterations on ~this many strided samples first; 0: off
     name = "dm-bfp"
 
     def __post_init__(self) -> None:
@@ -75,6 +82,9 @@ class BoundedFixedPoint:
             raise ConfigError(f"tol: expected a number > 0, got {self.tol!r}")
         if self.pilot not in PILOTS:
             raise ConfigError(f"pilot: expected one of {PILOTS}, got {self.pilot!r}")
+        w = self.warm_start_samples
+        if isinstance(w, bool) or not isinstance(w, int) or w < 0:
+            raise ConfigError(f"warm_start_samples: expected an integer ≥ 0 (0: no warm start), got {w!r}")
         object.__setattr__(self, "solver_options", freeze_options(self.solver_options, "BoundedFixedPoint: solver_options"))
 
     def fit(self, problem: IdentificationProblem):
@@ -86,52 +96,26 @@ class BoundedFixedPoint:
                              solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable)
         common = helper._common()
         theta_ref, pilot = helper.reference(sensor)
-        chunk = CHUNK
-        N, n = sensor.N, sensor.n
-        # the weight's state, per sample: pencil eigenvalues (log) and the eigenbasis carried by the reference's
-        # factor, LU_i = L_i U_i (M_i(θ_ref) = L_i L_iᵀ); storing L_i U_i instead of U_i saves evaluating and
-        # factoring M_i(θ_ref) in every weighted pass (two per outer iteration), at the same memory
-        log_lam = np.zeros((N, n))
-        LU = np.empty((N, n, n))
-        for start in range(0, N, chunk):  # M_i(θ_ref) ≻ 0 everywhere (the pencil's reference); U_i = I at first
-            try:
-                rows = slice(start, start + chunk)
-                LU[rows] = np.linalg.cholesky(sensor.metric.evaluate(theta_ref, rows))
-            except np.linalg.LinAlgError as exc:
-                raise MetricError(f"{self.name}: the pilot's metric M_i(θ_ref) is not positive definite") from exc
         c = float(self.bound)
-
-        def weight(block, rows):  # M̄_i = L_i U_i diag(λ_i) U_iᵀ L_iᵀ for a block of samples
-            G = LU[rows]
-            return (G * np.exp(log_lam[rows])[:, None, :]) @ np.swapaxes(G, 1, 2)
-
-        theta = theta_ref
-        history, clipped, converged = [], 0.0, False
-        for k in range(self.max_iter):
-            result = fit_weighted(sensor, weight, self.name, common, {})
-            theta = result.theta
-            step, n_clipped = 0.0, 0
-            for start in range(0, N, chunk):
-                rows = slice(start, start + chunk)
-                L, lam, U_new = _pencil(sensor.metric.evaluate(theta_ref, rows), sensor.metric.evaluate(theta, rows))
-                lam_c = np.clip(lam, 1.0 / c, c)
-                n_clipped += int(np.sum((lam < 1.0 / c) | (lam > c)))
-                # damping: geometric mean of the previous weight and the new one, in the new eigenbasis
-                Ub = _tri_inverse(L) @ LU[rows]  # U_i = L_i⁻¹ (L_i U_i)
-                old_in_new = np.log(np.clip(_in_basis(U_new, Ub, np.exp(log_lam[rows])), 1e-300, None))
-                new_log = (1 - self.damping) * old_in_new + self.damping * np.log(lam_c)
-                step = max(step, float(np.max(np.abs(new_log - old_in_new))))
-                log_lam[rows], LU[rows] = new_log, L @ U_new
-            clipped = n_clipped / (N * n)
-            history.append(step)
-            if step < self.tol:
-                converged = True
-                break
+        # warm start (large N): the same outer iterations on an evenly strided subsample first, then on all samples
+        # from the subsample's θ (the weight's state there: clip(pencil(θ_sub)), the fixed point's own form)
+        m = self.warm_start_samples
+        warm = {}
+        theta_start = None
+        if m and sensor.N > 4 * m:
+            sub = sensor.subset(slice(0, None, sensor.N // m))
+            theta_start, _, hist_sub, _, conv_sub, _, _ = _outer(self, sub, theta_ref, None, common, c)
+            warm = {"warm_start_samples": sub.N, "iterations_outer_subsample": len(hist_sub),
+                    "converged_subsample": conv_sub}
+        theta, result, history, clipped, converged, eta, ratios = _outer(self, sensor, theta_ref, theta_start, common, c)
+        if warm:
+            warm.update(iterations_outer_full=len(history), damping_full=eta)
         info = {
             "pilot": pilot,
             "bound": c,
             "damping": self.damping,
-            "iterations_outer": len(history),
+            "iterations_outer": len(history),  # on all samples (see iterations_outer_subsample)
+            **warm,
             "converged": converged,
             "last_step": history[-1],
             "clipped_fraction": clipped,  # share of pencil eigenvalues at the trust-region bound
@@ -139,5 +123,94 @@ class BoundedFixedPoint:
         }
         if not converged:
             info["fallback"] = f"stopped after max_iter = {self.max_iter} outer iterations (last step {history[-1]:.2g})"
-        info.update(guard_info(sensor, theta, theta_ref, self.guard_bound, f"pilot ({pilot})"))
+        # the guard: the pencil's extreme eigenvalues at θ̂ against θ_ref over every sample, from the last pencil pass
+        info.update(guard_from_ratios(*ratios, self.guard_bound, f"pilot ({pilot})"))
         return dataclasses.replace(result, method=self.name, info={**result.info, **info})
+
+
+
+def _fit(sensor, weight, whiten, est, common, first):
+    """θ = argmin Σ r_iᵀ M̄_i⁻¹ r_i: the first fit of a run through ``fit_weighted`` (identifiability check,
+    fallbacks), later ones from the weighted statistics whitened by the stored factor, without the objective's
+    pass (the caller computes it in its pencil pass); ``fit_weighted`` takes over if that start fails."""
+    if not first and common["solver"] == "newton":
+        from dualid.estimators.newton.weighted import fit_weighted_newton
+
+        try:
+            result = fit_weighted_newton(sensor, weight, constrained=common["constrained"], method=est.name,
+                                         whiten=whiten, objective_pass=False, **common["solver_options"])
+        except SolverError:
+            result = None
+        if result is not None:
+            return result
+    return fit_weighted(sensor, weight, est.name, common, {})
+
+
+def _outer(est, sensor, theta_ref, theta_start, common, c):
+    """The outer iterations on ``sensor`` (all its samples): from the pilot's metric (U_i = I, λ = 1) with the
+    estimator's damping; or, given θ_start (the warm start), from the clipped pencil at θ_start, undamped while
+    each step at least halves the last (near the fixed point the undamped map contracts faster than the damping
+    η; the damping takes over otherwise). The fixed point and the stopping rule are the same (an undamped step
+    |log λ̄_new − log λ̄_old| is ≥ the damped one, η times it). Returns (θ, last weighted fit with its objective,
+    step history, clipped share, converged, damping used last, (min, max) pencil eigenvalue at θ)."""
+    chunk = CHUNK
+    N, n = sensor.N, sensor.n
+    # the weight's state, per sample: pencil eigenvalues (log) and W_i = (L_i U_i)⁻¹ = U_iᵀ L_i⁻¹ (M_i(θ_ref) =
+    # L_i L_iᵀ): M̄_i⁻¹ = W_iᵀ diag(1/λ_i) W_i, so a weighted pass whitens with diag(λ_i^-½) W_i, no factorisation
+    log_lam = np.zeros((N, n))
+    Winv = np.empty((N, n, n))
+    for start in range(0, N, chunk):  # M_i(θ_ref) ≻ 0 everywhere (the pencil's reference); U_i = I at first
+        rows = slice(start, start + chunk)
+        try:
+            M_ref = sensor.metric.evaluate(theta_ref, rows)
+            if theta_start is None:
+                Winv[rows] = _tri_inverse(np.linalg.cholesky(M_ref))
+                continue
+            L, lam, U = _pencil(M_ref, sensor.metric.evaluate(theta_start, rows))
+        except np.linalg.LinAlgError as exc:
+            raise MetricError(f"{est.name}: the pilot's metric M_i(θ_ref) is not positive definite") from exc
+        log_lam[rows], Winv[rows] = np.log(np.clip(lam, 1.0 / c, c)), np.swapaxes(U, 1, 2) @ _tri_inverse(L)
+
+    def whiten(block, rows):  # diag(λ_i^-½) W_i: M̄_i⁻¹ = (·)ᵀ(·)
+        return np.exp(-0.5 * log_lam[rows])[:, :, None] * Winv[rows]
+
+    def weight(block, rows):  # M̄_i = G_i diag(λ_i) G_iᵀ, G_i = L_i U_i = M_i(θ_ref) W_iᵀ
+        G = block.metric.evaluate(theta_ref, rows) @ np.swapaxes(Winv[rows], 1, 2)
+        return (G * np.exp(log_lam[rows])[:, None, :]) @ np.swapaxes(G, 1, 2)
+
+    theta, result = theta_ref, None
+    eta = est.damping if theta_start is None else 1.0
+    history, clipped, converged = [], 0.0, False
+    for k in range(est.max_iter):
+        # the warm start's full phase skips the first fit's checks: the subsample passed them (its rows are a subset)
+        result = _fit(sensor, weight, whiten, est, common, first=k == 0 and theta_start is None)
+        theta = result.theta
+        step, n_clipped, f, lo, hi = 0.0, 0, 0.0, np.inf, -np.inf
+        for start in range(0, N, chunk):
+            rows = slice(start, start + chunk)
+            W = Winv[rows]
+            e = np.exp(-0.5 * log_lam[rows])[:, :, None] * W  # the objective of this fit, with its weight
+            e = np.einsum("cab,cb->ca", e, sensor.Y[rows] @ theta - sensor.tau[rows])
+            f += float(np.sum(e * e))
+            # the pencil in the stored basis: W_i M_i(θ) W_iᵀ = U_iᵀ (L_i⁻¹ M_i(θ) L_i⁻ᵀ) U_i = V_i diag(λ) V_iᵀ, so
+            # the new basis is U_i V_i (W_i ← V_iᵀ W_i), and the old weight in it has the diagonal Σ_k V_ki² λ̄_k
+            # (no M_i(θ_ref), Cholesky or triangular inverse per pass)
+            A = W @ sensor.metric.evaluate(theta, rows) @ np.swapaxes(W, 1, 2)
+            lam, V = np.linalg.eigh(0.5 * (A + np.swapaxes(A, 1, 2)))
+            lam_c = np.clip(lam, 1.0 / c, c)
+            n_clipped += int(np.sum((lam < 1.0 / c) | (lam > c)))
+            lo, hi = float(np.minimum(lo, lam[:, 0].min())), float(np.maximum(hi, lam[:, -1].max()))  # NaN stays
+            # damping: geometric mean of the previous weight and the new one, in the new eigenbasis
+            old_in_new = np.log(np.clip(_in_basis(V, np.exp(log_lam[rows])), 1e-300, None))
+            new_log = (1 - eta) * old_in_new + eta * np.log(lam_c)
+            step = max(step, float(np.max(np.abs(new_log - old_in_new))))
+            log_lam[rows], Winv[rows] = new_log, np.swapaxes(V, 1, 2) @ W
+        result = dataclasses.replace(result, objective=f)
+        clipped = n_clipped / (N * n)
+        if eta != est.damping and history and step > 0.5 * history[-1]:
+            eta = est.damping  # not contracting fast: the damped iteration from here
+        history.append(step)
+        if step < est.tol:
+            converged = True
+            break
+    return theta, result, history, clipped, converged, eta, (lo, hi)

@@ -80,9 +80,13 @@ def guard_info(
     reference: str = "",
 ) -> dict:
     """{"metric_ratio_min", "metric_ratio_max", "degenerate", "metric_guard_bound", "metric_guard_reference"}."""
-    bound = _check_bound(bound)
     lam = generalized_eigenvalues(problem, theta, theta_ref)
-    lo, hi = float(lam[:, 0].min()), float(lam[:, -1].max())
+    return guard_from_ratios(float(lam[:, 0].min()), float(lam[:, -1].max()), bound, reference)
+
+
+def guard_from_ratios(lo: float, hi: float, bound: float = DEFAULT_BOUND, reference: str = "") -> dict:
+    """``guard_info`` from the extreme generalised eigenvalues, when the caller has them (e.g. dm-bfp's pencil)."""
+    bound = _check_bound(bound)
     return {
         "metric_ratio_min": lo,
         "metric_ratio_max": hi,

@@ -37,8 +37,12 @@ def _weight(weight: Weight, block: IdentificationProblem, rows: slice) -> np.nda
     return np.broadcast_to(weight(block, rows), (len(range(block.N)[rows]), block.n, block.n))
 
 
-def _whitened(problem, block: IdentificationProblem, weight: Weight, rows: slice, what: str):
-    """(L_i⁻¹ Y_i (c, n, p), L_i⁻¹ τ_i (c, n)) for C_i = L_i L_iᵀ; MetricError if some C_i is not ≻ 0."""
+def _whitened(problem, block: IdentificationProblem, weight: Weight, rows: slice, what: str, whiten=None):
+    """(L_i⁻¹ Y_i (c, n, p), L_i⁻¹ τ_i (c, n)) for C_i = L_i L_iᵀ; MetricError if some C_i is not ≻ 0.
+    whiten: (block, rows) → W_i (c, n, n) with C_i⁻¹ = W_iᵀ W_i, when the caller has that factor (no Cholesky)."""
+    if whiten is not None:
+        W = whiten(block, rows)
+        return np.matmul(W, block.Y[rows]), np.einsum("cab,cb->ca", W, block.tau[rows])
     try:
         L = np.linalg.cholesky(_weight(weight, block, rows))
     except np.linalg.LinAlgError:
@@ -57,7 +61,7 @@ def _whitened(problem, block: IdentificationProblem, weight: Weight, rows: slice
 
 
 def weighted_statistics(problem: IdentificationProblem, weight: Weight, chunk: int = 4096,
-                        what: str = "the weight's covariance", energy: bool = False):
+                        what: str = "the weight's covariance", energy: bool = False, whiten=None):
     """(H, g, c) = Σ Y_iᵀC_i⁻¹Y_i, Σ Y_iᵀC_i⁻¹τ_i, Σ τ_iᵀC_i⁻¹τ_i accumulated over chunks of samples; with
     energy=True also (H_e, g_e) of the energy residual v_iᵀ r_i, from the same pass."""
     p = problem.p
@@ -68,7 +72,7 @@ def weighted_statistics(problem: IdentificationProblem, weight: Weight, chunk: i
             e = np.einsum("nap,na->np", block.Y[rows], block.v[rows])
             He += e.T @ e
             ge += e.T @ np.einsum("na,na->n", block.tau[rows], block.v[rows])
-        Z, z = _whitened(problem, block, weight, rows, what)
+        Z, z = _whitened(problem, block, weight, rows, what, whiten)
         Z2, z1 = Z.reshape(-1, p), z.reshape(-1)
         H += Z2.T @ Z2
         g += Z2.T @ z1
@@ -100,15 +104,19 @@ def fit_weighted_newton(
     verbose: bool = False,
     warm_start_samples: int | None = None,  # accepted for option compatibility; unused (no pass per iteration)
     what: str = "the weight's covariance",
+    whiten=None,
+    objective_pass: bool = True,
 ) -> IdentificationResult | None:
     """argmin Σ r_iᵀ C_i⁻¹ r_i under the constraints (module doc); None when the cheap start fails (the
-    caller then runs ``fit_dual_metric_newton`` on the materialised constant metric, with its phase I)."""
+    caller then runs ``fit_dual_metric_newton`` on the materialised constant metric, with its phase I).
+    whiten: as in ``_whitened``; objective_pass=False skips the pass for the result's objective (NaN: the
+    caller computes it, e.g. the bounded fixed point in its own pass)."""
     from dualid.estimators.newton.fit import check_bounds
 
     t0 = time.perf_counter()
     check_bounds(problem, constrained)
     cons = feasible_set(problem.parameters, constrained)
-    H, g, c, H_e, g_e = weighted_statistics(problem, weight, chunk, what, energy=True)
+    H, g, c, H_e, g_e = weighted_statistics(problem, weight, chunk, what, energy=True, whiten=whiten)
     theta_f = _solve_psd(H, g, rtol=1e-10)  # the unconstrained weighted LS (min-norm): the frozen-metric LS
     f_min = max(c - 2.0 * float(g @ theta_f) + float(theta_f @ H @ theta_f), 0.0)
 
@@ -137,7 +145,7 @@ def fit_weighted_newton(
                                         objective=objective, f_scale=c)
     info.pop("objective")
     info.update(start=start, statistics="one pass (H = Σ YᵀC⁻¹Y)")
-    f = weighted_objective(problem, weight, theta, chunk)
+    f = weighted_objective(problem, weight, theta, chunk) if objective_pass else float("nan")
     return IdentificationResult(method, theta, problem.parameters, f, "optimal", "newton", time.perf_counter() - t0,
                                 info["iterations"], constrained, info)
 
