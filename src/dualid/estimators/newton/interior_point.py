@@ -199,14 +199,14 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
         # centring: Mehrotra's heuristic σ = (μ_aff / μ)³ from the affine-scaling (σ = 0) predictor
         mu = gap / nu if nu else 0.0
         sigma = 0.0
-        if nu:
+        if mu > 0:  # a gap that underflowed to 0 (the dual iterates at 0) leaves nothing to centre: σ = 0
             d_aff = system.solve(-grad)
             a_p = min(1.0, cons.max_step(theta, d_aff))
             dZa, dza = _dual_direction(cons, Z, z, Cinv, s, d_aff, 0.0)
             a_d = min(1.0, _dual_max_step(Z, z, dZa, dza))
             mu_aff = _gap(cons, theta + a_p * d_aff, [Zb + a_d * dZb for Zb, dZb in zip(Z, dZa)], z + a_d * dza) / nu
             sigma = float(np.clip((max(mu_aff, 0.0) / mu) ** 3, 0.05, 0.5))
-        if nu and last_step < SHORT_STEP and min_centrality(cons, theta, Z, z, s) < CENTRALITY_MIN * mu:
+        if mu > 0 and last_step < SHORT_STEP and min_centrality(cons, theta, Z, z, s) < CENTRALITY_MIN * mu:
             sigma = 1.0  # a pure centring step: see CENTRALITY_MIN
         target = sigma * mu
         rhs = -grad + target * barrier_grad  # −∇ of the merit φ = f + target · barrier
