@@ -128,14 +128,35 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
     return theta, info
 
 
+# Retried with exact Newton steps (no Levenberg term; the eigen pseudo-inverse only where Cholesky fails) when the
+# Levenberg-damped run fails: with 1e-12 the fit crawls along directions whose Jacobi-scaled curvature is below it
+# (LandSalp pullback/logdet with the OLS prior: pivots² ~1e-22, f falling 0.027 per iteration 1,000 above the
+# optimum; units-1e6 pullback: 150 iterations). Not the first choice: those exact steps are rounding-dominated and
+# chart-dependent (dm's re-chart change on the sensor-error arms 1e-11–1e-4 → 1e-7–3e-4 when used for every fit).
+RETRY_LEVENBERG = 0.0
+
+
 def _run(cons, theta, tol, max_iter, objective, f_scale, gap0=1.0):
     """_interior_point on the module's f; an arithmetic failure inside it (e.g. a duality gap that underflows to 0)
-    is a SolverError of this solver, so that the caller's fallback or certification sees a failed solve."""
-    try:
-        theta, _, _, info = _interior_point(None, cons, theta, None, None, tol, max_iter, 0, False, gap0=gap0,
-                                            objective=objective, f_scale=f_scale)
-    except (ArithmeticError, np.linalg.LinAlgError) as exc:
-        raise SolverError(f"quadratic Newton: numerical failure: {type(exc).__name__}: {exc}",
-                          status="numerical_error") from exc
+    is a SolverError of this solver, so that the caller's fallback or certification sees a failed solve. A failed
+    run is retried once with RETRY_LEVENBERG (recorded as info["newton_levenberg"])."""
+    failure = None
+    for levenberg in (1e-12, RETRY_LEVENBERG):
+        try:
+            theta_out, _, _, info = _interior_point(None, cons, theta, None, None, tol, max_iter, 0, False, gap0=gap0,
+                                                    objective=objective, f_scale=f_scale, levenberg=levenberg)
+            info["newton_levenberg"] = levenberg
+            if failure is not None:
+                info["newton_retry"] = f"Levenberg 1e-12 failed ({failure.status}); exact Newton steps"
+            break
+        except (ArithmeticError, np.linalg.LinAlgError) as exc:
+            failure = SolverError(f"quadratic Newton: numerical failure: {type(exc).__name__}: {exc}",
+                                  status="numerical_error")
+            failure.__cause__ = exc
+        except SolverError as exc:
+            failure = exc
+    else:
+        raise failure
+    theta = theta_out
     info.pop("f_history", None)
     return theta, info

@@ -28,6 +28,12 @@ CENTRALITY_MIN = 0.0075  # below this × μ, the smallest eigenvalue of C_b^½ Z
 # corpus problems). Re-centring first: 0 failures there; on their well-posed versions (benchmarks/newton_unattained.py)
 # 64/26/51/40/33/15 → 37/23/29/32/30/16 iterations.
 SHORT_STEP = 0.5  # … and only after a step shorter than this (primal or dual): well-centred runs keep Mehrotra's σ
+GAP_BALANCE = 3.0  # the centring target σμ is kept ≥ GAP_BALANCE · λ²/ν (λ² the Lagrangian's squared Newton
+# decrement, the stationarity error in units of f; at most μ). Mehrotra's σ comes from the affine predictor of f's
+# local quadratic model; on the dual metric (M(θ)⁻¹ inside f) and at rank-deficient optima it cut the gap 10–20×
+# per step while λ² stayed put, the iterates reached a block's boundary far from the optimum and crawled along it
+# (σ = 1 centring steps of 0.01–0.1 for 20 iterations). Stress corpus (benchmarks/stress_corpus.py --no-large):
+# dm-paper Newton median/max 27/54 → 20.5/32 iterations; see docs/performance.md ("Gap balance").
 
 
 def diverging_iterates(thetas: list[np.ndarray], f_history: list[float]) -> dict:
@@ -130,7 +136,7 @@ def _barrier(cons: FeasibleSet, theta) -> float:
 
 
 def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chunk, verbose, der=None, gap0=1.0,
-                    objective=None, f_scale=None):
+                    objective=None, f_scale=None, levenberg=1e-12):
     """Primal–dual iterations from a strictly feasible θ (and dual Z, z, or None: centred at θ, gap0·f).
 
     Returns (θ, Z, z, info) at relative gap ≤ tol; raises SolverError otherwise. objective(θ, order) → _Derivatives
@@ -170,7 +176,7 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
             r_dual -= cons.G.T @ z
             barrier_grad += cons.G.T @ (1.0 / s)
             K += cons.G.T @ ((z / s)[:, None] * cons.G)
-        system = _NewtonSystem(0.5 * (K + K.T))
+        system = _NewtonSystem(0.5 * (K + K.T), levenberg)
         gap = _gap(cons, theta, Z, z)
         kkt = float(max(r_dual @ system.solve(r_dual), 0.0))  # squared Newton decrement of the Lagrangian
         f_ref = max(f, 1e-12 * f_scale, 1e-300)
@@ -199,16 +205,18 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
         # centring: Mehrotra's heuristic σ = (μ_aff / μ)³ from the affine-scaling (σ = 0) predictor
         mu = gap / nu if nu else 0.0
         sigma = 0.0
-        if nu:
+        if mu > 0:  # a gap that underflowed to 0 (the dual iterates at 0) leaves nothing to centre: σ = 0
             d_aff = system.solve(-grad)
             a_p = min(1.0, cons.max_step(theta, d_aff))
             dZa, dza = _dual_direction(cons, Z, z, Cinv, s, d_aff, 0.0)
             a_d = min(1.0, _dual_max_step(Z, z, dZa, dza))
             mu_aff = _gap(cons, theta + a_p * d_aff, [Zb + a_d * dZb for Zb, dZb in zip(Z, dZa)], z + a_d * dza) / nu
             sigma = float(np.clip((max(mu_aff, 0.0) / mu) ** 3, 0.05, 0.5))
-        if nu and last_step < SHORT_STEP and min_centrality(cons, theta, Z, z, s) < CENTRALITY_MIN * mu:
+        if mu > 0 and last_step < SHORT_STEP and min_centrality(cons, theta, Z, z, s) < CENTRALITY_MIN * mu:
             sigma = 1.0  # a pure centring step: see CENTRALITY_MIN
         target = sigma * mu
+        if mu > 0:  # the gap kept from running ahead of stationarity: see GAP_BALANCE
+            target = min(mu, max(target, GAP_BALANCE * kkt / nu))
         rhs = -grad + target * barrier_grad  # −∇ of the merit φ = f + target · barrier
         d = system.solve(rhs)
         slope = -float(rhs @ d)

@@ -30,7 +30,8 @@ class _NewtonSystem:
     def __init__(self, K: np.ndarray, levenberg: float = 1e-12):
         self.d = _jacobi(K)
         Ks = K / np.outer(self.d, self.d)
-        Ks[np.diag_indices_from(Ks)] += levenberg
+        if levenberg:
+            Ks[np.diag_indices_from(Ks)] += levenberg
         try:
             self.L = np.linalg.cholesky(Ks)
             self.U = None
