@@ -135,7 +135,8 @@ def fit_dual_metric_newton(
         # too close to its boundary for the full problem and would jam the iterations
         try:
             theta, Z, z, info = _interior_point(problem, cons, warm[0], None, None, tol, min(max_iter, WARM_MAX_ITER),
-                                                chunk, verbose, der=warm[1], gap0=WARM_GAP, f_scale=f_scale)
+                                                chunk, verbose, der=warm[1], gap0=WARM_GAP, f_scale=f_scale,
+                                                balance=0.0)
         except SolverError as exc:  # the subsample's optimum can sit near a boundary the full data move away from
             warm = None
             failed_warm = f"{start} failed ({exc.status}); "

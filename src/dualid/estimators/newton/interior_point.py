@@ -136,7 +136,7 @@ def _barrier(cons: FeasibleSet, theta) -> float:
 
 
 def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chunk, verbose, der=None, gap0=1.0,
-                    objective=None, f_scale=None, levenberg=1e-12):
+                    objective=None, f_scale=None, levenberg=1e-12, balance: float = GAP_BALANCE):
     """Primal–dual iterations from a strictly feasible θ (and dual Z, z, or None: centred at θ, gap0·f).
 
     Returns (θ, Z, z, info) at relative gap ≤ tol; raises SolverError otherwise. objective(θ, order) → _Derivatives
@@ -215,8 +215,8 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
         if mu > 0 and last_step < SHORT_STEP and min_centrality(cons, theta, Z, z, s) < CENTRALITY_MIN * mu:
             sigma = 1.0  # a pure centring step: see CENTRALITY_MIN
         target = sigma * mu
-        if mu > 0:  # the gap kept from running ahead of stationarity: see GAP_BALANCE
-            target = min(mu, max(target, GAP_BALANCE * kkt / nu))
+        if mu > 0 and balance:  # the gap kept from running ahead of stationarity: see GAP_BALANCE
+            target = min(mu, max(target, balance * kkt / nu))
         rhs = -grad + target * barrier_grad  # −∇ of the merit φ = f + target · barrier
         d = system.solve(rhs)
         slope = -float(rhs @ d)
