@@ -347,3 +347,18 @@ def test_the_chain_config_fits_the_example_logs_like_the_urdf():
         del body["xyz"]  # the chain's link frames are at the link centres
     by_chain = fit_drag(FitConfig.from_dict(raw, EXAMPLE)).fits["ols"].result.theta
     np.testing.assert_allclose(by_chain, by_urdf, rtol=1e-6, atol=1e-8)
+
+
+def test_the_drag_workflow_parses_each_log_once(monkeypatch):
+    import dualid.data.tables as tables
+    from dualid.robot.drag_fit import fit_drag
+
+    raw = yaml.safe_load((EXAMPLE / "drag.yaml").read_text())
+    raw.update(methods=["ols"])
+    config = FitConfig.from_dict(raw, EXAMPLE)
+    parsed = []
+    real = tables._read_table
+    monkeypatch.setattr(tables, "_read_table", lambda path: parsed.append(Path(path).name) or real(path))
+    fit_drag(config)
+    logs = [Path(p).name for p in (*config.train, *config.test)]
+    assert sorted(parsed) == sorted(logs)  # the first log: column map, default preprocessing, loading — parsed once

@@ -14,8 +14,6 @@ one); without them those methods fail with a message saying so.
 
 from __future__ import annotations
 
-import dataclasses
-import warnings
 from dataclasses import dataclass
 
 import cvxpy as cp
@@ -24,7 +22,7 @@ import numpy as np
 from dualid.data.io import LINEAR_UNITS, SI_UNITS, ColumnMap, load_log
 from dualid.data.preprocessing import preprocess
 from dualid.data.trajectory import Trajectory
-from dualid.errors import ConfigError, DataError, DualidError, DualidWarning
+from dualid.errors import ConfigError, DataError, DualidError
 from dualid.estimators.methods import method as method_entry
 from dualid.evaluation.validation import validate
 from dualid.model.drag import DragModel
@@ -37,6 +35,7 @@ from dualid.robot.fit import (
     choose_preprocessing,
     column_map,
     estimator,
+    run_workflow,
     velocity_source,
     with_bounds,
 )
@@ -87,16 +86,9 @@ class DragFitOutcome(RunOutcome):
 
 
 def fit_drag(config: FitConfig, progress: Progress | None = None) -> DragFitOutcome:
-    """The workflow of the module docstring; DualidWarnings are recorded in the outcome and re-issued."""
-    try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", DualidWarning)
-            outcome = _fit_drag(config, progress or (lambda _: None))
-    finally:
-        for w in {(str(w.message), w.category): w for w in caught}.values():
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    ours = [w for w in caught if issubclass(w.category, DualidWarning)]
-    return dataclasses.replace(outcome, warnings=tuple(dict.fromkeys(str(w.message) for w in ours)))
+    """The workflow of the module docstring; each log is parsed once, DualidWarnings are recorded in the outcome
+    and re-issued (robot.fit.run_workflow)."""
+    return run_workflow(_fit_drag, config, progress or (lambda _: None))
 
 
 def _fit_drag(config: FitConfig, say: Progress) -> DragFitOutcome:

@@ -297,19 +297,25 @@ def _say(progress: Progress | None, message: str) -> None:
         progress(message)
 
 
-def fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome:
-    """Run the whole workflow (see the module docstring); progress(message) is called between stages.
-    Every DualidWarning raised on the way is recorded in the outcome (and re-issued to the caller)."""
+def run_workflow(workflow, config, progress):
+    """workflow(config, progress) with each log parsed once (the first one is checked, sampled and loaded) and every
+    DualidWarning raised on the way recorded in the outcome's ``warnings`` (and re-issued to the caller)."""
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", DualidWarning)
-            with reading_once():  # the first log is checked, sampled and loaded: parsed once
-                outcome = _fit_robot(config, progress)
+            with reading_once():
+                outcome = workflow(config, progress)
     finally:  # re-issued (each once) also when an error follows: a warning may explain it
         for w in {(str(w.message), w.category): w for w in caught}.values():
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     ours = [w for w in caught if issubclass(w.category, DualidWarning)]
     return dataclasses.replace(outcome, warnings=tuple(dict.fromkeys(str(w.message) for w in ours)))
+
+
+def fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome:
+    """Run the whole workflow (see the module docstring); progress(message) is called between stages.
+    Every DualidWarning raised on the way is recorded in the outcome (and re-issued to the caller)."""
+    return run_workflow(_fit_robot, config, progress)
 
 
 def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome:
