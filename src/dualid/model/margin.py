@@ -36,16 +36,13 @@ def check_margin(parameters, theta_ref, epsilon) -> tuple[tuple[float, ...], flo
         raise ConfigError(f"margin.reference: expected θ_ref of shape ({parameters.p},), got {ref.shape}")
     if not np.all(np.isfinite(ref)):
         raise ConfigError("margin.reference: θ_ref has non-finite entries (NaN or inf)")
-    for b in parameters.blocks:
-        C = b.constraint_matrix(ref)
-        if C is None:
-            continue
-        lam = float(np.linalg.eigvalsh(C)[0])
-        if lam < -1e-9 * max(1.0, float(np.abs(C).max())):
-            raise ConfigError(
-                f"margin.reference: θ_ref is not physically consistent: block {b.name!r} has constraint-matrix "
-                f"smallest eigenvalue {lam:.3g} < 0; the margin C_b(θ) ⪰ ε·C_b(θ_ref) needs a consistent reference"
-            )
+    violated = parameters.violated_block(ref)
+    if violated is not None:
+        name, lam = violated
+        raise ConfigError(
+            f"margin.reference: θ_ref is not physically consistent: block {name!r} has constraint-matrix "
+            f"smallest eigenvalue {lam:.3g} < 0; the margin C_b(θ) ⪰ ε·C_b(θ_ref) needs a consistent reference"
+        )
     return tuple(float(x) for x in ref), eps
 
 

@@ -227,13 +227,22 @@ class ParameterSpace:
                 out[b.name] = float(np.linalg.eigvalsh(C)[0])
         return out
 
-    def is_consistent(self, theta: np.ndarray, tol: float = 1e-9) -> bool:
-        """True when every block's C_b(θ_b) ⪰ −tol·max(1, ‖C_b‖) and θ is within the bounds."""
+    def violated_block(self, theta: np.ndarray, tol: float = 1e-9) -> tuple[str, float] | None:
+        """(name, smallest eigenvalue) of the first block whose C_b(θ_b) is not ⪰ −tol·max(1, ‖C_b‖), else None."""
         theta = np.asarray(theta, dtype=float)
         for b in self.blocks:
             C = b.constraint_matrix(theta)
-            if C is not None and np.linalg.eigvalsh(C)[0] < -tol * max(1.0, np.abs(C).max()):
-                return False
+            if C is not None:
+                lam = float(np.linalg.eigvalsh(C)[0])
+                if lam < -tol * max(1.0, float(np.abs(C).max())):
+                    return b.name, lam
+        return None
+
+    def is_consistent(self, theta: np.ndarray, tol: float = 1e-9) -> bool:
+        """True when every block's C_b(θ_b) ⪰ −tol·max(1, ‖C_b‖) and θ is within the bounds."""
+        theta = np.asarray(theta, dtype=float)
+        if self.violated_block(theta, tol) is not None:
+            return False
         if self.lower is not None and np.any(theta < np.asarray(self.lower) - tol):
             return False
         if self.upper is not None and np.any(theta > np.asarray(self.upper) + tol):
