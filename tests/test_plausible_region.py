@@ -75,15 +75,21 @@ def test_masses_move_toward_the_prior_and_the_region_holds(noisy_arm):
     assert region.training_rmse_hat < region.training_rmse < 1.01 * region.training_rmse_hat
 
 
-def test_level_to_zero_is_the_exact_choice():
+def _pendubot_problem(seed: int):
+    """(problem, θ_true): 80 random states of the DFKI pendubot with joint terms, 0.01 N m torque noise."""
     rigid = RigidBodyModel.from_urdf(PENDUBOT)
     model = with_joint_terms(rigid)
-    rng = np.random.default_rng(2)
+    rng = np.random.default_rng(seed)
     theta_true = np.concatenate([rigid.nominal, [0.02, 0.01], [0.08, 0.09], [0.003, 0.004]])
     T = 80
     q, v, a = rng.uniform(-2, 2, (T, 2)), rng.normal(size=(T, 2)), rng.normal(size=(T, 2))
     tau = model.regressor(q, v, a) @ theta_true + 0.01 * rng.normal(size=(T, 2))
     problem = build_problem(model, Trajectory(np.arange(T) * 0.01, q, v, tau, a, coordinates=model.coordinates))
+    return problem, theta_true
+
+
+def test_level_to_zero_is_the_exact_choice():
+    problem, theta_true = _pendubot_problem(2)
     theta_hat, unc = _fit(problem)
     theta0 = theta_true.copy()
     theta0[:20] *= np.repeat([1.25, 0.8], 10)
@@ -110,14 +116,7 @@ def test_invariant_under_a_unit_scaling_of_a_parameter():
     """Joint1.b in N mm s/rad instead of N m s/rad (θ_k × 1000, its regressor column / 1000): the same choice."""
     import dataclasses
 
-    rigid = RigidBodyModel.from_urdf(PENDUBOT)
-    model = with_joint_terms(rigid)
-    rng = np.random.default_rng(3)
-    theta_true = np.concatenate([rigid.nominal, [0.02, 0.01], [0.08, 0.09], [0.003, 0.004]])
-    T = 80
-    q, v, a = rng.uniform(-2, 2, (T, 2)), rng.normal(size=(T, 2)), rng.normal(size=(T, 2))
-    tau = model.regressor(q, v, a) @ theta_true + 0.01 * rng.normal(size=(T, 2))
-    problem = build_problem(model, Trajectory(np.arange(T) * 0.01, q, v, tau, a, coordinates=model.coordinates))
+    problem, theta_true = _pendubot_problem(3)
     k, s = problem.parameters.index("Joint1.b"), 1000.0
     Y = np.array(problem.Y)
     Y[:, :, k] /= s
