@@ -10,6 +10,7 @@ import numpy as np
 from dualid.errors import OptimumAtInfinityWarning, SolverError
 from dualid.estimators.newton.interior_point import _interior_point
 from dualid.estimators.newton.objective import (
+    CHUNK,
     _force_scale,
     _NotPositiveDefinite,
     _objective,
@@ -91,7 +92,7 @@ def fit_dual_metric_newton(
     constrained: bool = True,
     tol: float = 1e-9,
     max_iter: int = 100,
-    chunk: int = 4096,
+    chunk: int = CHUNK,
     warm_start_samples: int = 50_000,
     method: str = "dual_metric",
     verbose: bool = False,
