@@ -58,16 +58,24 @@ def pushed_out(problem, theta, f, d, tol, max_iter, chunk) -> dict | None:
     cons = feasible_set(pushed.parameters, True)
     start = theta.copy()
     start[main] = PUSH * (1 + 1e-3) * theta[main]
-    if cons.margin(start) <= 0 or not np.isfinite(_objective(pushed, start, chunk)):
-        return None
+    near = cons.margin(start) > 0 and np.isfinite(_objective(pushed, start, chunk))
+    if not near:  # θ̂ on a cone's boundary (DFKI: a margin of ±4e-12, its sign set by rounding): the pushed problem's
+        # own strictly feasible start instead, solved cold below
+        try:
+            start, _ = starting_point(pushed, cons, chunk)
+        except (SolverError, _NotPositiveDefinite, np.linalg.LinAlgError):
+            return None
+        if cons.margin(start) <= 0 or not np.isfinite(_objective(pushed, start, chunk)):
+            return None
     info = None
-    try:  # θ̂ pushed out is usually near the pushed optimum (f cannot see the pushed directions): duals centred at a
-        # small gap, as the warm start's; the cold re-solve below if that fails (same optimum; arm7 N = 1,000: 3 instead
+    if near:  # θ̂ pushed out is usually near the pushed optimum (f cannot see the pushed directions): duals centred at
+        # a small gap, as the warm start's; the cold re-solve if that fails (same optimum; arm7 N = 1,000: 3 instead
         # of 11 iterations, the fit's total 24 → 16)
-        _, _, _, info = _interior_point(pushed, cons, start, None, None, tol, min(max_iter, WARM_MAX_ITER), chunk,
-                                        False, gap0=WARM_GAP, balance=0.0)
-    except (SolverError, _NotPositiveDefinite):
-        pass
+        try:
+            _, _, _, info = _interior_point(pushed, cons, start, None, None, tol, min(max_iter, WARM_MAX_ITER), chunk,
+                                            False, gap0=WARM_GAP, balance=0.0)
+        except (SolverError, _NotPositiveDefinite):
+            info = None
     if info is None:
         try:
             _, _, _, info = _interior_point(pushed, cons, start, None, None, tol, max_iter, chunk, False)
