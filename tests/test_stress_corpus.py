@@ -106,8 +106,10 @@ def test_boundary_prior_fails_without_the_lift_and_is_solved_and_recorded_with_i
             failed, chain = r.status != "optimal", r.info["solver_chain"]
         except SolverError:
             failed, chain = True, ""
-        if kind == "logdet":
-            assert not failed and chain == "CLARABEL returned optimal_inaccurate → newton optimal", chain
+        if kind == "logdet":  # Clarabel inaccurate (raw-regressor chart) or failed (the weighted fit's own chart,
+            # estimators.quadratic_chart): either way not optimal on its own, and the fallback solves it
+            assert not failed and chain.endswith("→ newton optimal"), chain
+            assert chain.startswith(("CLARABEL returned optimal_inaccurate", "CLARABEL failed (solver_error)")), chain
         else:
             assert failed, kind
         after = make_estimator(kind, theta0=theta_ols, allow_unidentifiable=True).fit(problem)

@@ -27,6 +27,7 @@ from dualid.estimators.base import (
     solve_cvxpy,
 )
 from dualid.estimators.metric_guard import DEFAULT_BOUND, check_guard_options, given_reference, reference_guard
+from dualid.estimators.quadratic_chart import signal_scale
 from dualid.estimators.result import IdentificationResult
 from dualid.estimators.statistics import Statistics, energy_statistics, statistics
 from dualid.linalg import gram_eigh, gram_rank
@@ -62,6 +63,9 @@ def fit_quadratic(
         s = np.sqrt(np.clip(np.diag(stats.H), 0.0, None))
         s[s > 0] = 1.0 / s[s > 0]
         s[s == 0] = 1.0
+    elif constrained or regularizer is not None:  # weighted or energy conic fit: the chart of its own statistics,
+        # invariant to units and noise level (estimators.quadratic_chart; the column norms of Y are neither)
+        s = signal_scale(stats.H, stats.c, problem.parameters, regularizer)
     else:
         s = parameter_scale(problem)
     Hs = s[:, None] * stats.H * s[None, :]
