@@ -63,11 +63,12 @@ def test_energy_fit_in_units_1e_minus_6_does_not_fail_and_matches_units_1e6(unit
 
 @pytest.mark.parametrize("kind", ["wls", "energy", "pullback", "logdet"])
 def test_the_chart_is_the_weighted_column_norm_over_the_weighted_signal_in_every_unit_and_noise_level(units, kind):
-    """s_k = √(c / H_kk) from H_kk = Σ_i Y_ikᵀ W Y_ik and c = Σ_i τ_iᵀ W τ_i summed here from the problem's own
-    arrays (not the statistics module), 1/√g_kk for a parameter only the prior sees, 1 for one nothing sees; the same
-    s in units ×1e-6 and ×1e6 and with W scaled by 1e20 (a noise level 1e-10 times smaller: exact data)."""
+    """s_k = √(c / (H_kk + γ g_kk)) from H_kk = Σ_i Y_ikᵀ W Y_ik and c = Σ_i τ_iᵀ W τ_i summed here from the problem's
+    own arrays (not the statistics module) and g the prior's pullback metric (0 without a prior), 1/√g_kk for a
+    parameter only the prior sees, 1 for one nothing sees; the same s in units ×1e-6 and ×1e6, and, without a prior,
+    with W scaled by 1e20 (a noise level 1e-10 times smaller: exact data; with a prior that changes the problem)."""
     theta0 = CASES["units 1e6 on q1, 3 dof, 5 %"].build()[1]  # the true θ: consistent, interior, chart-free
-    out = []
+    out = {1.0: [], 1e20: []}
     for f, problem in units.items():
         Y, tau = problem.Y, problem.tau  # (N, n, p), (N, n)
         if kind == "energy":
@@ -77,19 +78,38 @@ def test_the_chart_is_the_weighted_column_norm_over_the_weighted_signal_in_every
             W = np.broadcast_to(np.linalg.inv(r.T @ r / problem.N), (problem.N, problem.n, problem.n))
         H_kk = np.einsum("iak,iab,ibk->k", Y, W, Y)
         c = float(np.einsum("ia,iab,ib->", tau, W, tau))
-        reg = (kind, theta0, 0.1 * problem.N * problem.n) if kind in ("pullback", "logdet") else None
+        gamma = 0.1 * problem.N * problem.n
+        reg = (kind, theta0, gamma) if kind in ("pullback", "logdet") else None
+        g = np.zeros(problem.p)
+        if reg is not None:
+            g = np.concatenate([np.diag(pullback_metric(V, C0)) for _, V, C0 in
+                                prior_blocks(kind, problem.parameters, theta0)])
+            assert np.all(g > 0)
         stats = energy_statistics(problem) if kind == "energy" else statistics(problem, W[0])
         for scale in (1.0, 1e20):
             s = signal_scale(scale * stats.H, scale * stats.c, problem.parameters, reg)
             seen = H_kk > 0
             assert 13 <= seen.sum() < problem.p
-            assert np.allclose(s[seen], np.sqrt(c / H_kk[seen]), rtol=1e-9)
+            expected = np.sqrt(scale * c / (scale * H_kk[seen] + (gamma * g[seen] if reg else 0.0)))
+            assert np.allclose(s[seen], expected, rtol=1e-9)
             if reg is None:
                 assert np.all(s[~seen] == 1.0)
             else:  # the first link's mass, first moments and inertia the data do not see: the prior's own size
-                g = np.concatenate([np.diag(pullback_metric(V, C0)) for _, V, C0 in
-                                    prior_blocks(kind, problem.parameters, theta0)])
                 assert np.allclose(s[~seen], 1 / np.sqrt(g[~seen]), rtol=1e-12)
-            out.append(s)
-    for s in out[1:]:
-        assert np.allclose(s, out[0], rtol=1e-6)
+            out[scale].append(s)
+    for scale, charts in out.items():
+        assert np.allclose(charts[1], charts[0], rtol=1e-6), scale
+    if reg is None:
+        assert np.allclose(out[1e20][0], out[1.0][0], rtol=1e-6)
+
+
+def test_crazyflie_pullback_fit_in_units_1e3_is_solved_by_clarabel():
+    """A near-singular prior body (the pendulum links' thin inertia, pullback curvature ~1e16) with the data's
+    chart alone left the prior term 1e10 above the data term in the scaled problem: Clarabel stopped
+    (InsufficientProgress). The chart with the prior's curvature lets it finish, certified."""
+    from dualid.bench.corpus import cad_prior
+
+    problem, theta_true = CASES["crazyflie, units 1e3 on q1, 5 %"].build()[:2]
+    result = make_estimator("pullback", theta0=cad_prior(theta_true, 0), allow_unidentifiable=True).fit(problem)
+    assert result.info["solver_chain"].startswith("CLARABEL optimal (certified by newton: "), result.info["solver_chain"]
+    assert result.status == "optimal" and result.solver == "CLARABEL"

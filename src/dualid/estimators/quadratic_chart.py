@@ -14,8 +14,13 @@ Here the chart comes from the fit's own statistics H = Σ Y_iᵀ W_i Y_i and c =
 
 the share of the weighted torques that θ_k alone carries: invariant to a change of coordinates (H and c move
 together), to the noise level (W = Σ̂⁻¹ scales both by 1/σ²; the plain Jacobi chart 1/√H_kk does not, and puts the
-data-seen parameters 1e13 away from the others on exact data) and to N. A parameter the data do not see keeps
-1/√g_kk from the prior's pullback metric when a prior sees it (its size in C_b(θ₀)), else its physical unit, 1.
+data-seen parameters 1e13 away from the others on exact data) and to N. With a prior γR(θ) the
+data-seen parameters use the whole curvature, s_k = √(c / (H_kk + γ g_kk)) with g the prior's pullback metric (the
+log-det divergence's Hessian at θ₀ too): a near-singular prior body (the Crazyflie's thin pendulum links, g ~ 1e16)
+otherwise left the prior term 1e10 above the data term in the scaled problem, and Clarabel stopped on the Crazyflie
+with q1 in units ×1e3 (pullback, CAD-like prior; measured with √(c/H_kk): 1 failed and 5 optimal_inaccurate
+regularized fits over the corpus's small cases, with the whole curvature 0 and 3). A parameter the data do not see
+keeps 1/√g_kk from the prior's pullback metric when a prior sees it (its size in C_b(θ₀)), else its physical unit, 1.
 Measured: the per-equation normalisation √(c/(N n H_kk)) (a chart N·n times smaller) made Clarabel report the
 feasible pullback fit with a margin of tests/test_margin.py "infeasible"; this one does not.
 """
@@ -28,16 +33,20 @@ import numpy as np
 def signal_scale(H: np.ndarray, c: float, parameters=None, regularizer=None) -> np.ndarray:
     """s (p,) of the module doc; H (p, p) and c the fit's weighted statistics, regularizer (kind, θ₀, γ) or None."""
     d = np.clip(np.diag(H).astype(float), 0.0, None)
-    s = np.ones_like(d)
     seen = d > 0
-    s[seen] = np.sqrt(max(float(c), 1e-300) / d[seen])
+    prior = np.zeros_like(d)  # diag of γ·g, the prior term's curvature (the log-det divergence's at θ₀ too)
+    only = np.zeros_like(d)  # diag of g on the parameters only the prior sees
     if regularizer is not None:
         from dualid.model.consistency import prior_blocks, pullback_metric
 
-        kind, theta0, _ = regularizer
+        kind, theta0, gamma = regularizer
         for idx, V, C0 in prior_blocks(kind, parameters, np.asarray(theta0, dtype=float)):
             idx = np.asarray(idx)
             g = np.clip(np.diag(pullback_metric(V, C0)), 0.0, None)
-            prior_only = ~seen[idx] & (g > 0)
-            s[idx[prior_only]] = 1.0 / np.sqrt(g[prior_only])
+            prior[idx] += float(gamma) * g
+            only[idx] += g
+    s = np.ones_like(d)
+    s[seen] = np.sqrt(max(float(c), 1e-300) / (d[seen] + prior[seen]))
+    prior_only = ~seen & (only > 0)
+    s[prior_only] = 1.0 / np.sqrt(only[prior_only])
     return s
