@@ -35,7 +35,10 @@ def test_a_clarabel_optimal_above_the_optimum_is_polished_and_says_by_how_much(m
     above = result.info["cvxpy_above_certified"]
     assert result.info["solver_chain"] == f"CLARABEL optimal but {above:.1e} above → newton polished"
     # the polish returns the honest optimum, and 'above' is the moved point's own excess over it
-    assert result.objective == pytest.approx(honest.objective, rel=certify.TOL)  # both certified to TOL
+    # at or below Clarabel's certified answer: the polish solves on the closed feasible set (newton.closure), whose
+    # minimum the cvxpy solution approaches along j0.m (it is 1.0e-7 lower here)
+    assert result.objective <= honest.objective * (1 + certify.TOL)
+    assert result.objective == pytest.approx(honest.objective, rel=3 * certify.TOL)
     f = seen["f"]
     assert above == pytest.approx((f(seen["worse"]) - f(seen["best"])) / f(seen["best"]), rel=1e-5)
     assert above > 1e-4

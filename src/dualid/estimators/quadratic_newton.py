@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from dualid.errors import SolverError
+from dualid.estimators.newton.closure import close, complete
 from dualid.estimators.newton.interior_point import _interior_point
 from dualid.estimators.newton.linalg import _solve_psd
 from dualid.estimators.newton.objective import _Derivatives, _NotPositiveDefinite
@@ -93,8 +94,15 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
 
     ``start`` (e.g. a cvxpy solution on the cone's boundary): tried first, moved just inside the cones and started
     close to the central path (a polish); when that does not converge, the cold start below runs as without it."""
-    cons = feasible_set(parameters, constrained)
+    full = feasible_set(parameters, constrained)
+    # parameters f cannot see that only loosen a block are projected out (newton.closure; not with a prior, which sees them)
+    cons, projected = close(full, np.asarray(H)) if regularizer is None else (full, ())
     objective, theta_ls = quadratic_objective(H, g, c, parameters, regularizer)
+
+    def done(theta, info):
+        theta, completed = complete(theta, full, projected, parameters.names)
+        info.update(completed)
+        return theta, info
 
     def value(theta):
         if not cons.empty and cons.margin(theta) <= 0:
@@ -112,7 +120,7 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
             try:
                 theta, info = _run(cons, warm, tol, max_iter, objective, f_scale, gap0=1e-6)
                 info["start"] = "warm"
-                return theta, info
+                return done(theta, info)
             except SolverError as exc:
                 failure = f"warm start failed ({exc.status})"
     candidates = [_central_point(theta_ls, cons)]
@@ -125,7 +133,7 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
         raise SolverError("quadratic Newton: found no strictly feasible start", status="no_start")
     theta, info = _run(cons, candidates[k], tol, max_iter, objective, f_scale)
     info["start"] = "cold" + (f" ({failure})" if failure else "")
-    return theta, info
+    return done(theta, info)
 
 
 # Retried with exact Newton steps (no Levenberg term; the eigen pseudo-inverse only where Cholesky fails) when the
