@@ -89,14 +89,16 @@ def quadratic_objective(H: np.ndarray, g: np.ndarray, c: float, parameters, regu
 
 
 def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regularizer=None, tol: float = 1e-9,
-                         max_iter: int = 300, start: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+                         max_iter: int = 300, start: np.ndarray | None = None,
+                         closure: bool = False) -> tuple[np.ndarray, dict]:
     """(θ̂, info) minimising the module's f under the constraints; raises SolverError when it does not converge.
 
     ``start`` (e.g. a cvxpy solution on the cone's boundary): tried first, moved just inside the cones and started
-    close to the central path (a polish); when that does not converge, the cold start below runs as without it."""
+    close to the central path (a polish); when that does not converge, the cold start below runs as without it.
+    closure=True (without a prior): on the closed feasible set of ``newton.closure`` (dm's fits; the other estimators
+    keep the original set, whose stopping points along an unbounded unseen mass are moderate, e.g. as priors)."""
     full = feasible_set(parameters, constrained)
-    # parameters f cannot see that only loosen a block are projected out (newton.closure; not with a prior, which sees them)
-    cons, projected = close(full, np.asarray(H)) if regularizer is None else (full, ())
+    cons, projected = close(full, np.asarray(H)) if closure and regularizer is None else (full, ())
     objective, theta_ls = quadratic_objective(H, g, c, parameters, regularizer)
 
     def done(theta, info):
