@@ -397,7 +397,7 @@ def _provenance() -> dict:
     src = Path(dualid.__file__).resolve().parents[1]
     git = lambda *a: subprocess.run(["git", "-C", str(src), *a], capture_output=True, text=True).stdout.strip()
     return {"dualid_package": str(Path(dualid.__file__).resolve().parent), "commit": git("rev-parse", "HEAD"),
-            "uncommitted": git("status", "--short", "--", "src").splitlines(),
+            "uncommitted": git("status", "--short", "--", ".").splitlines(),  # relative to src/ (-C)
             "data_module": str(Path(sb.__file__).resolve())}
 
 

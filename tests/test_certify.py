@@ -23,11 +23,11 @@ def test_a_clarabel_optimal_above_the_optimum_is_polished_and_says_by_how_much(m
     seen = {}
     polish = certify.polish
 
-    def moved(theta_cvx, stats, parameters, constrained, regularizer, solver):
+    def moved(theta_cvx, stats, parameters, constrained, regularizer, solver, closure=False):
         worse = 0.9 * theta_cvx + 0.1 * theta_true
         seen["f"] = certify.certified_objective(stats, parameters, regularizer)
         seen["worse"], seen["best"] = worse, theta_cvx
-        return polish(worse, stats, parameters, constrained, regularizer, solver)
+        return polish(worse, stats, parameters, constrained, regularizer, solver, closure=closure)
 
     monkeypatch.setattr(certify, "polish", moved)
     result = make_estimator("wls", allow_unidentifiable=True).fit(problem)

@@ -65,9 +65,9 @@ def test_subsample_warm_start_reaches_the_cold_fixed_point():
     # scipy's generalised eigenproblem at θ̂ (the last fit's weight is one step < tol older)
     from scipy.linalg import eigh
 
-    from dualid import OLS
+    from dualid.estimators.gls import FeasibleGLS
 
-    ref = OLS().fit(problem).theta
+    ref = FeasibleGLS(pilot="ols").reference(problem)[0]  # the pilot itself (OLS by Newton; cvxpy's agrees to ~1e-10)
     M, M_ref, r = problem.metric.evaluate(warm.theta), problem.metric.evaluate(ref), problem.residual(warm.theta)
     f = 0.0
     for i in range(problem.N):

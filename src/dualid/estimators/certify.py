@@ -44,7 +44,7 @@ def certified_objective(stats, parameters, regularizer):
     return f
 
 
-def polish(theta_cvx, stats, parameters, constrained, regularizer, solver):
+def polish(theta_cvx, stats, parameters, constrained, regularizer, solver, closure: bool = False):
     """(θ, label, polished, certified, info) — see the module doc."""
     from dualid.estimators.quadratic_newton import fit_quadratic_newton
 
@@ -58,13 +58,15 @@ def polish(theta_cvx, stats, parameters, constrained, regularizer, solver):
             False, True, info
     try:
         theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, parameters, constrained=constrained,
-                                          regularizer=regularizer, start=theta_cvx)
+                                          regularizer=regularizer, start=theta_cvx, closure=closure)
     except SolverError as exc:
         return theta_cvx, f"{solver} optimal, not certified: newton check failed ({exc.status})", False, False, {}
     f_new = f(theta)
     above = (f_cvx - f_new) / max(abs(f_new), 1e-300) if np.isfinite(f_cvx) else np.inf
     info = {"certified_gap": float(ipm["relative_gap"]), "cvxpy_above_certified": float(above),
             "certify_iterations": int(ipm["iterations"])}
+    if "projected_parameters" in ipm and above > TOL:
+        info["projected_parameters"] = ipm["projected_parameters"]
     if above > TOL:
         return theta, f"{solver} optimal but {above:.1e} above → newton polished", True, True, info
     return theta_cvx, f"{solver} optimal (certified by newton: {max(above, 0.0):.1e})", False, True, info

@@ -156,22 +156,34 @@ class FeasibleGLS:
         cvx = {**c, "solver": c["solver"] if c["solver"] != "newton" else "CLARABEL",
                "solver_options": {} if c["solver"] == "newton" else c["solver_options"]}
         if self.pilot in ("wls", "ols"):
-            # the library's OLS/WLS (cvxpy); if that solver fails, the same estimator by the interior-point
-            # Newton method on a constant metric (OLS: M_i = I; WLS: M_i = Σ̂ from the OLS residuals),
-            # recorded in the returned label (result.info["pilot"])
+            # OLS/WLS by the interior-point Newton method on a constant metric (OLS: M_i = I;
+            # WLS: M_i = Σ̂ from the OLS residuals), which fits on the closed feasible set where the infimum is
+            # reached only as an unseen mass grows (newton.closure): a pilot stopped along that ray moves with
+            # rounding, and the weights with it (re-chart change of dm up to 1.2e-5, docs/statistics.md). If Newton
+            # fails, the library's OLS/WLS (cvxpy); what ran is in the label (result.info["pilot"])
+            newton = {**c, "solver": "newton", "solver_options": {}}
+            first = None
+            try:  # whatever the final fit's solver: the same pilot, so the solvers fit the same weighted problem
+                return self._newton_pilot(sensor, newton), self.pilot
+            except SolverError as exc:
+                first = f"newton failed: {str(exc)[:120]}"
             try:
                 est = WLS(**cvx) if self.pilot == "wls" else OLS(**cvx)
-                return est.fit(sensor).theta, self.pilot
+                return est.fit(sensor).theta, self.pilot + (f" ({cvx['solver']}: {first})" if first else "")
             except SolverError as exc:
-                newton = {**c, "solver": "newton", "solver_options": {}}
-                eye = np.broadcast_to(np.eye(sensor.n), (sensor.N, sensor.n, sensor.n))
-                theta = fit_weighted(sensor, eye, "ols", newton, {}).theta
-                if self.pilot == "wls":
-                    theta = fit_weighted(sensor, residual_covariance(sensor, theta)[None], "wls", newton, {}).theta
-                return theta, f"{self.pilot} (newton: {cvx['solver']} failed: {str(exc)[:120]})"
+                if first:
+                    raise
+                return self._newton_pilot(sensor, newton), f"{self.pilot} (newton: {cvx['solver']} failed: {str(exc)[:120]})"
         from dualid.estimators.dual_metric import DualMetric
 
         return DualMetric(constrained=c["constrained"], allow_unidentifiable=c["allow_unidentifiable"]).fit(sensor).theta, "dm-paper"
+
+    def _newton_pilot(self, sensor: IdentificationProblem, newton: dict) -> np.ndarray:
+        eye = np.broadcast_to(np.eye(sensor.n), (sensor.N, sensor.n, sensor.n))
+        theta = fit_weighted(sensor, eye, "ols", newton, {}).theta
+        if self.pilot == "wls":
+            theta = fit_weighted(sensor, residual_covariance(sensor, theta)[None], "wls", newton, {}).theta
+        return theta
 
     def covariance(self, sensor: IdentificationProblem, theta_ref: np.ndarray,
                    M: np.ndarray | None = None, r: np.ndarray | None = None) -> tuple[np.ndarray, float, dict]:
@@ -309,4 +321,5 @@ def fit_weighted(sensor: IdentificationProblem, C, method: str, common: dict, in
     return fit_quadratic(
         white, statistics(white), method=method, constrained=common["constrained"], solver=common["solver"],
         solver_options=common["solver_options"], allow_unidentifiable=common["allow_unidentifiable"], info=info,
+        closure=True,  # the polish of the cvxpy answer on the closed feasible set, as the Newton fit (newton.closure)
     )

@@ -48,6 +48,7 @@ def fit_quadratic(
     allow_unidentifiable: bool,
     regularizer: tuple[str, np.ndarray, float] | None = None,
     info: dict | None = None,
+    closure: bool = False,  # Newton polish / fallback on the closed feasible set (estimators.newton.closure; dm)
 ) -> IdentificationResult:
     """min θᵀHθ − 2gᵀθ + c (+ γ R(θ)) under the problem's constraints, in scaled variables θ = s ⊙ φ."""
     import cvxpy as cp
@@ -121,7 +122,7 @@ def fit_quadratic(
     constraints = cvxpy_constraints(theta, problem.parameters) if constrained else []
     cvx = cp.Problem(cp.Minimize(objective), constraints)
     theta_hat, status, used, iterations, solve_time = _solve_with_fallback(
-        cvx, phi, s, stats, problem, method, constrained, solver, solver_options, regularizer, info
+        cvx, phi, s, stats, problem, method, constrained, solver, solver_options, regularizer, info, closure
     )
     value = stats.objective(problem, theta_hat)
     if regularizer is not None:
@@ -133,7 +134,8 @@ def fit_quadratic(
     )
 
 
-def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solver, solver_options, regularizer, info):
+def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solver, solver_options, regularizer, info,
+                         closure=False):
     """cvxpy first; when it fails or returns only optimal_inaccurate, dualid's own interior-point method
     (estimators.quadratic_newton). What happened is recorded in info (solver_chain, fallback_used,
     solver_warnings); an inaccurate cvxpy result is returned only, and labelled, if that fails too."""
@@ -155,7 +157,7 @@ def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solve
     if solved is not None and solved.status == "optimal":  # certified (or polished) by dualid's interior point
         t0 = time.perf_counter()
         theta, label, polished, certified, checked = polish(s * solved.value, stats, problem.parameters,
-                                                            constrained, regularizer, solver)
+                                                            constrained, regularizer, solver, closure=closure)
         info.update(checked, solver_chain=label, fallback_used=polished)
         if polished:
             info["fallback_reason"] = label
@@ -167,12 +169,12 @@ def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solve
     try:
         try:  # cold start first (the same path whatever rounding cvxpy's end point has), then from that end point
             theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, constrained=constrained,
-                                              regularizer=regularizer)
+                                              regularizer=regularizer, closure=closure)
         except SolverError:
             if solved is None:
                 raise
             theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, constrained=constrained,
-                                              regularizer=regularizer, start=s * solved.value)
+                                              regularizer=regularizer, start=s * solved.value, closure=closure)
     except SolverError as exc:
         if solved is None:
             raise SolverError(f"{method} fit: {first}; then dualid's interior-point method failed: {exc}",
@@ -182,6 +184,8 @@ def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solve
         return s * solved.value, solved.status, solved.solver, solved.iterations, solved.solve_time
     info.update(solver_chain=f"{first} → newton optimal", fallback_used=True, fallback_reason=first,
                 relative_gap=ipm["relative_gap"])
+    if "projected_parameters" in ipm:
+        info["projected_parameters"] = ipm["projected_parameters"]
     return theta, "optimal", "newton", ipm["iterations"], time.perf_counter() - t0
 
 

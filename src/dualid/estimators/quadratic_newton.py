@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from dualid.errors import SolverError
+from dualid.estimators.newton.closure import close, complete
 from dualid.estimators.newton.interior_point import _interior_point
 from dualid.estimators.newton.linalg import _solve_psd
 from dualid.estimators.newton.objective import _Derivatives, _NotPositiveDefinite
@@ -88,13 +89,22 @@ def quadratic_objective(H: np.ndarray, g: np.ndarray, c: float, parameters, regu
 
 
 def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regularizer=None, tol: float = 1e-9,
-                         max_iter: int = 300, start: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+                         max_iter: int = 300, start: np.ndarray | None = None,
+                         closure: bool = False) -> tuple[np.ndarray, dict]:
     """(θ̂, info) minimising the module's f under the constraints; raises SolverError when it does not converge.
 
     ``start`` (e.g. a cvxpy solution on the cone's boundary): tried first, moved just inside the cones and started
-    close to the central path (a polish); when that does not converge, the cold start below runs as without it."""
-    cons = feasible_set(parameters, constrained)
+    close to the central path (a polish); when that does not converge, the cold start below runs as without it.
+    closure=True (without a prior): on the closed feasible set of ``newton.closure`` (dm's fits; the other estimators
+    keep the original set, whose stopping points along an unbounded unseen mass are moderate, e.g. as priors)."""
+    full = feasible_set(parameters, constrained)
+    cons, projected = close(full, np.asarray(H)) if closure and regularizer is None else (full, ())
     objective, theta_ls = quadratic_objective(H, g, c, parameters, regularizer)
+
+    def done(theta, info):
+        theta, completed = complete(theta, full, projected, parameters.names)
+        info.update(completed)
+        return theta, info
 
     def value(theta):
         if not cons.empty and cons.margin(theta) <= 0:
@@ -112,7 +122,7 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
             try:
                 theta, info = _run(cons, warm, tol, max_iter, objective, f_scale, gap0=1e-6)
                 info["start"] = "warm"
-                return theta, info
+                return done(theta, info)
             except SolverError as exc:
                 failure = f"warm start failed ({exc.status})"
     candidates = [_central_point(theta_ls, cons)]
@@ -125,7 +135,7 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
         raise SolverError("quadratic Newton: found no strictly feasible start", status="no_start")
     theta, info = _run(cons, candidates[k], tol, max_iter, objective, f_scale)
     info["start"] = "cold" + (f" ({failure})" if failure else "")
-    return theta, info
+    return done(theta, info)
 
 
 # Retried with exact Newton steps (no Levenberg term; the eigen pseudo-inverse only where Cholesky fails) when the

@@ -20,6 +20,7 @@ from collections.abc import Callable
 import numpy as np
 
 from dualid.errors import MetricError
+from dualid.estimators.newton.closure import close, complete
 from dualid.estimators.newton.interior_point import _interior_point
 from dualid.estimators.newton.linalg import _solve_psd
 from dualid.estimators.newton.objective import _Derivatives, _tri_inverse
@@ -117,6 +118,7 @@ def fit_weighted_newton(
     check_bounds(problem, constrained)
     cons = feasible_set(problem.parameters, constrained)
     H, g, c, H_e, g_e = weighted_statistics(problem, weight, chunk, what, energy=True, whiten=whiten)
+    full, (cons, projected) = cons, close(cons, H)  # parameters f cannot see that only loosen a block: newton.closure
     theta_f = _solve_psd(H, g, rtol=1e-10)  # the unconstrained weighted LS (min-norm): the frozen-metric LS
     f_min = max(c - 2.0 * float(g @ theta_f) + float(theta_f @ H @ theta_f), 0.0)
 
@@ -145,6 +147,8 @@ def fit_weighted_newton(
                                         objective=objective, f_scale=c)
     info.pop("objective")
     info.update(start=start, statistics="one pass (H = Σ YᵀC⁻¹Y)")
+    theta, completed = complete(theta, full, projected, problem.parameters.names)
+    info.update(completed)
     f = weighted_objective(problem, weight, theta, chunk) if objective_pass else float("nan")
     return IdentificationResult(method, theta, problem.parameters, f, "optimal", "newton", time.perf_counter() - t0,
                                 info["iterations"], constrained, info)
