@@ -150,6 +150,29 @@ def test_infeasible_constraints_raise_with_the_solver_status():
     assert info.value.status == "infeasible"
 
 
+def test_a_false_infeasibility_claim_is_refuted_by_the_interior_point(monkeypatch):
+    """cvxpy's "infeasible" ends a fit only when dualid's interior point finds no feasible optimum either (a badly
+    scaled conic problem can be called infeasible: the margin's pullback fit in test_margin was); the chain says so."""
+    import dualid.estimators.least_squares as ls
+
+    problem, _ = drag_problem(np.random.default_rng(0), N=20, n=3)
+    expected = OLS().fit(problem)
+
+    def claims_infeasible(*args, **kwargs):
+        raise SolverError("ols fit: the problem is infeasible (CLARABEL status 'infeasible')", status="infeasible")
+
+    monkeypatch.setattr(ls, "solve_cvxpy", claims_infeasible)
+    result = OLS().fit(problem)
+    assert result.info["solver_chain"] == "CLARABEL claimed infeasible → newton optimal"
+    assert result.solver == "newton" and result.status == "optimal" and result.info["fallback_used"] is True
+    assert np.allclose(result.theta, expected.theta, rtol=1e-6, atol=1e-9)
+    impossible = IdentificationProblem(
+        problem.Y, problem.tau, problem.metric, problem.v, problem.parameters.with_bounds(upper=np.full(9, -1.0)), "drag"
+    )
+    with pytest.raises(SolverError, match=r"^ols fit: the problem is infeasible \(CLARABEL status 'infeasible'\)$"):
+        OLS().fit(impossible)  # the interior point finds no start either: the claim stands
+
+
 def test_metric_that_cannot_be_positive_definite_is_a_metric_error():
     problem, _ = drag_problem(np.random.default_rng(0), N=20, n=3)
     M0 = np.zeros((20, 3, 3))

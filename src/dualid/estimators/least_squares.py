@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from dualid.errors import ConfigError, ConsistencyError, DataError, SolverError
+from dualid.errors import ConfigError, ConsistencyError, DataError, MetricError, SolverError
 from dualid.estimators.base import (
     SOLVERS,
     captured_warnings,
@@ -144,14 +144,17 @@ def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solve
     from dualid.estimators.certify import polish
     from dualid.estimators.quadratic_newton import fit_quadratic_newton
 
-    solved, failure = None, None
+    solved, failure, claim = None, None, None
     with captured_warnings() as notes:  # cvxpy's warnings go into the result, not the terminal
         try:
             solved = solve_cvxpy(cvx, phi, solver, solver_options, what=f"{method} fit")
         except SolverError as exc:
-            if is_problem_property(exc):
+            if not is_problem_property(exc):
+                failure = f"{solver} failed ({exc.status}): {exc}"
+            elif "infeasible" in exc.status:  # checked: a badly scaled conic problem can be called infeasible
+                claim, failure = exc, f"{solver} claimed {exc.status}"
+            else:
                 raise
-            failure = f"{solver} failed ({exc.status}): {exc}"
     if notes:
         info["solver_warnings"] = " | ".join(notes)
     if solved is not None and solved.status == "optimal":  # certified (or polished) by dualid's interior point
@@ -175,7 +178,11 @@ def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solve
                 raise
             theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, constrained=constrained,
                                               regularizer=regularizer, start=s * solved.value, closure=closure)
-    except SolverError as exc:
+    except (SolverError, MetricError) as exc:
+        if claim is not None:  # dualid's interior point finds no feasible optimum either: the claim stands
+            raise claim from exc
+        if isinstance(exc, MetricError):
+            raise
         if solved is None:
             raise SolverError(f"{method} fit: {first}; then dualid's interior-point method failed: {exc}",
                               status="all_solvers_failed") from exc
