@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from dualid.errors import ConfigError, ConsistencyError, DataError, MetricError, SolverError
+from dualid.errors import ConfigError, ConsistencyError, DataError, SolverError
 from dualid.estimators.base import (
     SOLVERS,
     captured_warnings,
@@ -178,11 +178,12 @@ def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solve
                 raise
             theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, constrained=constrained,
                                               regularizer=regularizer, start=s * solved.value, closure=closure)
-    except (SolverError, MetricError) as exc:
-        if claim is not None:  # dualid's interior point finds no feasible optimum either: the claim stands
+    except SolverError as exc:
+        if claim is not None and exc.status == "no_start":  # no strictly feasible θ either: the claim stands
             raise claim from exc
-        if isinstance(exc, MetricError):
-            raise
+        if claim is not None:
+            raise SolverError(f"{method} fit: {first}; dualid's interior-point method could not check it (it failed: "
+                              f"{exc})", status="all_solvers_failed") from exc
         if solved is None:
             raise SolverError(f"{method} fit: {first}; then dualid's interior-point method failed: {exc}",
                               status="all_solvers_failed") from exc
