@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from dualid.errors import SolverError
 from dualid.estimators.newton.closure import close, complete
 from dualid.estimators.newton.weighted import fit_weighted_newton
 from dualid.model.consistency import feasible_set
@@ -78,6 +79,10 @@ def test_close_projects_only_parameters_f_cannot_see_that_enter_one_block_as_a_r
     done, info = complete(theta, cons, projected, names)
     C = cons.lmis[0].C(done)
     assert np.linalg.eigvalsh(C)[0] >= 0 and np.linalg.eigvalsh(C)[0] < 1e-6  # consistent, on the boundary
+    # a compression that is singular (Izz = 0 with mc_x ≠ 0: no finite mass is consistent) is an error, not a θ
+    theta[names.index("j0.Izz")] = 0.0
+    with pytest.raises(SolverError, match=r"^closure: no value of j0.m makes its consistency block positive definite"):
+        complete(theta, cons, projected, names)
 
 
 def test_dm_is_chart_invariant_on_the_benchmark_arm_whose_first_link_mass_ran_off():

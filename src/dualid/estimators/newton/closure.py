@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dualid.errors import SolverError
 from dualid.model.consistency import LMI, FeasibleSet
 
 SLACK = 1e-9  # the completed block's smallest eigenvalue: this × its largest (strictly consistent, on the boundary)
@@ -97,12 +98,26 @@ def complete(theta: np.ndarray, cons: FeasibleSet, projected: tuple[Projected, .
         w = pr.P.T @ Q @ pr.u
         q = float(pr.u @ Q @ pr.u)
         top = max(float(np.abs(np.linalg.eigvalsh(S)).max()), abs(q), 1e-300)
-        need = float(w @ np.linalg.solve(S, w)) - q  # m·λ ≥ wᵀS⁻¹w − q  (Schur complement)
-        value = (need + SLACK * top) / pr.lam
+        # m·λ ≥ wᵀS⁻¹w − q (Schur complement); S may be nearly singular (the closed optimum on its boundary): a
+        # least-squares solve (no LinAlgError), a relative slack against its rounding, then a Cholesky check below
+        need = float(w @ np.linalg.lstsq(S, w, rcond=None)[0]) - q
+        value = (need * (1.0 + 1e-8) + SLACK * top) / pr.lam
         lo = -np.inf
         for r in np.flatnonzero(cons.G[:, pr.k]) if len(cons.h) else ():
             lo = max(lo, -cons.h[r] / cons.G[r, pr.k])
         theta[pr.k] = max(value, lo)
+        for _ in range(60):  # the full block must factor; if rounding left it singular, grow the mass (×2)
+            try:
+                np.linalg.cholesky(c.C(theta))
+                break
+            except np.linalg.LinAlgError:
+                theta[pr.k] = 2.0 * max(theta[pr.k], SLACK * top / pr.lam)
+        else:
+            label = names[pr.k] if names is not None else f"θ[{pr.k}]"
+            raise SolverError(f"closure: no value of {label} makes its consistency block positive definite (the "
+                              "rest of the block, compressed, is singular: smallest eigenvalue "
+                              f"{float(np.linalg.eigvalsh(S)[0]):.3g}); the closed fit did not end inside its cone",
+                              status="closure_failed")
         label = names[pr.k] if names is not None else f"θ[{pr.k}]"
         notes.append(f"{label} = {theta[pr.k]:.6g}")
     info = {"projected_parameters": ", ".join(notes),
