@@ -255,3 +255,5 @@ def test_report_says_which_covariance_structure_dm_used(written):
     # Link 1 turns about a fixed axis: its mass only loosens its consistency block and the infimum is approached as
     # it grows (estimators.newton.closure); the report names the completed value instead of hiding it
     assert "dm: projected parameters: Joint1.m = " in text
+    record = yaml.safe_load((written / "parameters.yaml").read_text())["methods"]["dm"]["projected_parameters"]
+    assert record["values"].startswith("Joint1.m = ") and "smallest value that keeps the block consistent" in record["note"]
