@@ -116,7 +116,7 @@ class AffineMetric:
     def quad(self, w: np.ndarray, rows: slice | np.ndarray = slice(None)) -> np.ndarray:
         """(N', p): w_iᵀ M_ik w_i for w (N', n)."""
         out = np.zeros((w.shape[0], self.n_params))
-        for t, u, Eu in self._factors(w, rows):
+        for t, u, Eu in self.factors(w, rows):
             out[:, _as_slice(t.indices)] += np.einsum("ckd,cd->ck", Eu, u)
         return out
 
@@ -132,13 +132,13 @@ class AffineMetric:
         The dual-metric gradient and Hessian need exactly this pair."""
         out = np.zeros((w.shape[0], w.shape[1], self.n_params)) if out is None else out
         wMw = np.zeros(self.n_params)
-        for t, u, Eu in self._factors(w, rows):
+        for t, u, Eu in self.factors(w, rows):
             idx = _as_slice(t.indices)
             out[:, :, idx] -= np.matmul(np.swapaxes(t.J[rows], 1, 2), np.swapaxes(Eu, 1, 2))  # J_iᵀ E_k u_i
             wMw[idx] += np.einsum("ckd,cd->k", Eu, u)
         return out, wMw
 
-    def _factors(self, w: np.ndarray, rows):
+    def factors(self, w: np.ndarray, rows):
         """Per term: (term, u_i = J_i w_i (c, d), E_k u_i (c, k, d)); a shared E is one GEMM."""
         for t in self.terms:
             J = t.J[rows]  # (c, d, n)

@@ -44,16 +44,10 @@ def residual_jacobian(metric: AffineMetric, Y: np.ndarray, w: np.ndarray, rows) 
     A = np.zeros((c, n, p))  # [M_ik w_i]_k; columns no term touches stay 0
     wMw = np.zeros(p)
     written = np.zeros(p, dtype=bool)
-    for t in metric.terms:
+    for t, u, Eu in metric.factors(w, rows):  # u_i = J_i w_i (c, d), E_k u_i (c, k, d)
         J = t.J[rows]  # (c, d, n)
-        d, k = J.shape[1], len(t.indices)
-        u = np.einsum("cdn,cn->cd", J, w)  # J_i w_i
-        if t.per_sample:
-            Eu = np.einsum("ckde,ce->ckd", t.E[rows], u)
-            quad = np.einsum("ckd,cd->k", Eu, u)
-        else:
-            Eu = (u @ t.E.transpose(2, 0, 1).reshape(d, k * d)).reshape(c, k, d)  # E_k symmetric
-            quad = np.einsum("kde,de->k", t.E, u.T @ u)
+        k = len(t.indices)
+        quad = np.einsum("ckd,cd->k", Eu, u) if t.per_sample else np.einsum("kde,de->k", t.E, u.T @ u)
         idx = list(t.indices)
         wMw[idx] += quad
         JtEu = np.swapaxes(J, 1, 2), np.swapaxes(Eu, 1, 2)  # J_iᵀ E_k u_i = (n, d)(d, k)
