@@ -161,19 +161,12 @@ class FeasibleGLS:
             # reached only as an unseen mass grows (newton.closure): a pilot stopped along that ray moves with
             # rounding, and the weights with it (re-chart change of dm up to 1.2e-5, docs/statistics.md). If Newton
             # fails, the library's OLS/WLS (cvxpy); what ran is in the label (result.info["pilot"])
-            newton = {**c, "solver": "newton", "solver_options": {}}
-            first = None
             try:  # whatever the final fit's solver: the same pilot, so the solvers fit the same weighted problem
-                return self._newton_pilot(sensor, newton), self.pilot
+                return self._newton_pilot(sensor, {**c, "solver": "newton", "solver_options": {}}), self.pilot
             except SolverError as exc:
                 first = f"newton failed: {str(exc)[:120]}"
-            try:
-                est = WLS(**cvx) if self.pilot == "wls" else OLS(**cvx)
-                return est.fit(sensor).theta, self.pilot + (f" ({cvx['solver']}: {first})" if first else "")
-            except SolverError as exc:
-                if first:
-                    raise
-                return self._newton_pilot(sensor, newton), f"{self.pilot} (newton: {cvx['solver']} failed: {str(exc)[:120]})"
+            est = WLS(**cvx) if self.pilot == "wls" else OLS(**cvx)
+            return est.fit(sensor).theta, f"{self.pilot} ({cvx['solver']}: {first})"
         from dualid.estimators.dual_metric import DualMetric
 
         return DualMetric(constrained=c["constrained"], allow_unidentifiable=c["allow_unidentifiable"]).fit(sensor).theta, "dm-paper"
