@@ -33,24 +33,21 @@ from __future__ import annotations
 
 import numpy as np
 
+from dualid.model.consistency import prior_blocks, pullback_metric
+
 
 def signal_scale(H: np.ndarray, c: float, parameters=None, regularizer=None) -> np.ndarray:
     """s (p,) of the module doc; H (p, p) and c the fit's weighted statistics, regularizer (kind, θ₀, γ) or None."""
     d = np.clip(np.diag(H).astype(float), 0.0, None)
     seen = d > 0
-    prior = np.zeros_like(d)  # diag of γ·g, the prior term's curvature (the log-det divergence's at θ₀ too)
-    only = np.zeros_like(d)  # diag of g on the parameters only the prior sees
+    g = np.zeros_like(d)  # diag of the prior's pullback metric (the log-det divergence's Hessian at θ₀ too)
+    gamma = 0.0
     if regularizer is not None:
-        from dualid.model.consistency import prior_blocks, pullback_metric
-
         kind, theta0, gamma = regularizer
         for idx, V, C0 in prior_blocks(kind, parameters, np.asarray(theta0, dtype=float)):
-            idx = np.asarray(idx)
-            g = np.clip(np.diag(pullback_metric(V, C0)), 0.0, None)
-            prior[idx] += float(gamma) * g
-            only[idx] += g
+            g[np.asarray(idx)] += np.clip(np.diag(pullback_metric(V, C0)), 0.0, None)
     s = np.ones_like(d)
-    s[seen] = np.sqrt(max(float(c), 1e-300) / (d[seen] + prior[seen]))
-    prior_only = ~seen & (only > 0)
-    s[prior_only] = 1.0 / np.sqrt(only[prior_only])
+    s[seen] = np.sqrt(max(float(c), 1e-300) / (d[seen] + float(gamma) * g[seen]))
+    prior_only = ~seen & (g > 0)
+    s[prior_only] = 1.0 / np.sqrt(g[prior_only])
     return s
