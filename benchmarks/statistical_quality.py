@@ -324,6 +324,28 @@ def to_markdown(result: dict) -> str:
                 cells.append(fmt(vals) + ("" if len(vals) == total else f" [{len(vals)}/{total}]"))
             out.append("| " + " | ".join([str(x) for x in k] + cells) + " |")
 
+    def paired(title, family_rows, key_cols, key_fn, metric, base="wls"):
+        """Per run: metric(method) − metric(base) on the same data set; mean ± standard error over runs, and
+        how many runs the method is at least as high (k/n). Failed fits make the pair missing (n says so)."""
+        others = [m for m in methods if m != base]
+        out.extend(["", f"### {title}", "", "| " + " | ".join(key_cols + [f"{m} − {base}" for m in others]) + " |",
+                    "|" + " --- |" * len(key_cols) + " ---: |" * len(others)])
+        runs: dict = {}
+        for r in family_rows:
+            if r.get("ok") and r.get(metric) is not None:
+                runs.setdefault((key_fn(r), r["seed"]), {})[r["method"]] = r[metric]
+        keys = sorted({k for k, _ in runs}, key=lambda k: tuple(str(x).zfill(8) for x in k))
+        for k in keys:
+            cells = []
+            for meth in others:
+                d = np.array([v[meth] - v[base] for (kk, _), v in runs.items() if kk == k and meth in v and base in v])
+                if d.size == 0:
+                    cells.append("–")
+                    continue
+                se = d.std(ddof=1) / np.sqrt(d.size) if d.size > 1 else float("nan")
+                cells.append(f"{d.mean():+.4f} ± {se:.4f} ({int(np.sum(d >= 0))}/{d.size})")
+            out.append("| " + " | ".join([str(x) for x in k] + cells) + " |")
+
     noise = [r for r in rows if r["family"] == "noise"]
     me = [r for r in rows if r["family"] == "model_error"]
     nkey = lambda r: (f"{100 * r['noise']:g} %", r["N"])
@@ -334,6 +356,8 @@ def to_markdown(result: dict) -> str:
         table("Clean torque error / best of OLS, WLS (paired per run)", noise, ["noise", "N"], nkey, "ratio_to_best_ls")
         table("Clean torque error (absolute NRMSE)", noise, ["noise", "N"], nkey, "torque_nrmse")
         table("Forward-dynamics NCC, mean (min) over seeds", noise, ["noise", "N"], nkey, "fd_ncc", _fmt_min)
+        paired("Forward-dynamics NCC minus WLS's, paired per run: mean ± s.e. over seeds (runs ≥ WLS / runs)", noise,
+               ["noise", "N"], nkey, "fd_ncc")
         table("Re-chart: relative change of the clean torque error, median (max)", noise, ["noise", "N"], nkey,
               "torque_rel_change", lambda xs: _fmt([abs(x) for x in xs if x is not None], "{:.1e}"), sub="rechart")
         table("Metric guard: generalised eigenvalues of M(θ̂) vs M(θ_true), median of min (min of min)", noise,
@@ -358,6 +382,8 @@ def to_markdown(result: dict) -> str:
         table("Clean torque error / best of OLS, WLS (paired per run)", me, ["case"], ckey, "ratio_to_best_ls")
         table("Clean torque error (absolute NRMSE)", me, ["case"], ckey, "torque_nrmse")
         table("Forward-dynamics NCC, mean (min) over seeds", me, ["case"], ckey, "fd_ncc", _fmt_min)
+        paired("Forward-dynamics NCC minus WLS's, paired per run: mean ± s.e. over seeds (runs ≥ WLS / runs)", me,
+               ["case"], ckey, "fd_ncc")
         table("Re-chart: relative change of the clean torque error, median (max)", me, ["case"], ckey,
               "torque_rel_change", lambda xs: _fmt([abs(x) for x in xs if x is not None], "{:.1e}"), sub="rechart")
         table("Metric guard: min generalised eigenvalue of M(θ̂) vs M(θ_true), median (min)", me, ["case"], ckey,
