@@ -50,6 +50,7 @@ from dualid.estimators.least_squares import OLS, WLS, fit_quadratic, residual_co
 from dualid.estimators.metric_guard import DEFAULT_BOUND, given_reference, reference_guard
 from dualid.estimators.result import IdentificationResult
 from dualid.estimators.statistics import statistics
+from dualid.estimators.weight_cv import CV_FOLDS, SELECTS, choose_weight
 from dualid.problem import IdentificationProblem
 
 PILOTS = ("wls", "ols", "dm-paper")
@@ -97,6 +98,9 @@ class FeasibleGLS:
     solver: str = "newton"  # "newton" (dualid's interior point, constant metric) or a cvxpy solver
     solver_options: tuple | None = None  # newton: tol, max_iter; cvxpy: its options (a dict or pairs)
     allow_unidentifiable: bool = False
+    select: str = "cv"  # "cv": keep the GLS fit or its OLS/WLS pilot, whichever predicts held-out folds better
+    # (estimators.weight_cv); "none": always the GLS fit
+    cv_folds: int = CV_FOLDS
     name = "dm"
 
     def __post_init__(self) -> None:
@@ -138,6 +142,10 @@ class FeasibleGLS:
             raise ConfigError(f"guard_bound: expected a finite number > 1, got {self.guard_bound!r}")
         if self.solver not in SOLVERS:
             raise ConfigError(f"solver: expected one of {SOLVERS}, got {self.solver!r}")
+        if self.select not in SELECTS:
+            raise ConfigError(f"select: expected one of {SELECTS}, got {self.select!r}")
+        if isinstance(self.cv_folds, bool) or not isinstance(self.cv_folds, (int, np.integer)) or self.cv_folds < 2:
+            raise ConfigError(f"cv_folds: expected an integer ≥ 2, got {self.cv_folds!r}")
         object.__setattr__(self, "solver_options", freeze_options(self.solver_options, "FeasibleGLS: solver_options"))
 
     # --- steps --------------------------------------------------------------------------------
@@ -147,11 +155,16 @@ class FeasibleGLS:
 
     def reference(self, sensor: IdentificationProblem) -> tuple[np.ndarray, str]:
         """θ_ref and how it was obtained, in the sensor chart."""
+        return self._pilot(sensor)[:2]
+
+    def _pilot(self, sensor: IdentificationProblem) -> tuple[np.ndarray, str, np.ndarray | None]:
+        """(θ_ref, how it was obtained, the covariance (n, n) whose inverse weighs the pilot's own fit: I for OLS,
+        WLS's Σ̂; None for a given θ_ref or the paper's DM), in the sensor chart."""
         if self.theta_ref is not None:
             theta = np.array(self.theta_ref)
             if theta.shape != (sensor.p,):
                 raise ConfigError(f"theta_ref: expected shape ({sensor.p},), got {theta.shape}")
-            return theta, "given"
+            return theta, "given", None
         c = self._common()
         cvx = {**c, "solver": c["solver"] if c["solver"] != "newton" else "CLARABEL",
                "solver_options": {} if c["solver"] == "newton" else c["solver_options"]}
@@ -162,21 +175,27 @@ class FeasibleGLS:
             # rounding, and the weights with it (re-chart change of dm up to 1.2e-5, docs/statistics.md). If Newton
             # fails, the library's OLS/WLS (cvxpy); what ran is in the label (result.info["pilot"])
             try:  # whatever the final fit's solver: the same pilot, so the solvers fit the same weighted problem
-                return self._newton_pilot(sensor, {**c, "solver": "newton", "solver_options": {}}), self.pilot
+                theta, S = self._newton_pilot(sensor, {**c, "solver": "newton", "solver_options": {}})
+                return theta, self.pilot, S
             except SolverError as exc:
                 first = f"newton failed: {str(exc)[:120]}"
             est = WLS(**cvx) if self.pilot == "wls" else OLS(**cvx)
-            return est.fit(sensor).theta, f"{self.pilot} ({cvx['solver']}: {first})"
+            res = est.fit(sensor)
+            S = np.asarray(res.info["covariance_matrix"]) if self.pilot == "wls" else np.eye(sensor.n)
+            return res.theta, f"{self.pilot} ({cvx['solver']}: {first})", S
         from dualid.estimators.dual_metric import DualMetric
 
-        return DualMetric(constrained=c["constrained"], allow_unidentifiable=c["allow_unidentifiable"]).fit(sensor).theta, "dm-paper"
+        return DualMetric(constrained=c["constrained"],
+                          allow_unidentifiable=c["allow_unidentifiable"]).fit(sensor).theta, "dm-paper", None
 
-    def _newton_pilot(self, sensor: IdentificationProblem, newton: dict) -> np.ndarray:
+    def _newton_pilot(self, sensor: IdentificationProblem, newton: dict) -> tuple[np.ndarray, np.ndarray]:
+        """(θ, S): OLS, then for a WLS pilot the weighted fit with S = Σ̂ of the OLS residuals (S = I for OLS)."""
         eye = np.broadcast_to(np.eye(sensor.n), (sensor.N, sensor.n, sensor.n))
         theta = fit_weighted(sensor, eye, "ols", newton, {}).theta
-        if self.pilot == "wls":
-            theta = fit_weighted(sensor, residual_covariance(sensor, theta)[None], "wls", newton, {}).theta
-        return theta
+        if self.pilot == "ols":
+            return theta, np.eye(sensor.n)
+        S = residual_covariance(sensor, theta)
+        return fit_weighted(sensor, S[None], "wls", newton, {}).theta, S
 
     def covariance(self, sensor: IdentificationProblem, theta_ref: np.ndarray,
                    M: np.ndarray | None = None, r: np.ndarray | None = None) -> tuple[np.ndarray, float, dict]:
@@ -222,9 +241,9 @@ class FeasibleGLS:
         sensor = problem.in_sensor_chart()
         need_pilot = not (self.kappa == 0.0 and self.sigma is not None) or self.theta_ref is not None
         if need_pilot:
-            theta_ref, pilot = self.reference(sensor)
+            theta_ref, pilot, S_pilot = self._pilot(sensor)
         else:
-            theta_ref, pilot = None, "none (κ = 0)"
+            theta_ref, pilot, S_pilot = None, "none (κ = 0)", None
         # (Σ, κ) from the residuals of at most COVARIANCE_SAMPLES evenly strided samples: few numbers, and the
         # likelihood's iterations each pass over the samples it is given
         step = -(-sensor.N // COVARIANCE_SAMPLES)
@@ -252,6 +271,7 @@ class FeasibleGLS:
         )
         result = fit_weighted(sensor, C, self.name, self._common(), info,
                               what=f"the residual covariance Σ + κ M_i(θ_ref) (κ = {kappa:.3g})")
+        result = self._select(sensor, result, info, S_pilot)
         ref = given_reference(sensor, self.guard_reference, "FeasibleGLS")
         label = "given guard_reference" if ref is not None else f"pilot ({pilot})"
         ref = theta_ref if ref is None else ref
@@ -259,6 +279,28 @@ class FeasibleGLS:
                                 self.guard_bound)
         result = dataclasses.replace(result, info={**result.info, **guard})
         return result
+
+    def _select(self, sensor: IdentificationProblem, result: IdentificationResult, info: dict,
+                S_pilot: np.ndarray | None) -> IdentificationResult:
+        """The GLS fit ``result`` (``info``: what fit() recorded before the fit), or its pilot's weighted fit when that
+        predicts held-out folds better (estimators.weight_cv)."""
+        if self.select == "none" or S_pilot is None or self.sigma is not None:
+            why = ("select='none'" if self.select == "none" else
+                   "no selection: Σ and κ were given" if self.sigma is not None else
+                   f"no selection: the pilot ({info['pilot']}) is not a weighted least squares")
+            return dataclasses.replace(result, info={**result.info, "weight_choice": f"gls ({why})"})
+        plain = dataclasses.replace(self, select="none", allow_unidentifiable=True)
+
+        def fit_pair(sub):  # the whole estimator on a sub-problem: (its pilot, its GLS fit)
+            r = plain.fit(sub)
+            return np.asarray(r.info["theta_ref"]), r.theta
+
+        cv = choose_weight(sensor, fit_pair, self.cv_folds)
+        if cv["weight_choice"] == "gls":
+            return dataclasses.replace(result, info={**result.info, **cv})
+        info = {**info, **cv, "sigma": S_pilot.tolist(), "sigma_diag": np.diag(S_pilot).tolist(), "kappa": 0.0,
+                "estimated_sigma": info["sigma"], "estimated_kappa": info["kappa"]}
+        return fit_weighted(sensor, S_pilot[None], self.name, self._common(), info, what="the pilot's weight covariance")
 
 
 def fit_weighted(sensor: IdentificationProblem, C, method: str, common: dict, info: dict,

@@ -1,0 +1,72 @@
+"""Choosing ``dm``'s weight by cross-validation: the dual-metric GLS fit, or the pilot it was built from.
+
+``FeasibleGLS`` weighs the residuals by (Σ + κ M_i(θ_ref))⁻¹ with (Σ, κ) estimated from a pilot's residuals
+(WLS by default). Under model error that covariance model predicts held-out torque better than WLS (the
+statistical benchmark's model-error family, docs/statistics.md); where the residual is mostly sensor-local it can
+do slightly worse: on every 4-of-6 split of the DFKI double-pendulum logs the GLS fit's joint-1 torque error was
+above WLS's on 15 of 15 splits (+0.0026 ± 0.0003 N m), joint 2 below (benchmarks/dfki_splits.py). Which weight
+is better is a property of the data, so ``select="cv"`` (the default) asks the data:
+
+- the training samples (at most ``CV_SAMPLES``, evenly strided) are cut into K contiguous folds (time blocks,
+  so neighbouring, correlated samples are not split between training and test);
+- for each fold the whole estimator (pilot, (Σ, κ), weighted fit) is fitted on the other folds, and both its
+  pilot and its GLS fit predict the held-out fold;
+- the score of a candidate is the rms over coordinates of NRMSE_a = √(SSE_a / N) / rms(τ_a), SSE pooled over
+  the folds, in the sensor chart (a passive coordinate, τ_a ≡ 0, is scaled by the pilot's held-out error on it);
+- the GLS fit is kept unless its pilot scores lower; then ``dm`` is the pilot's weighted fit (κ = 0, Σ the
+  pilot's weight) on all the data.
+
+Everything is computed in the sensor chart (like the rest of ``FeasibleGLS``), so the choice, and with it the
+fit, is the same in every chart the problem records. The choice, both scores and the folds are in
+``result.info`` (``weight_choice``, ``cv_score``, ``cv_folds``, ``cv_samples``); a fold that cannot be fitted
+makes the choice fall back to the GLS fit, recorded in ``info["cv_fallback"]``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from dualid.errors import DualidError
+from dualid.problem import IdentificationProblem
+
+CV_FOLDS = 5  # contiguous folds
+CV_SAMPLES = 20_000  # at most this many evenly strided training samples take part in the choice
+SELECTS = ("cv", "none")
+
+
+def cv_rows(N: int, max_samples: int = CV_SAMPLES) -> slice:
+    """The evenly strided samples the cross-validation uses (every sample when N ≤ max_samples)."""
+    return slice(0, None, -(-N // max_samples))
+
+
+def choose_weight(sensor: IdentificationProblem, fit_pair: Callable[[IdentificationProblem], tuple],
+                  folds: int = CV_FOLDS) -> dict:
+    """{"weight_choice": "gls" | "pilot", "cv_score": {"gls": s, "pilot": s}, …} for a problem in the sensor chart.
+
+    fit_pair(sub) → (θ_pilot, θ_gls) fitted on the sub-problem ``sub`` (the estimator without selection).
+    """
+    rows = cv_rows(sensor.N)
+    data = sensor.subset(rows)
+    N, n = data.N, data.n
+    edges = np.linspace(0, N, folds + 1).astype(int)
+    sse = {"pilot": np.zeros(n), "gls": np.zeros(n)}
+    info: dict = {"cv_folds": folds, "cv_samples": N}
+    for k in range(folds):
+        held = np.arange(edges[k], edges[k + 1])
+        try:
+            theta = dict(zip(("pilot", "gls"), fit_pair(data.subset(np.setdiff1d(np.arange(N), held)))))
+        except DualidError as exc:  # recorded, and the GLS fit is kept
+            return {**info, "weight_choice": "gls", "cv_fallback": f"fold {k + 1} of {folds} could not be fitted "
+                    f"({type(exc).__name__}: {str(exc)[:160]}); the GLS fit is kept"}
+        test = data.subset(held)
+        for name, th in theta.items():
+            sse[name] += np.sum(test.residual(th) ** 2, axis=0)
+    rms = np.sqrt(np.mean(data.tau**2, axis=0))
+    # a coordinate with no force (a passive joint: τ_a ≡ 0) is scaled by the pilot's held-out error there instead
+    passive = ~(rms > 1e-12 * rms.max()) if rms.max() > 0 else np.ones(n, bool)
+    rms = np.where(passive, np.sqrt(sse["pilot"] / N), rms)
+    rms = np.where(rms > 0, rms, 1.0)
+    score = {name: float(np.sqrt(np.mean(s / N / rms**2))) for name, s in sse.items()}
+    return {**info, "weight_choice": "pilot" if score["pilot"] < score["gls"] else "gls", "cv_score": score}

@@ -1,0 +1,149 @@
+"""dm's choice between its GLS fit and its pilot by cross-validation (estimators/weight_cv.py, FeasibleGLS.select).
+
+Specified against an independent re-computation: the folds refitted by hand, with the library's cvxpy WLS as the
+pilot (dm fits its pilot by its own interior point); the choice is the same in every chart; the pilot branch
+returns the pilot's weighted fit with the weight it used (so the sandwich rebuilds it); failures are recorded.
+"""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from dualid import WLS
+from dualid.errors import ConfigError, SolverError
+from dualid.estimators import gls as gls_module
+from dualid.estimators.gls import FeasibleGLS
+from dualid.estimators.uncertainty import base_uncertainty
+from dualid.estimators.weight_cv import choose_weight, cv_rows
+from tests.factories import drag_problem, random_chart
+from tests.test_invariance import rel
+
+
+def _metric_noise(rng, N=300, scale=0.3):
+    """Residuals with covariance ∝ M_i(θ_true): the dual metric's own noise model, which GLS (κ > 0) fits."""
+    problem, theta = drag_problem(rng, N=N, n=3)
+    L = np.linalg.cholesky(problem.metric.evaluate(theta))
+    tau = problem.tau + scale * np.einsum("nab,nb->na", L, rng.standard_normal((N, 3)))
+    return dataclasses.replace(problem, tau=tau), theta
+
+
+def _by_hand(problem, folds=5):
+    """The cross-validation scores recomputed from the folds: pilot = the library's WLS (cvxpy), GLS = dm unselected."""
+    N = problem.N
+    edges = np.linspace(0, N, folds + 1).astype(int)
+    sse = {"pilot": 0.0, "gls": 0.0}
+    sse = {k: np.zeros(problem.n) for k in sse}
+    for k in range(folds):
+        held = np.arange(edges[k], edges[k + 1])
+        train = problem.subset(np.setdiff1d(np.arange(N), held))
+        test = problem.subset(held)
+        theta = {"pilot": WLS(allow_unidentifiable=True).fit(train).theta,
+                 "gls": FeasibleGLS(select="none", allow_unidentifiable=True).fit(train).theta}
+        for name, th in theta.items():
+            sse[name] += np.sum(test.residual(th) ** 2, axis=0)
+    rms = np.sqrt(np.mean(problem.tau**2, axis=0))
+    return {name: float(np.sqrt(np.mean(s / N / rms**2))) for name, s in sse.items()}
+
+
+def test_the_scores_are_the_cross_validated_torque_errors_of_pilot_and_gls():
+    problem, _ = _metric_noise(np.random.default_rng(3))
+    res = FeasibleGLS().fit(problem)
+    expected = _by_hand(problem)
+    assert res.info["cv_folds"] == 5 and res.info["cv_samples"] == problem.N
+    for name in ("pilot", "gls"):
+        assert res.info["cv_score"][name] == pytest.approx(expected[name], rel=1e-6)
+
+
+def test_metric_isotropic_residuals_keep_the_gls_fit():
+    problem, _ = _metric_noise(np.random.default_rng(4), scale=0.5)
+    res = FeasibleGLS().fit(problem)
+    plain = FeasibleGLS(select="none").fit(problem)
+    assert res.info["weight_choice"] == "gls"
+    assert res.info["cv_score"]["gls"] < res.info["cv_score"]["pilot"]
+    assert res.info["kappa"] > 0
+    np.testing.assert_array_equal(res.theta, plain.theta)
+
+
+def test_the_pilot_branch_returns_the_pilots_weighted_fit_with_its_weight(monkeypatch):
+    """When the pilot predicts better, dm is the pilot's own weighted fit: θ = WLS's, κ = 0 and Σ = WLS's weight
+    (recorded, so the sandwich rebuilds the weight that was used), the estimated (Σ, κ) kept beside it."""
+    problem, _ = _metric_noise(np.random.default_rng(5))
+    monkeypatch.setattr(gls_module, "choose_weight", lambda sensor, fit_pair, folds: {
+        "weight_choice": "pilot", "cv_score": {"pilot": 1.0, "gls": 2.0}, "cv_folds": folds, "cv_samples": sensor.N})
+    est = FeasibleGLS()
+    res = est.fit(problem)
+    wls = WLS().fit(problem)
+    assert rel(res.theta, wls.theta) < 1e-6
+    assert res.info["kappa"] == 0.0 and res.info["estimated_kappa"] > 0
+    np.testing.assert_allclose(res.info["sigma"], wls.info["covariance_matrix"], rtol=1e-6)
+    base = problem.identifiability().base
+    sandwich = base_uncertainty(problem, res, est, base).covariance
+    np.testing.assert_allclose(sandwich, base_uncertainty(problem, wls, WLS(), base).covariance, rtol=1e-4, atol=1e-12)
+
+
+def test_the_choice_and_the_fit_are_the_same_in_every_chart():
+    rng = np.random.default_rng(6)
+    problem, _ = _metric_noise(rng)
+    B = random_chart(rng, problem.N, problem.n, per_sample=True) * 10.0 ** rng.uniform(-6, 6, (1, 1, problem.n))
+    a, b = FeasibleGLS().fit(problem), FeasibleGLS().fit(problem.in_coordinates(B))
+    assert a.info["weight_choice"] == b.info["weight_choice"]
+    assert a.info["cv_score"]["gls"] == pytest.approx(b.info["cv_score"]["gls"], rel=1e-8)
+    assert rel(a.theta, b.theta) < 1e-6
+
+
+def test_large_problems_choose_on_an_evenly_strided_subsample():
+    assert cv_rows(10_000) == slice(0, None, 1)
+    assert cv_rows(50_000) == slice(0, None, 3)
+    assert len(range(50_000)[cv_rows(50_000)]) <= 20_000
+
+
+def test_a_fold_that_cannot_be_fitted_keeps_the_gls_fit_and_says_so():
+    problem, _ = _metric_noise(np.random.default_rng(7), N=100)
+    calls = []
+
+    def fit_pair(sub):
+        calls.append(sub.N)
+        if len(calls) == 2:
+            raise SolverError("no strictly feasible start", status="no_start")
+        return np.zeros(problem.p), np.zeros(problem.p)
+
+    info = choose_weight(problem, fit_pair, 5)
+    assert info == {"cv_folds": 5, "cv_samples": 100, "weight_choice": "gls", "cv_fallback":
+                    "fold 2 of 5 could not be fitted (SolverError: no strictly feasible start); the GLS fit is kept"}
+
+
+def test_no_selection_where_there_is_no_weighted_pilot():
+    problem, theta = _metric_noise(np.random.default_rng(8), N=80)
+    given = FeasibleGLS(sigma=np.ones(3), kappa=0.5, theta_ref=theta).fit(problem)
+    assert given.info["weight_choice"] == "gls (no selection: Σ and κ were given)"
+    off = FeasibleGLS(select="none").fit(problem)
+    assert off.info["weight_choice"] == "gls (select='none')"
+    paper = FeasibleGLS(pilot="dm-paper").fit(problem)
+    assert paper.info["weight_choice"] == "gls (no selection: the pilot (dm-paper) is not a weighted least squares)"
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"select": "aic"}, "select: expected one of ('cv', 'none'), got 'aic'"),
+    ({"cv_folds": 1}, "cv_folds: expected an integer ≥ 2, got 1"),
+    ({"cv_folds": 2.5}, "cv_folds: expected an integer ≥ 2, got 2.5"),
+])
+def test_constructor_errors(kwargs, match):
+    with pytest.raises(ConfigError) as exc:
+        FeasibleGLS(**kwargs)
+    assert str(exc.value) == match
+
+
+def test_a_passive_coordinate_is_scaled_by_the_pilots_held_out_error():
+    """τ_a ≡ 0 (a passive joint) has no torque scale: its NRMSE is taken relative to the pilot's error there."""
+    problem, theta = _metric_noise(np.random.default_rng(9), N=100)
+    tau = problem.tau.copy()
+    tau[:, 2] = 0.0
+    problem = dataclasses.replace(problem, tau=tau)
+    th_pilot, th_gls = theta, 1.1 * theta
+    info = choose_weight(problem, lambda sub: (th_pilot, th_gls), 5)
+    rms = np.sqrt(np.mean(tau**2, axis=0))
+    e = {name: np.sqrt(np.mean(problem.residual(th) ** 2, axis=0)) for name, th in (("pilot", th_pilot), ("gls", th_gls))}
+    rms[2] = e["pilot"][2]
+    for name in ("pilot", "gls"):
+        assert info["cv_score"][name] == pytest.approx(float(np.sqrt(np.mean((e[name] / rms) ** 2))), rel=1e-12)
