@@ -172,7 +172,7 @@ class FeasibleGLS:
         return DualMetric(constrained=c["constrained"], allow_unidentifiable=c["allow_unidentifiable"]).fit(sensor).theta, "dm-paper"
 
     def _newton_pilot(self, sensor: IdentificationProblem, newton: dict) -> np.ndarray:
-        eye = np.broadcast_to(np.eye(sensor.n), (sensor.N, sensor.n, sensor.n))
+        eye = np.eye(sensor.n)[None]  # one (1, n, n) block: a constant weight, factored once (newton.weighted)
         theta = fit_weighted(sensor, eye, "ols", newton, {}).theta
         if self.pilot == "wls":
             theta = fit_weighted(sensor, residual_covariance(sensor, theta)[None], "wls", newton, {}).theta
