@@ -26,7 +26,7 @@ from dualid.errors import MetricError
 from dualid.estimators.newton.closure import on_closure
 from dualid.estimators.newton.interior_point import _interior_point
 from dualid.estimators.newton.linalg import _solve_psd
-from dualid.estimators.newton.objective import CHUNK, _Derivatives, _tri_inverse
+from dualid.estimators.newton.objective import CHUNK, _Derivatives, _forward, _tri_inverse
 from dualid.estimators.newton.start import _central_point
 from dualid.estimators.newton.trace import direction_label, direction_names
 from dualid.estimators.result import IdentificationResult
@@ -75,7 +75,22 @@ class _Whitening:
             Li = self._constant(C[0])
             return np.matmul(Li, block.Y[rows]), block.tau[rows] @ Li.T
         self.kinds.add("per-sample")
-        return _whitened(self.problem, block, self.weight, rows, self.what)
+        Li = _tri_inverse(_factor(self.problem, block, self.weight, rows, self.what, C))
+        return np.matmul(Li, block.Y[rows]), np.einsum("cab,cb->ca", Li, block.tau[rows])
+
+    def residual(self, block: IdentificationProblem, rows: slice, theta: np.ndarray) -> np.ndarray:
+        """The whitened residuals L_i⁻¹ r_i (c, n) at θ: r_i first, then one n-vector per sample to whiten (not Y)."""
+        Y = block.Y[rows]
+        r = (Y.reshape(-1, Y.shape[-1]) @ theta).reshape(Y.shape[:2]) - block.tau[rows]  # (c, n)
+        if self.whiten is not None:
+            self.kinds.add("factor")
+            return np.einsum("cab,cb->ca", self.whiten(block, rows), r)
+        C = np.asarray(self.weight(block, rows))
+        if C.ndim == 3 and C.shape[0] == 1:
+            self.kinds.add("constant")
+            return r @ self._constant(C[0]).T
+        self.kinds.add("per-sample")
+        return _forward(_factor(self.problem, block, self.weight, rows, self.what, C), r)
 
     def _constant(self, C: np.ndarray) -> np.ndarray:
         if self.Li is None or not np.array_equal(C, self.C):
@@ -89,11 +104,12 @@ class _Whitening:
         return self.Li
 
 
-def _whitened(problem, block: IdentificationProblem, weight: Weight, rows: slice, what: str):
-    """(L_i⁻¹ Y_i (c, n, p), L_i⁻¹ τ_i (c, n)) for C_i = L_i L_iᵀ, a Cholesky per sample; MetricError if some
-    C_i is not ≻ 0."""
+def _factor(problem, block: IdentificationProblem, weight: Weight, rows: slice, what: str, C=None) -> np.ndarray:
+    """L (c, n, n), C_i = L_i L_iᵀ, a Cholesky per sample (C: weight(block, rows) when the caller has it already);
+    MetricError if some C_i is not ≻ 0."""
+    c = len(range(block.N)[rows])
     try:
-        L = np.linalg.cholesky(_weight(weight, block, rows))
+        L = np.linalg.cholesky(np.broadcast_to(weight(block, rows) if C is None else C, (c, block.n, block.n)))
     except np.linalg.LinAlgError:
         L = None
     if L is None or not np.all(np.isfinite(L)):
@@ -102,8 +118,7 @@ def _whitened(problem, block: IdentificationProblem, weight: Weight, rows: slice
             lam = np.linalg.eigvalsh(_weight(weight, b, r))[:, 0]
             bad, low = bad + int(np.sum(~(lam > 0))), min(low, float(lam.min()))
         raise _not_positive_definite(problem, what, bad, low)
-    Li = _tri_inverse(L)
-    return np.matmul(Li, block.Y[rows]), np.einsum("cab,cb->ca", Li, block.tau[rows])
+    return L
 
 
 def _whitening(problem, weight, what: str, whiten=None) -> _Whitening:
@@ -140,8 +155,7 @@ def weighted_objective(problem: IdentificationProblem, weight: Weight, theta: np
     white = _whitening(problem, weight, "the weight")
     f = 0.0
     for block, rows, _ in sample_blocks(problem, chunk):
-        Z, z = white(block, rows)
-        e = Z @ theta - z
+        e = white.residual(block, rows, theta)
         f += float(np.sum(e * e))
     return f
 
