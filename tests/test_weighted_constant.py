@@ -145,3 +145,19 @@ def test_weighted_info_names_the_diverging_direction(monkeypatch):
     assert result.info["diverging_candidate"] == [names[5], names[2]]
     assert result.info["diverging_direction"] == f"-0.800·{names[5]} +0.600·{names[2]}"
     json.dumps(result.info)  # JSON-friendly: no arrays
+
+
+@pytest.mark.parametrize("constant", [True, False])
+def test_the_weight_is_evaluated_once_per_block_and_pass(constant):
+    """Two passes (statistics, objective), each evaluating C_i once per block (Σ + κ M_i(θ_ref) costs a metric
+    evaluation per sample)."""
+    rng = np.random.default_rng(8)
+    problem, _ = drag_problem(rng, N=500, n=3, noise=0.3)
+    C, calls = _spd(rng, 3), []
+
+    def weight(block, rows):
+        calls.append(rows)
+        return C[None] if constant else np.broadcast_to(C, (len(range(block.N)[rows]), 3, 3))
+
+    fit_weighted_newton(problem, weight, chunk=64)
+    assert len(calls) == 2 * 8
