@@ -104,12 +104,12 @@ class _Whitening:
         return self.Li
 
 
-def _factor(problem, block: IdentificationProblem, weight: Weight, rows: slice, what: str, C=None) -> np.ndarray:
-    """L (c, n, n), C_i = L_i L_iᵀ, a Cholesky per sample (C: weight(block, rows) when the caller has it already);
-    MetricError if some C_i is not ≻ 0."""
+def _factor(problem, block: IdentificationProblem, weight: Weight, rows: slice, what: str, C: np.ndarray) -> np.ndarray:
+    """L (c, n, n), C_i = L_i L_iᵀ, a Cholesky per sample of C = weight(block, rows); MetricError (counting the
+    samples of the whole problem) if some C_i is not ≻ 0."""
     c = len(range(block.N)[rows])
     try:
-        L = np.linalg.cholesky(np.broadcast_to(weight(block, rows) if C is None else C, (c, block.n, block.n)))
+        L = np.linalg.cholesky(np.broadcast_to(C, (c, block.n, block.n)))
     except np.linalg.LinAlgError:
         L = None
     if L is None or not np.all(np.isfinite(L)):
