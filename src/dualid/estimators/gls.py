@@ -190,7 +190,7 @@ class FeasibleGLS:
 
     def _newton_pilot(self, sensor: IdentificationProblem, newton: dict) -> tuple[np.ndarray, np.ndarray]:
         """(θ, S): OLS, then for a WLS pilot the weighted fit with S = Σ̂ of the OLS residuals (S = I for OLS)."""
-        eye = np.broadcast_to(np.eye(sensor.n), (sensor.N, sensor.n, sensor.n))
+        eye = np.eye(sensor.n)[None]  # one (1, n, n) block: a constant weight, factored once (newton.weighted)
         theta = fit_weighted(sensor, eye, "ols", newton, {}).theta
         if self.pilot == "ols":
             return theta, np.eye(sensor.n)

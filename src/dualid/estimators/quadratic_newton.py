@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from dualid.errors import SolverError
-from dualid.estimators.newton.closure import close, complete
+from dualid.estimators.newton.closure import on_closure
 from dualid.estimators.newton.interior_point import _interior_point
 from dualid.estimators.newton.linalg import _solve_psd
 from dualid.estimators.newton.objective import _Derivatives, _NotPositiveDefinite
@@ -97,14 +97,9 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
     close to the central path (a polish); when that does not converge, the cold start below runs as without it.
     closure=True (without a prior): on the closed feasible set of ``newton.closure`` (dm's fits; the other estimators
     keep the original set, whose stopping points along an unbounded unseen mass are moderate, e.g. as priors)."""
-    full = feasible_set(parameters, constrained)
-    cons, projected = close(full, np.asarray(H)) if closure and regularizer is None else (full, ())
+    cons, done = on_closure(feasible_set(parameters, constrained), np.asarray(H), parameters.names,
+                            enabled=closure and regularizer is None)
     objective, theta_ls = quadratic_objective(H, g, c, parameters, regularizer)
-
-    def done(theta, info):
-        theta, completed = complete(theta, full, projected, parameters.names)
-        info.update(completed)
-        return theta, info
 
     def value(theta):
         if not cons.empty and cons.margin(theta) <= 0:

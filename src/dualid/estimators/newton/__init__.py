@@ -10,7 +10,7 @@ approximation: d/dθ_l of 2Y_kᵀw − wᵀM_k w is 2(Y_k − M_k w)ᵀ dw/dθ_l
     ∂f/∂θ_k        = Σ_i 2 Y_ikᵀ w_i − w_iᵀ M_ik w_i
     ∂²f/∂θ_k∂θ_l   = Σ_i 2 (Y_ik − M_ik w_i)ᵀ M_i⁻¹ (Y_il − M_il w_i)      (PSD: f is convex)
 
-Both are accumulated over chunks of samples (default 4,096) with batched Cholesky factors and the
+Both are accumulated over chunks of samples (``objective.CHUNK``, 1,024) with batched Cholesky factors and the
 factored metric (the quantities of ``AffineMetric.quad`` / ``apply``, computed together), so memory
 is O(chunk·n·p) beyond the problem's own arrays; the dense N·p·n² basis is never formed.
 

@@ -126,3 +126,17 @@ def complete(theta: np.ndarray, cons: FeasibleSet, projected: tuple[Projected, .
                               "value that keeps the block consistent; a large value means the infimum is approached "
                               "only as it grows (predictions are those of the limit)"}
     return theta, info
+
+
+def on_closure(cons: FeasibleSet, hess: np.ndarray, names=None, enabled: bool = True):
+    """close → (the caller solves) → complete, the one sequence of every fit on the closed feasible set: returns
+    (the set to solve on, done) with done(θ, info) → (θ completed against the full ``cons``, info with the
+    completion's note). enabled=False: ``cons`` itself and a done that only returns θ as a float array."""
+    closed, projected = close(cons, hess) if enabled else (cons, ())
+
+    def done(theta: np.ndarray, info: dict) -> tuple[np.ndarray, dict]:
+        theta, completed = complete(theta, cons, projected, names)
+        info.update(completed)
+        return theta, info
+
+    return closed, done

@@ -17,6 +17,7 @@ from dualid.estimators.newton.objective import (
     dual_metric_derivatives,
 )
 from dualid.estimators.newton.start import starting_point
+from dualid.estimators.newton.trace import direction_label
 from dualid.estimators.result import IdentificationResult
 from dualid.model.consistency import feasible_set
 from dualid.problem import IdentificationProblem
@@ -172,8 +173,7 @@ def fit_dual_metric_newton(
     if info.get("optimum_at_infinity"):
         d = info.pop("diverging_direction")
         names = problem.parameters.names
-        top = [k for k in np.argsort(-np.abs(d))[:4] if abs(d[k]) > 1e-3]
-        info["diverging_direction"] = " ".join(f"{d[k]:+.3f}·{names[k]}" for k in top)
+        info["diverging_direction"] = direction_label(d, names)
         detail = f"|θ| grew {info['theta_norm_growth']:.3g}× over {info['diverging_steps']} aligned iterations"
         if "objective_pushed_out" in info:
             detail += (f"; with its main components bounded at {PUSH:g}× their values the optimum is lower still "

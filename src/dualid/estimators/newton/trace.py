@@ -83,3 +83,20 @@ def constraint_only_growth(cons, der, thetas, names, growth_min: float = GROWTH)
     return (f"; the objective does not depend on {label} (they enter only the consistency constraints, which "
             f"loosen as they grow) and they grew {growth:.3g}× over the iterations: the infimum is likely not "
             "attained at a finite θ; fix or bound these parameters")
+
+
+def main_components(d: np.ndarray, top: int = 4) -> list[int]:
+    """Indices of direction d's largest components (at most ``top``, each above 1e-3 of |d|), largest first."""
+    d = np.asarray(d, dtype=float)
+    size = float(np.linalg.norm(d))
+    return [int(k) for k in np.argsort(-np.abs(d))[:top] if abs(d[k]) > 1e-3 * size]
+
+
+def direction_names(d: np.ndarray, names) -> list[str]:
+    """The parameter names of d's main components (a plain, JSON-friendly list for result.info)."""
+    return [names[k] for k in main_components(d)]
+
+
+def direction_label(d: np.ndarray, names) -> str:
+    """d's main components as "+0.707·name …" (result.info["diverging_direction"])."""
+    return " ".join(f"{d[k]:+.3f}·{names[k]}" for k in main_components(d))

@@ -9,7 +9,10 @@ fit to a p-sized problem. The iterations, the start and the stopping rule are th
 ``fit_dual_metric_newton`` on the problem with M_i = C_i (the same chart-invariant start: energy LS →
 central point → frozen-metric LS, here the weighted LS itself), so the result is the same θ up to
 rounding, at the cost of two passes over the data instead of two per iteration. C_i is given as a
-function of a block of rows, so no N-sized (N, n, n) array is formed.
+function of a block of rows, so no N-sized (N, n, n) array is formed. A constant weight (the function returns
+one (1, n, n) block: the OLS and WLS pilots of ``dm``, and its final fit when κ = 0) is factored once per fit,
+C = L Lᵀ, and its rows whitened by the one L⁻¹ (a batched matmul), instead of a Cholesky per sample and per pass
+(result.info["weight"] says which path ran).
 """
 
 from __future__ import annotations
@@ -20,11 +23,12 @@ from collections.abc import Callable
 import numpy as np
 
 from dualid.errors import MetricError
-from dualid.estimators.newton.closure import close, complete
+from dualid.estimators.newton.closure import on_closure
 from dualid.estimators.newton.interior_point import _interior_point
 from dualid.estimators.newton.linalg import _solve_psd
-from dualid.estimators.newton.objective import _Derivatives, _tri_inverse
+from dualid.estimators.newton.objective import CHUNK, _Derivatives, _forward, _tri_inverse
 from dualid.estimators.newton.start import _central_point
+from dualid.estimators.newton.trace import direction_label, direction_names
 from dualid.estimators.result import IdentificationResult
 from dualid.model.consistency import feasible_set
 from dualid.problem import IdentificationProblem, sample_blocks
@@ -38,33 +42,95 @@ def _weight(weight: Weight, block: IdentificationProblem, rows: slice) -> np.nda
     return np.broadcast_to(weight(block, rows), (len(range(block.N)[rows]), block.n, block.n))
 
 
-def _whitened(problem, block: IdentificationProblem, weight: Weight, rows: slice, what: str, whiten=None):
-    """(L_i⁻¹ Y_i (c, n, p), L_i⁻¹ τ_i (c, n)) for C_i = L_i L_iᵀ; MetricError if some C_i is not ≻ 0.
-    whiten: (block, rows) → W_i (c, n, n) with C_i⁻¹ = W_iᵀ W_i, when the caller has that factor (no Cholesky)."""
-    if whiten is not None:
-        W = whiten(block, rows)
-        return np.matmul(W, block.Y[rows]), np.einsum("cab,cb->ca", W, block.tau[rows])
+def _not_positive_definite(problem, what: str, bad: int, low: float) -> MetricError:
+    return MetricError(
+        f"{what} must be positive definite at every sample, but it is not at {bad} of {problem.N} samples "
+        f"(smallest eigenvalue {low:.3g}); give a positive-definite Σ or a pilot with a positive-definite metric"
+    )
+
+
+class _Whitening:
+    """(block, rows) → the block's whitened rows (L_i⁻¹ Y_i (c, n, p), L_i⁻¹ τ_i (c, n)), C_i = L_i L_iᵀ, for one fit:
+    a constant weight (``weight`` returns one (1, n, n) block) is factored once and its L⁻¹ reused while the weight
+    returns the same C (one n×n Cholesky per fit, not one per sample and pass); otherwise a Cholesky per sample.
+    ``kind``: "constant", "per-sample", "mixed" (both, by block) or "factor" (the caller's W_i, below)."""
+
+    def __init__(self, problem: IdentificationProblem, weight: Weight, what: str, whiten=None):
+        self.problem, self.weight, self.what, self.whiten = problem, weight, what, whiten
+        self.C = self.Li = None  # the constant weight (n, n) and its L⁻¹, once factored
+        self.kinds: set[str] = set()
+
+    @property
+    def kind(self) -> str:
+        return "mixed" if len(self.kinds) > 1 else next(iter(self.kinds), "none")
+
+    def __call__(self, block: IdentificationProblem, rows: slice) -> tuple[np.ndarray, np.ndarray]:
+        if self.whiten is not None:  # the caller's factor W_i (c, n, n), C_i⁻¹ = W_iᵀ W_i: no Cholesky
+            self.kinds.add("factor")
+            W = self.whiten(block, rows)
+            return np.matmul(W, block.Y[rows]), np.einsum("cab,cb->ca", W, block.tau[rows])
+        C = np.asarray(self.weight(block, rows))
+        if C.ndim == 3 and C.shape[0] == 1:
+            self.kinds.add("constant")
+            Li = self._constant(C[0])
+            return np.matmul(Li, block.Y[rows]), block.tau[rows] @ Li.T
+        self.kinds.add("per-sample")
+        Li = _tri_inverse(_factor(self.problem, block, self.weight, rows, self.what, C))
+        return np.matmul(Li, block.Y[rows]), np.einsum("cab,cb->ca", Li, block.tau[rows])
+
+    def residual(self, block: IdentificationProblem, rows: slice, theta: np.ndarray) -> np.ndarray:
+        """The whitened residuals L_i⁻¹ r_i (c, n) at θ: r_i first, then one n-vector per sample to whiten (not Y)."""
+        Y = block.Y[rows]
+        r = (Y.reshape(-1, Y.shape[-1]) @ theta).reshape(Y.shape[:2]) - block.tau[rows]  # (c, n)
+        if self.whiten is not None:
+            self.kinds.add("factor")
+            return np.einsum("cab,cb->ca", self.whiten(block, rows), r)
+        C = np.asarray(self.weight(block, rows))
+        if C.ndim == 3 and C.shape[0] == 1:
+            self.kinds.add("constant")
+            return r @ self._constant(C[0]).T
+        self.kinds.add("per-sample")
+        return _forward(_factor(self.problem, block, self.weight, rows, self.what, C), r)
+
+    def _constant(self, C: np.ndarray) -> np.ndarray:
+        if self.Li is None or not np.array_equal(C, self.C):
+            try:
+                L = np.linalg.cholesky(C)
+            except np.linalg.LinAlgError:
+                L = None
+            if L is None or not np.all(np.isfinite(L)):  # the same C at every sample: all of them fail
+                raise _not_positive_definite(self.problem, self.what, self.problem.N, float(np.linalg.eigvalsh(C)[0]))
+            self.C, self.Li = C.copy(), _tri_inverse(L[None])[0]
+        return self.Li
+
+
+def _factor(problem, block: IdentificationProblem, weight: Weight, rows: slice, what: str, C: np.ndarray) -> np.ndarray:
+    """L (c, n, n), C_i = L_i L_iᵀ, a Cholesky per sample of C = weight(block, rows); MetricError (counting the
+    samples of the whole problem) if some C_i is not ≻ 0."""
+    c = len(range(block.N)[rows])
     try:
-        L = np.linalg.cholesky(_weight(weight, block, rows))
+        L = np.linalg.cholesky(np.broadcast_to(C, (c, block.n, block.n)))
     except np.linalg.LinAlgError:
         L = None
     if L is None or not np.all(np.isfinite(L)):
         bad, low = 0, np.inf
-        for b, r, _ in sample_blocks(problem, 4096):  # the whole count, for the message
+        for b, r, _ in sample_blocks(problem, CHUNK):  # the whole count, for the message
             lam = np.linalg.eigvalsh(_weight(weight, b, r))[:, 0]
             bad, low = bad + int(np.sum(~(lam > 0))), min(low, float(lam.min()))
-        raise MetricError(
-            f"{what} must be positive definite at every sample, but it is not at {bad} of {problem.N} samples "
-            f"(smallest eigenvalue {low:.3g}); give a positive-definite Σ or a pilot with a positive-definite metric"
-        )
-    Li = _tri_inverse(L)
-    return np.matmul(Li, block.Y[rows]), np.einsum("cab,cb->ca", Li, block.tau[rows])
+        raise _not_positive_definite(problem, what, bad, low)
+    return L
 
 
-def weighted_statistics(problem: IdentificationProblem, weight: Weight, chunk: int = 4096,
+def _whitening(problem, weight, what: str, whiten=None) -> _Whitening:
+    return weight if isinstance(weight, _Whitening) else _Whitening(problem, weight, what, whiten)
+
+
+def weighted_statistics(problem: IdentificationProblem, weight: Weight, chunk: int = CHUNK,
                         what: str = "the weight's covariance", energy: bool = False, whiten=None):
     """(H, g, c) = Σ Y_iᵀC_i⁻¹Y_i, Σ Y_iᵀC_i⁻¹τ_i, Σ τ_iᵀC_i⁻¹τ_i accumulated over chunks of samples; with
-    energy=True also (H_e, g_e) of the energy residual v_iᵀ r_i, from the same pass."""
+    energy=True also (H_e, g_e) of the energy residual v_iᵀ r_i, from the same pass. weight: a Weight, or the
+    fit's ``_Whitening`` (which keeps a constant weight's factor between passes)."""
+    white = _whitening(problem, weight, what, whiten)
     p = problem.p
     H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
     He, ge = np.zeros((p, p)), np.zeros(p)
@@ -73,7 +139,7 @@ def weighted_statistics(problem: IdentificationProblem, weight: Weight, chunk: i
             e = np.einsum("nap,na->np", block.Y[rows], block.v[rows])
             He += e.T @ e
             ge += e.T @ np.einsum("na,na->n", block.tau[rows], block.v[rows])
-        Z, z = _whitened(problem, block, weight, rows, what, whiten)
+        Z, z = white(block, rows)
         Z2, z1 = Z.reshape(-1, p), z.reshape(-1)
         H += Z2.T @ Z2
         g += Z2.T @ z1
@@ -83,12 +149,13 @@ def weighted_statistics(problem: IdentificationProblem, weight: Weight, chunk: i
     return 0.5 * (H + H.T), g, c
 
 
-def weighted_objective(problem: IdentificationProblem, weight: Weight, theta: np.ndarray, chunk: int = 4096) -> float:
-    """Σ r_iᵀ C_i⁻¹ r_i from the residuals (no cancellation, unlike θᵀHθ − 2gᵀθ + c)."""
+def weighted_objective(problem: IdentificationProblem, weight: Weight, theta: np.ndarray, chunk: int = CHUNK) -> float:
+    """Σ r_iᵀ C_i⁻¹ r_i from the residuals (no cancellation, unlike θᵀHθ − 2gᵀθ + c); weight as in
+    ``weighted_statistics``."""
+    white = _whitening(problem, weight, "the weight")
     f = 0.0
     for block, rows, _ in sample_blocks(problem, chunk):
-        Z, z = _whitened(problem, block, weight, rows, "the weight")
-        e = Z @ theta - z
+        e = white.residual(block, rows, theta)
         f += float(np.sum(e * e))
     return f
 
@@ -100,7 +167,7 @@ def fit_weighted_newton(
     constrained: bool = True,
     tol: float = 1e-9,
     max_iter: int = 100,
-    chunk: int = 4096,
+    chunk: int = CHUNK,
     method: str = "dual_metric",
     verbose: bool = False,
     warm_start_samples: int | None = None,  # accepted for option compatibility; unused (no pass per iteration)
@@ -110,15 +177,17 @@ def fit_weighted_newton(
 ) -> IdentificationResult | None:
     """argmin Σ r_iᵀ C_i⁻¹ r_i under the constraints (module doc); None when the cheap start fails (the
     caller then runs ``fit_dual_metric_newton`` on the materialised constant metric, with its phase I).
-    whiten: as in ``_whitened``; objective_pass=False skips the pass for the result's objective (NaN: the
-    caller computes it, e.g. the bounded fixed point in its own pass)."""
+    whiten: (block, rows) → W_i (c, n, n) with C_i⁻¹ = W_iᵀ W_i, when the caller has that factor (no Cholesky);
+    objective_pass=False skips the pass for the result's objective (NaN: the caller computes it, e.g. the bounded
+    fixed point in its own pass)."""
     from dualid.estimators.newton.fit import check_bounds
 
     t0 = time.perf_counter()
     check_bounds(problem, constrained)
-    cons = feasible_set(problem.parameters, constrained)
-    H, g, c, H_e, g_e = weighted_statistics(problem, weight, chunk, what, energy=True, whiten=whiten)
-    full, (cons, projected) = cons, close(cons, H)  # parameters f cannot see that only loosen a block: newton.closure
+    white = _Whitening(problem, weight, what, whiten)
+    H, g, c, H_e, g_e = weighted_statistics(problem, white, chunk, energy=True)
+    # parameters f cannot see that only loosen a block: solved on the closed set, then completed (newton.closure)
+    cons, done = on_closure(feasible_set(problem.parameters, constrained), H, problem.parameters.names)
     theta_f = _solve_psd(H, g, rtol=1e-10)  # the unconstrained weighted LS (min-norm): the frozen-metric LS
     f_min = max(c - 2.0 * float(g @ theta_f) + float(theta_f @ H @ theta_f), 0.0)
 
@@ -146,10 +215,14 @@ def fit_weighted_newton(
     theta, _, _, info = _interior_point(problem, cons, theta0, None, None, tol, max_iter, chunk, verbose,
                                         objective=objective, f_scale=c)
     info.pop("objective")
-    info.update(start=start, statistics="one pass (H = Σ YᵀC⁻¹Y)")
-    theta, completed = complete(theta, full, projected, problem.parameters.names)
-    info.update(completed)
-    f = weighted_objective(problem, weight, theta, chunk) if objective_pass else float("nan")
+    info.update(start=start, statistics="one pass (H = Σ YᵀC⁻¹Y)", weight=white.kind)
+    names = problem.parameters.names  # the iterates' direction by parameter name (no arrays in info), as newton.fit
+    if "diverging_candidate" in info:
+        info["diverging_candidate"] = direction_names(info["diverging_candidate"], names)
+    if "diverging_direction" in info:
+        info["diverging_direction"] = direction_label(info["diverging_direction"], names)
+    theta, info = done(theta, info)
+    f = weighted_objective(problem, white, theta, chunk) if objective_pass else float("nan")
     return IdentificationResult(method, theta, problem.parameters, f, "optimal", "newton", time.perf_counter() - t0,
                                 info["iterations"], constrained, info)
 
