@@ -48,6 +48,17 @@ SOLVER_NOTES = ("fallback_reason", "solver_warnings", "fallback", "sigma_kappa_f
 # infimum approached only as parameters grow (estimators.newton.closure; dm-paper's optimum at infinity)
 
 
+def weight_note(m: str, info: dict) -> str:
+    """dm's weight: the GLS fit or its pilot's, chosen by cross-validation (estimators.weight_cv)."""
+    choice = info["weight_choice"]
+    if "cv_score" in info:
+        sc = info["cv_score"]
+        which = "the GLS fit Σ + κM(θ_ref)" if choice == "gls" else "its pilot's weighted fit (κ = 0)"
+        return (f"{m}: weight: {which}, chosen by {info['cv_folds']}-fold cross-validation on {info['cv_samples']} "
+                f"samples (held-out torque NRMSE: GLS {sc['gls']:.4g}, pilot {sc['pilot']:.4g})")
+    return f"{m}: weight: {choice}" + (f"; {info['cv_fallback']}" if "cv_fallback" in info else "")
+
+
 def slug(s: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", s)
 
@@ -181,6 +192,7 @@ def _fits(d: FitReportData) -> Section:
         notes += [f"{m}: solver chain: {chain}"] if "→" in chain and not r.info.get("fallback_used") else []
         notes += [f"{m}: {k.replace('_', ' ')}: {fmt_value(r.info[k])}" for k in SOLVER_NOTES
                   if k in r.info]
+        notes += [weight_note(m, r.info)] if "weight_choice" in r.info else []
         notes += [margin_note(m, r.info)] if "margin_epsilon" in r.info else []
     table = Table(("method", "status", "solver", "fallback", "time [s]", "iterations", "consistent",
                    "metric vs URDF", "URDF"), tuple(rows),
