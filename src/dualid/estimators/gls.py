@@ -275,23 +275,14 @@ def fit_weighted(sensor: IdentificationProblem, C, method: str, common: dict, in
     """
     weight = C if callable(C) else (lambda block, rows, C=np.asarray(C): C if C.shape[0] == 1 else C[rows])
     if common["solver"] == "newton":
-        from dualid.estimators.newton import fit_dual_metric_newton
         from dualid.estimators.newton.weighted import fit_weighted_newton
-        from dualid.model.metric import AffineMetric
 
         if not common["allow_unidentifiable"]:
             check_identifiable(sensor, what=f"{method} regressor")
-        try:  # from the weighted statistics (two passes over the data); None: the cheap start failed
+        try:  # from the weighted statistics (two passes over the data; phase I on the closed set if the cheap
+            # start fails: no fit of the materialised metric without the closure, newton.closure)
             result = fit_weighted_newton(sensor, weight, constrained=common["constrained"], method=method,
                                          what=f"{method}: {what}", **common["solver_options"])
-            if result is None:  # the materialised constant metric, with newton's own start and phase I
-                if not isinstance(sensor, IdentificationProblem):
-                    sensor = sensor.materialise()
-                C = np.broadcast_to(weight(sensor, slice(None)), (sensor.N, sensor.n, sensor.n))
-                np.linalg.cholesky(C)
-                const = dataclasses.replace(sensor, metric=AffineMetric(sensor.p, (), np.array(C)))
-                result = fit_dual_metric_newton(const, constrained=common["constrained"], method=method,
-                                                **common["solver_options"])
             return dataclasses.replace(result, info={**result.info, **info})
         except np.linalg.LinAlgError:
             pass  # the message below

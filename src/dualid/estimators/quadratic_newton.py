@@ -98,7 +98,7 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
     closure=True (without a prior): on the closed feasible set of ``newton.closure`` (dm's fits; the other estimators
     keep the original set, whose stopping points along an unbounded unseen mass are moderate, e.g. as priors)."""
     full = feasible_set(parameters, constrained)
-    cons, projected = close(full, np.asarray(H)) if closure and regularizer is None else (full, ())
+    cons, projected = close(full, np.asarray(H), c) if closure and regularizer is None else (full, ())
     objective, theta_ls = quadratic_objective(H, g, c, parameters, regularizer)
 
     def done(theta, info):
