@@ -46,7 +46,7 @@ from dualid.errors import ConfigError, MetricError, SolverError
 from dualid.estimators.base import check_identifiable, freeze_options
 from dualid.estimators.covariance_model import full_likelihood_estimate, likelihood_estimate, moment_estimate
 from dualid.estimators.covariance_select import select_structure
-from dualid.estimators.least_squares import OLS, WLS, fit_quadratic, residual_covariance
+from dualid.estimators.least_squares import fit_quadratic, residual_covariance
 from dualid.estimators.metric_guard import DEFAULT_BOUND, given_reference, reference_guard
 from dualid.estimators.result import IdentificationResult
 from dualid.estimators.statistics import statistics
@@ -160,13 +160,13 @@ class FeasibleGLS:
             # WLS: M_i = Σ̂ from the OLS residuals), which fits on the closed feasible set where the infimum is
             # reached only as an unseen mass grows (newton.closure): a pilot stopped along that ray moves with
             # rounding, and the weights with it (re-chart change of dm up to 1.2e-5, docs/statistics.md). If Newton
-            # fails, the library's OLS/WLS (cvxpy); what ran is in the label (result.info["pilot"])
+            # fails, the same two weighted fits by cvxpy, polished on the closed set as well (``fit_weighted``; not the
+            # library's OLS/WLS, which keep the original set); what ran is in the label (result.info["pilot"])
             try:  # whatever the final fit's solver: the same pilot, so the solvers fit the same weighted problem
                 return self._newton_pilot(sensor, {**c, "solver": "newton", "solver_options": {}}), self.pilot
             except SolverError as exc:
                 first = f"newton failed: {str(exc)[:120]}"
-            est = WLS(**cvx) if self.pilot == "wls" else OLS(**cvx)
-            return est.fit(sensor).theta, f"{self.pilot} ({cvx['solver']}: {first})"
+            return self._newton_pilot(sensor, cvx), f"{self.pilot} ({cvx['solver']}: {first})"  # cvx: by cvxpy
         from dualid.estimators.dual_metric import DualMetric
 
         return DualMetric(constrained=c["constrained"], allow_unidentifiable=c["allow_unidentifiable"]).fit(sensor).theta, "dm-paper"
