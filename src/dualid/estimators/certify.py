@@ -22,7 +22,11 @@ With ``closure`` (dm's fits) and a parameter the closure projects out (``newton.
 only as it grows), the polish on the closed set is the answer whatever the two objectives: there cvxpy's θ is a
 stopping point along that ray, within its tolerance of the infimum but placed by rounding (a certified cvxpy θ
 kept within ``TOL`` used to leave dm's prediction depending on where Clarabel stopped, and without the completed
-parameter's note); the exact-data shortcut is not taken either. The chain says so ("→ newton on the closed set").
+parameter's note). The chain says so ("→ newton on the closed set"). Not when the closed run ends above cvxpy's θ
+by more than ``TOL`` (it is a feasible point of the closed set, so that run missed its infimum): then as above. Nor on
+exact data (the shortcut above): f is at the rounding floor, the infimum is attained (f = 0 at a consistent θ), and a
+polish there is rounding-dominated (a WLS pilot on the stress corpus's exact RR chain, weights Σ̂⁻¹ ~ 1e23, came back
+1.4e7 times higher in f and moved dm's weights by 1e7).
 """
 
 from __future__ import annotations
@@ -57,12 +61,12 @@ def polish(theta_cvx, stats, parameters, constrained, regularizer, solver, closu
     f = certified_objective(stats, parameters, regularizer)
     f_cvx = f(theta_cvx)
     floor = ROUNDING * max(float(stats.c), 0.0)
-    closed = closure and regularizer is None and constrained and _projects(stats, parameters)
-    if regularizer is None and abs(f_cvx) <= floor and not closed:  # f ≥ 0 (below 0: rounding), so f(θ_cvx) − f* ≤ f(θ_cvx): a certificate by itself
+    if regularizer is None and abs(f_cvx) <= floor:  # f ≥ 0 (below 0: rounding), so f(θ_cvx) − f* ≤ f(θ_cvx): a certificate by itself
         info = {"certified_gap": float(abs(f_cvx) / max(float(stats.c), 1e-300)), "cvxpy_above_certified": 0.0,
                 "certify_iterations": 0}
         return theta_cvx, f"{solver} optimal (certified: f at the rounding floor, {info['certified_gap']:.1e} of f(0))", \
             False, True, info
+    closed = closure and regularizer is None and constrained and _projects(stats, parameters)
     try:
         theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, parameters, constrained=constrained,
                                           regularizer=regularizer, start=theta_cvx, closure=closure)
@@ -75,7 +79,8 @@ def polish(theta_cvx, stats, parameters, constrained, regularizer, solver, closu
             "certify_iterations": int(ipm["iterations"])}
     if "projected_parameters" in ipm and (above > TOL or closed):
         info.update({k: v for k, v in ipm.items() if k.startswith("projected_")})
-    if closed and "projected_parameters" in ipm:
+    if closed and "projected_parameters" in ipm and above >= -TOL:  # not worse than cvxpy's θ (a feasible point of
+        # the closed set too): else the closed run did not reach its infimum and cvxpy's θ is checked as below
         return theta, f"{solver} optimal ({above:.1e} above) → newton on the closed set (newton.closure)", True, True, info
     if above > TOL:
         return theta, f"{solver} optimal but {above:.1e} above → newton polished", True, True, info
