@@ -63,16 +63,16 @@ def test_the_weighted_fit_reaches_the_infimum_approached_as_the_mass_grows():
 def test_close_projects_only_parameters_f_cannot_see_that_enter_one_block_as_a_rank_one_term():
     space, H, names = _fit_data()
     cons = feasible_set(space, True)
-    closed, projected = close(cons, H)
+    closed, projected = close(cons, H, 1.0)
     assert [names[p.k] for p in projected] == ["j0.m"]  # Ixx, Iyy, … enter with rank > 1 and stay
     assert closed.lmis[0].V.shape == (9, 3, 3)
     H2 = H.copy()
     H2[names.index("j0.m"), names.index("j0.m")] = 1.0  # f sees the mass: nothing is projected
-    assert close(cons, H2)[1] == ()
+    assert close(cons, H2, 1.0)[1] == ()
     upper = np.full(space.p, np.inf)
     upper[names.index("j0.m")] = 10.0  # an upper bound cuts the ray: the minimum is attained, nothing to project
     bounded = feasible_set(space.with_bounds(np.full(space.p, -np.inf), upper), True)
-    assert close(bounded, H)[1] == ()
+    assert close(bounded, H, 1.0)[1] == ()
     theta = np.zeros(space.p)
     theta[[names.index(n) for n in ("j0.Ixx", "j0.Iyy", "j0.Izz")]] = 1.0
     theta[names.index("j0.mc_x")] = 0.5

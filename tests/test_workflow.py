@@ -257,3 +257,9 @@ def test_report_says_which_covariance_structure_dm_used(written):
     assert "dm: projected parameters: Joint1.m = " in text
     record = yaml.safe_load((written / "parameters.yaml").read_text())["methods"]["dm"]["projected_parameters"]
     assert record["values"].startswith("Joint1.m = ") and "smallest value that keeps the block consistent" in record["note"]
+    # its size (4.9e7 kg) reflects the solver's tolerance: said next to the value, not presented as an estimate
+    assert record["note"].startswith("not determined by the data: the smallest value consistent with the other")
+    entry = next(e for e in yaml.safe_load((written / "parameters.yaml").read_text())["methods"]["dm"]["parameters"]
+                 if e["name"] == "Joint1.m")
+    assert entry["determined_by_data"] is False and entry["note"].startswith("not determined by the data")
+    assert "(n.d.)" in text and "n.d.: not determined by the data" in text

@@ -17,6 +17,16 @@ of the same fit were seen 5e-9 apart, well inside ``TOL``). Then
 
 A least-squares fit (no prior) whose f is already below ``ROUNDING`` · f(0) — exact data — is certified without
 the polish: f ≥ 0, so it is that close to the optimum; relative tests on f itself are meaningless there (f ~ 1e-26).
+
+With ``closure`` (dm's fits) and a parameter the closure projects out (``newton.closure``: the infimum is approached
+only as it grows), the polish on the closed set is the answer whatever the two objectives: there cvxpy's θ is a
+stopping point along that ray, within its tolerance of the infimum but placed by rounding (a certified cvxpy θ
+kept within ``TOL`` used to leave dm's prediction depending on where Clarabel stopped, and without the completed
+parameter's note). The chain says so ("→ newton on the closed set"). Not when the closed run ends above cvxpy's θ
+by more than ``TOL`` (it is a feasible point of the closed set, so that run missed its infimum): then as above. Nor on
+exact data (the shortcut above): f is at the rounding floor, the infimum is attained (f = 0 at a consistent θ), and a
+polish there is rounding-dominated (a WLS pilot on the stress corpus's exact RR chain, weights Σ̂⁻¹ ~ 1e23, came back
+1.4e7 times higher in f and moved dm's weights by 1e7).
 """
 
 from __future__ import annotations
@@ -56,17 +66,30 @@ def polish(theta_cvx, stats, parameters, constrained, regularizer, solver, closu
                 "certify_iterations": 0}
         return theta_cvx, f"{solver} optimal (certified: f at the rounding floor, {info['certified_gap']:.1e} of f(0))", \
             False, True, info
+    closed = closure and regularizer is None and constrained and _projects(stats, parameters)
     try:
         theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, parameters, constrained=constrained,
                                           regularizer=regularizer, start=theta_cvx, closure=closure)
     except SolverError as exc:
-        return theta_cvx, f"{solver} optimal, not certified: newton check failed ({exc.status})", False, False, {}
+        where = " on the closed set (newton.closure)" if closed else ""
+        return theta_cvx, f"{solver} optimal, not certified: newton check{where} failed ({exc.status})", False, False, {}
     f_new = f(theta)
     above = (f_cvx - f_new) / max(abs(f_new), 1e-300) if np.isfinite(f_cvx) else np.inf
     info = {"certified_gap": float(ipm["relative_gap"]), "cvxpy_above_certified": float(above),
             "certify_iterations": int(ipm["iterations"])}
-    if "projected_parameters" in ipm and above > TOL:
-        info["projected_parameters"] = ipm["projected_parameters"]
+    if "projected_parameters" in ipm and (above > TOL or closed):
+        info.update({k: v for k, v in ipm.items() if k.startswith("projected_")})
+    if closed and "projected_parameters" in ipm and above >= -TOL:  # not worse than cvxpy's θ (a feasible point of
+        # the closed set too): else the closed run did not reach its infimum and cvxpy's θ is checked as below
+        return theta, f"{solver} optimal ({above:.1e} above) → newton on the closed set (newton.closure)", True, True, info
     if above > TOL:
         return theta, f"{solver} optimal but {above:.1e} above → newton polished", True, True, info
     return theta_cvx, f"{solver} optimal (certified by newton: {max(above, 0.0):.1e})", False, True, info
+
+
+def _projects(stats, parameters) -> bool:
+    """Does the closure project some parameter out of this fit (``newton.closure.close`` on its statistics)?"""
+    from dualid.estimators.newton.closure import close
+    from dualid.model.consistency import feasible_set
+
+    return bool(close(feasible_set(parameters, True), stats.H, stats.c)[1])

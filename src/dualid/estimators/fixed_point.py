@@ -132,7 +132,7 @@ class BoundedFixedPoint:
 def _fit(sensor, weight, whiten, est, common, first):
     """θ = argmin Σ r_iᵀ M̄_i⁻¹ r_i: the first fit of a run through ``fit_weighted`` (identifiability check,
     fallbacks), later ones from the weighted statistics whitened by the stored factor, without the objective's
-    pass (the caller computes it in its pencil pass); ``fit_weighted`` takes over if that start fails."""
+    pass (the caller computes it in its pencil pass); ``fit_weighted`` takes over if that fit fails."""
     if not first and common["solver"] == "newton":
         from dualid.estimators.newton.weighted import fit_weighted_newton
 

@@ -46,7 +46,7 @@ from dualid.errors import ConfigError, MetricError, SolverError
 from dualid.estimators.base import check_identifiable, freeze_options
 from dualid.estimators.covariance_model import full_likelihood_estimate, likelihood_estimate, moment_estimate
 from dualid.estimators.covariance_select import select_structure
-from dualid.estimators.least_squares import OLS, WLS, fit_quadratic, residual_covariance
+from dualid.estimators.least_squares import fit_quadratic, residual_covariance
 from dualid.estimators.metric_guard import DEFAULT_BOUND, given_reference, reference_guard
 from dualid.estimators.result import IdentificationResult
 from dualid.estimators.statistics import statistics
@@ -173,16 +173,15 @@ class FeasibleGLS:
             # WLS: M_i = Σ̂ from the OLS residuals), which fits on the closed feasible set where the infimum is
             # reached only as an unseen mass grows (newton.closure): a pilot stopped along that ray moves with
             # rounding, and the weights with it (re-chart change of dm up to 1.2e-5, docs/statistics.md). If Newton
-            # fails, the library's OLS/WLS (cvxpy); what ran is in the label (result.info["pilot"])
+            # fails, the same two weighted fits by cvxpy, polished on the closed set as well (``fit_weighted``; not the
+            # library's OLS/WLS, which keep the original set); what ran is in the label (result.info["pilot"])
             try:  # whatever the final fit's solver: the same pilot, so the solvers fit the same weighted problem
                 theta, S = self._newton_pilot(sensor, {**c, "solver": "newton", "solver_options": {}})
                 return theta, self.pilot, S
             except SolverError as exc:
                 first = f"newton failed: {str(exc)[:120]}"
-            est = WLS(**cvx) if self.pilot == "wls" else OLS(**cvx)
-            res = est.fit(sensor)
-            S = np.asarray(res.info["covariance_matrix"]) if self.pilot == "wls" else np.eye(sensor.n)
-            return res.theta, f"{self.pilot} ({cvx['solver']}: {first})", S
+            theta, S = self._newton_pilot(sensor, cvx)  # cvx: the same two weighted fits by cvxpy
+            return theta, f"{self.pilot} ({cvx['solver']}: {first})", S
         from dualid.estimators.dual_metric import DualMetric
 
         return DualMetric(constrained=c["constrained"],
@@ -317,23 +316,14 @@ def fit_weighted(sensor: IdentificationProblem, C, method: str, common: dict, in
     """
     weight = C if callable(C) else (lambda block, rows, C=np.asarray(C): C if C.shape[0] == 1 else C[rows])
     if common["solver"] == "newton":
-        from dualid.estimators.newton import fit_dual_metric_newton
         from dualid.estimators.newton.weighted import fit_weighted_newton
-        from dualid.model.metric import AffineMetric
 
         if not common["allow_unidentifiable"]:
             check_identifiable(sensor, what=f"{method} regressor")
-        try:  # from the weighted statistics (two passes over the data); None: the cheap start failed
+        try:  # from the weighted statistics (two passes over the data; phase I on the closed set if the cheap
+            # start fails: no fit of the materialised metric without the closure, newton.closure)
             result = fit_weighted_newton(sensor, weight, constrained=common["constrained"], method=method,
                                          what=f"{method}: {what}", **common["solver_options"])
-            if result is None:  # the materialised constant metric, with newton's own start and phase I
-                if not isinstance(sensor, IdentificationProblem):
-                    sensor = sensor.materialise()
-                C = np.broadcast_to(weight(sensor, slice(None)), (sensor.N, sensor.n, sensor.n))
-                np.linalg.cholesky(C)
-                const = dataclasses.replace(sensor, metric=AffineMetric(sensor.p, (), np.array(C)))
-                result = fit_dual_metric_newton(const, constrained=common["constrained"], method=method,
-                                                **common["solver_options"])
             return dataclasses.replace(result, info={**result.info, **info})
         except np.linalg.LinAlgError:
             pass  # the message below

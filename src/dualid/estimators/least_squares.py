@@ -192,8 +192,7 @@ def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solve
         return s * solved.value, solved.status, solved.solver, solved.iterations, solved.solve_time
     info.update(solver_chain=f"{first} → newton optimal", fallback_used=True, fallback_reason=first,
                 relative_gap=ipm["relative_gap"])
-    if "projected_parameters" in ipm:
-        info["projected_parameters"] = ipm["projected_parameters"]
+    info.update({k: v for k, v in ipm.items() if k.startswith("projected_")})  # newton.closure's completion
     return theta, "optimal", "newton", ipm["iterations"], time.perf_counter() - t0
 
 

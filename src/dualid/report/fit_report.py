@@ -258,6 +258,7 @@ def parameter_tables(d: FitReportData) -> list[Table]:
             for i, m in enumerate(ok):
                 se = o.fits[m].uncertainty[k] if o.fits[m].uncertainty else None
                 values[i] += f" ± {se:.2g}" if isinstance(se, float) else ""
+                values[i] += " (n.d.)" if P.names[k] in o.fits[m].result.info.get("projected_names", ()) else ""
             cells += values
             rows.append(tuple(cells))
         tables.append(Table(("parameter", "unit", *ok, *o.references), tuple(rows), title=group))
@@ -267,7 +268,10 @@ def parameter_tables(d: FitReportData) -> list[Table]:
 def _parameters(d: FitReportData) -> Section:
     return Section("Parameters", (Text("n.i.: not identifiable on its own; ± standard error (see the uncertainty note "
                                        "in parameters.yaml); 0: below 1e-10 × the largest value of its column "
-                                       "(solver round-off; exact values in parameters.yaml)."), *parameter_tables(d)))
+                                       "(solver round-off; exact values in parameters.yaml); n.d.: not determined by "
+                                       "the data, the smallest value consistent with the other parameters (its size "
+                                       "reflects the solver's tolerance, not the data; no prediction depends on it; "
+                                       "see the projected note under Fits)."), *parameter_tables(d)))
 
 
 def _base(d: FitReportData) -> Section:

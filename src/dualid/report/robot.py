@@ -19,6 +19,7 @@ from pathlib import Path
 import yaml
 
 from dualid.estimators.methods import method as method_entry
+from dualid.estimators.newton.closure import NOT_DETERMINED
 from dualid.evaluation.validation import Validation
 from dualid.report.base_parameters import UNCERTAINTY_NOTE, definitions, method_record
 from dualid.report.fit_report import fit_report, report_data, score_table, validation_report
@@ -48,7 +49,9 @@ def method_entry_record(m: str, f, P) -> dict:
         "solve_time_s": r.solve_time,
         "objective": r.objective,
         "physically_consistent": bool(r.is_consistent),
-        "parameters": [{"name": n, "unit": u, "value": float(x), "std_error": se}
+        "parameters": [{"name": n, "unit": u, "value": float(x), "std_error": se,
+                        **({"determined_by_data": False, "note": NOT_DETERMINED}  # estimators.newton.closure
+                           if n in r.info.get("projected_names", ()) else {})}
                        for n, u, x, se in zip(P.names, P.units, r.theta, f.uncertainty)],
         "base_parameters": method_record(f),
         "validation": None if f.validation is None else f.validation.as_dict(),

@@ -114,6 +114,25 @@ def _frozen_metric_ls(problem: IdentificationProblem, theta_c: np.ndarray, chunk
     return _solve_psd(H, g, rtol=1e-10)
 
 
+def constant_metric_start(problem, cons: FeasibleSet, seed: np.ndarray) -> tuple[np.ndarray, str]:
+    """A strictly feasible θ for a fit whose metric does not depend on θ (M_i = C_i ≻ 0, e.g. ``newton.weighted``),
+    where only the constraints ``cons`` (possibly the closed set of ``newton.closure``) decide: the seed's central
+    point, else phase I over the constraints alone (no sample can leave the domain). SolverError (status
+    infeasible) when they admit no strictly feasible θ."""
+    theta_c = _central_point(seed, cons)
+    if cons.margin(theta_c) > 0:
+        return theta_c, "weighted LS→central"
+    try:
+        theta, t = _phase_one(problem, cons, theta_c, np.zeros(0, dtype=int))
+    except SolverError as exc:
+        raise SolverError(f"dual-metric Newton: phase I failed ({exc}); the constraints may admit no strictly "
+                          "feasible θ", status=exc.status) from exc
+    if t <= 1e-9 or cons.margin(theta) <= 0:
+        raise SolverError("dual-metric Newton: the constraints (physical consistency and bounds) admit no strictly "
+                          f"feasible θ (phase-I margin {t:.3g} ≤ 0)", status="infeasible")
+    return theta, "phase-I"
+
+
 def starting_point(problem, cons: FeasibleSet, chunk: int) -> tuple[np.ndarray, str]:
     """A strictly feasible θ with every M_i(θ) ≻ 0, computed from chart-invariant quantities only.
 

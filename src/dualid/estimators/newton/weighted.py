@@ -27,7 +27,7 @@ from dualid.estimators.newton.closure import on_closure
 from dualid.estimators.newton.interior_point import _interior_point
 from dualid.estimators.newton.linalg import _solve_psd
 from dualid.estimators.newton.objective import CHUNK, _Derivatives, _forward, _tri_inverse
-from dualid.estimators.newton.start import _central_point
+from dualid.estimators.newton.start import _central_point, constant_metric_start
 from dualid.estimators.newton.trace import direction_label, direction_names
 from dualid.estimators.result import IdentificationResult
 from dualid.model.consistency import feasible_set
@@ -174,9 +174,9 @@ def fit_weighted_newton(
     what: str = "the weight's covariance",
     whiten=None,
     objective_pass: bool = True,
-) -> IdentificationResult | None:
-    """argmin Σ r_iᵀ C_i⁻¹ r_i under the constraints (module doc); None when the cheap start fails (the
-    caller then runs ``fit_dual_metric_newton`` on the materialised constant metric, with its phase I).
+) -> IdentificationResult:
+    """argmin Σ r_iᵀ C_i⁻¹ r_i under the constraints (module doc); when the cheap start fails, from the weighted
+    LS's central point or a phase I on the same (closed) feasible set (``newton.start.constant_metric_start``).
     whiten: (block, rows) → W_i (c, n, n) with C_i⁻¹ = W_iᵀ W_i, when the caller has that factor (no Cholesky);
     objective_pass=False skips the pass for the result's objective (NaN: the caller computes it, e.g. the bounded
     fixed point in its own pass)."""
@@ -187,7 +187,7 @@ def fit_weighted_newton(
     white = _Whitening(problem, weight, what, whiten)
     H, g, c, H_e, g_e = weighted_statistics(problem, white, chunk, energy=True)
     # parameters f cannot see that only loosen a block: solved on the closed set, then completed (newton.closure)
-    cons, done = on_closure(feasible_set(problem.parameters, constrained), H, problem.parameters.names)
+    cons, done = on_closure(feasible_set(problem.parameters, constrained), H, c, problem.parameters.names)
     theta_f = _solve_psd(H, g, rtol=1e-10)  # the unconstrained weighted LS (min-norm): the frozen-metric LS
     f_min = max(c - 2.0 * float(g @ theta_f) + float(theta_f @ H @ theta_f), 0.0)
 
@@ -210,8 +210,9 @@ def fit_weighted_newton(
         f_lifted = f_of(lifted) if cons.margin(lifted) > 0 else np.inf
         label = "energy→frozen-metric→central"
         start, theta0 = ((f"{label}→lifted", lifted) if f_lifted < f_of(line) else (label, line))
-    if start is None:
-        return None
+    if start is None:  # the same closed problem from the weighted LS's central point or phase I (not a fit without
+        # the closure: newton.closure)
+        theta0, start = constant_metric_start(problem, cons, theta_f)
     theta, _, _, info = _interior_point(problem, cons, theta0, None, None, tol, max_iter, chunk, verbose,
                                         objective=objective, f_scale=c)
     info.pop("objective")
