@@ -168,20 +168,16 @@ def test_dm_closes_the_ray_of_a_tilted_first_joint_whose_mass_column_is_rounding
 
 
 def test_dm_pilot_by_cvxpy_after_newton_failed_is_closed_too(monkeypatch):
-    """When both Newton pilots fail, dm's OLS/WLS pilot is refitted by cvxpy through the same weighted fit (polished on
-    the closed set), not by the library's OLS/WLS (original set: j0.m where Clarabel stopped)."""
-    import dualid.estimators.gls as gls
+    """When Newton fails on dm's OLS/WLS pilot, ``fit_weighted`` refits it by cvxpy (polished on the closed set), not
+    the library's OLS/WLS (original set: j0.m where Clarabel stopped), and the pilot's label says so."""
+    import dualid.estimators.newton.weighted as weighted
     from dualid.errors import SolverError
 
-    real = gls.fit_weighted
+    def newton_fails(*args, **kwargs):
+        raise SolverError("newton failed (test)", status="test")
 
-    def newton_fails(sensor, C, method, common, info, **kw):
-        if common["solver"] == "newton":
-            raise SolverError("newton failed (test)", status="test")
-        return real(sensor, C, method, common, info, **kw)
-
-    monkeypatch.setattr(gls, "fit_weighted", newton_fails)
+    monkeypatch.setattr(weighted, "fit_weighted_newton", newton_fails)
     problem, names = _problem()
     theta, label = FeasibleGLS(pilot="ols", allow_unidentifiable=True).reference(problem)
-    assert label == "ols (CLARABEL: newton failed: newton failed (test))"
+    assert label == "ols (ols: CLARABEL after newton failed: newton failed (test))"
     assert _smallest(problem, theta, names.index("j0.m"))

@@ -75,7 +75,10 @@ def test_the_pilot_branch_returns_the_pilots_weighted_fit_with_its_weight(monkey
     res = est.fit(problem)
     wls = WLS().fit(problem)
     assert rel(res.theta, wls.theta) < 1e-6
-    assert res.info["kappa"] == 0.0 and res.info["estimated_kappa"] > 0
+    assert res.info["kappa"] == 0.0 and res.info["kappa_share"] == 0.0 and res.info["estimated_covariance"]["kappa"] > 0
+    # what the result says about its weight describes the weight used, not the GLS fit it did not return
+    assert res.info["covariance_model"] == "the sample covariance of the OLS residuals (the WLS pilot's weight)"
+    assert "sigma_structure" not in res.info and res.info["estimated_covariance"]["sigma_structure"] == "full"
     np.testing.assert_allclose(res.info["sigma"], wls.info["covariance_matrix"], rtol=1e-6)
     base = problem.identifiability().base
     sandwich = base_uncertainty(problem, res, est, base).covariance
@@ -147,3 +150,24 @@ def test_a_passive_coordinate_is_scaled_by_the_pilots_held_out_error():
     rms[2] = e["pilot"][2]
     for name in ("pilot", "gls"):
         assert info["cv_score"][name] == pytest.approx(float(np.sqrt(np.mean((e[name] / rms) ** 2))), rel=1e-12)
+
+
+def test_too_few_samples_to_cross_validate_keep_the_gls_fit_and_say_so():
+    problem, _ = _metric_noise(np.random.default_rng(10), N=40)
+    res = FeasibleGLS(allow_unidentifiable=True).fit(problem.subset(np.arange(3)))
+    assert res.info["weight_choice"] == "gls"
+    assert res.info["cv_fallback"] == "3 samples, too few to cross-validate (at least 4); the GLS fit is kept"
+    few = FeasibleGLS(allow_unidentifiable=True).fit(problem.subset(np.arange(6)))
+    assert few.info["cv_folds"] == 3 and few.info["cv_samples"] == 6  # 2 samples per fold at least
+
+
+def test_the_fit_report_states_the_choice_and_both_scores():
+    from dualid.report.fit_report import weight_note
+
+    info = {"weight_choice": "pilot", "cv_score": {"gls": 0.38812, "pilot": 0.38634}, "cv_folds": 5, "cv_samples": 4000}
+    assert weight_note("dm", info) == ("dm: weight: its pilot's weighted fit (κ = 0), chosen by 5-fold cross-validation "
+                                       "on 4000 samples (held-out torque NRMSE: GLS 0.3881, pilot 0.3863)")
+    assert weight_note("dm", {**info, "weight_choice": "gls"}).startswith("dm: weight: the GLS fit Σ + κM(θ_ref), chosen")
+    fallback = {"weight_choice": "gls", "cv_fallback": "3 samples, too few to cross-validate (at least 4); the GLS fit is kept"}
+    assert weight_note("dm", fallback) == ("dm: weight: gls; 3 samples, too few to cross-validate (at least 4); the GLS "
+                                           "fit is kept")

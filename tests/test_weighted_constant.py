@@ -14,6 +14,7 @@ import pytest
 
 from dualid.errors import MetricError
 from dualid.estimators.gls import FeasibleGLS, fit_weighted
+from dualid.estimators.least_squares import residual_covariance
 from dualid.estimators.newton import weighted
 from dualid.estimators.newton.weighted import fit_weighted_newton, weighted_objective
 from tests.factories import drag_problem
@@ -108,7 +109,7 @@ def test_dm_pilots_and_kappa_zero_take_the_constant_path(cholesky_calls):
     newton = {"constrained": True, "solver": "newton", "solver_options": {}, "allow_unidentifiable": False}
     for pilot in ("ols", "wls"):
         cholesky_calls.clear()
-        theta, _ = FeasibleGLS(pilot=pilot)._newton_pilot(problem, newton)
+        theta, _, _ = FeasibleGLS(pilot=pilot)._newton_pilot(problem, newton)
         assert _batched(cholesky_calls, problem.n) == [], pilot
         # the same pilot by the per-sample path: an (N, n, n) identity
         eye = np.broadcast_to(np.eye(3), (problem.N, 3, 3))
@@ -116,6 +117,10 @@ def test_dm_pilots_and_kappa_zero_take_the_constant_path(cholesky_calls):
         assert ols.info["weight"] == "per-sample"
         if pilot == "ols":
             assert rel(theta, ols.theta) < 1e-10
+        else:  # WLS with Σ̂ of the OLS residuals, per sample
+            S = residual_covariance(problem, ols.theta)
+            wls = fit_weighted(problem, np.broadcast_to(S, (problem.N, 3, 3)), "wls", newton, {})
+            assert wls.info["weight"] == "per-sample" and rel(theta, wls.theta) < 1e-8
     # the final fit with κ = 0 (Σ given): C_i = Σ at every sample
     S = _spd(rng, 3)
     cholesky_calls.clear()

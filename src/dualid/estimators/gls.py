@@ -58,6 +58,8 @@ SOLVERS = ("newton", "CLARABEL", "SCS")
 COVARIANCE_MODELS = ("likelihood", "moments")
 COVARIANCE_SAMPLES = 20_000  # (Σ, κ) (at most n(n+1)/2 + 1 numbers) from at most this many evenly strided samples: the likelihood
 # makes one pass over the samples it is given per L-BFGS iteration (recorded in info["covariance_samples"])
+ESTIMATION_KEYS = ("sigma", "sigma_diag", "kappa", "kappa_share", "covariance_model", "covariance_samples")  # (Σ̂, κ̂)'s
+# record (with the sigma_kappa_* and sigma_structure* keys of the estimators), set aside when dm returns its pilot
 SIGMA_STRUCTURES = ("full", "diagonal", "auto")  # auto: chosen by cross-validation (estimators.covariance_select)
 __all__ = ["FeasibleGLS", "fit_weighted", "full_likelihood_estimate", "likelihood_estimate", "moment_estimate"]
 
@@ -166,35 +168,33 @@ class FeasibleGLS:
                 raise ConfigError(f"theta_ref: expected shape ({sensor.p},), got {theta.shape}")
             return theta, "given", None
         c = self._common()
-        cvx = {**c, "solver": c["solver"] if c["solver"] != "newton" else "CLARABEL",
-               "solver_options": {} if c["solver"] == "newton" else c["solver_options"]}
         if self.pilot in ("wls", "ols"):
             # OLS/WLS by the interior-point Newton method on a constant metric (OLS: M_i = I;
             # WLS: M_i = Σ̂ from the OLS residuals), which fits on the closed feasible set where the infimum is
             # reached only as an unseen mass grows (newton.closure): a pilot stopped along that ray moves with
             # rounding, and the weights with it (re-chart change of dm up to 1.2e-5, docs/statistics.md). If Newton
-            # fails, the same two weighted fits by cvxpy, polished on the closed set as well (``fit_weighted``; not the
+            # fails, ``fit_weighted`` fits the same problem by cvxpy, polished on the closed set as well (not the
             # library's OLS/WLS, which keep the original set); what ran is in the label (result.info["pilot"])
-            try:  # whatever the final fit's solver: the same pilot, so the solvers fit the same weighted problem
-                theta, S = self._newton_pilot(sensor, {**c, "solver": "newton", "solver_options": {}})
-                return theta, self.pilot, S
-            except SolverError as exc:
-                first = f"newton failed: {str(exc)[:120]}"
-            theta, S = self._newton_pilot(sensor, cvx)  # cvx: the same two weighted fits by cvxpy
-            return theta, f"{self.pilot} ({cvx['solver']}: {first})", S
+            # whatever the final fit's solver: the same pilot, so the solvers fit the same weighted problem
+            theta, S, fallback = self._newton_pilot(sensor, {**c, "solver": "newton", "solver_options": {}})
+            return theta, self.pilot + (f" ({fallback})" if fallback else ""), S
         from dualid.estimators.dual_metric import DualMetric
 
         return DualMetric(constrained=c["constrained"],
                           allow_unidentifiable=c["allow_unidentifiable"]).fit(sensor).theta, "dm-paper", None
 
-    def _newton_pilot(self, sensor: IdentificationProblem, newton: dict) -> tuple[np.ndarray, np.ndarray]:
-        """(θ, S): OLS, then for a WLS pilot the weighted fit with S = Σ̂ of the OLS residuals (S = I for OLS)."""
+    def _newton_pilot(self, sensor: IdentificationProblem, newton: dict) -> tuple[np.ndarray, np.ndarray, str]:
+        """(θ, S, fallback): OLS, then for a WLS pilot the weighted fit with S = Σ̂ of the OLS residuals (S = I for
+        OLS); fallback: what ``fit_weighted`` recorded when Newton failed and cvxpy fitted instead ("" if nothing)."""
         eye = np.eye(sensor.n)[None]  # one (1, n, n) block: a constant weight, factored once (newton.weighted)
-        theta = fit_weighted(sensor, eye, "ols", newton, {}).theta
+        ols = fit_weighted(sensor, eye, "ols", newton, {})
+        notes = [f"ols: {ols.info['solver_fallback']}"] if "solver_fallback" in ols.info else []
         if self.pilot == "ols":
-            return theta, np.eye(sensor.n)
-        S = residual_covariance(sensor, theta)
-        return fit_weighted(sensor, S[None], "wls", newton, {}).theta, S
+            return ols.theta, np.eye(sensor.n), "; ".join(notes)
+        S = residual_covariance(sensor, ols.theta)
+        wls = fit_weighted(sensor, S[None], "wls", newton, {})
+        notes += [f"wls: {wls.info['solver_fallback']}"] if "solver_fallback" in wls.info else []
+        return wls.theta, S, "; ".join(notes)
 
     def covariance(self, sensor: IdentificationProblem, theta_ref: np.ndarray,
                    M: np.ndarray | None = None, r: np.ndarray | None = None) -> tuple[np.ndarray, float, dict]:
@@ -297,8 +297,13 @@ class FeasibleGLS:
         cv = choose_weight(sensor, fit_pair, self.cv_folds)
         if cv["weight_choice"] == "gls":
             return dataclasses.replace(result, info={**result.info, **cv})
+        # the weight used is the pilot's; what was estimated for the GLS fit is kept under "estimated_covariance"
+        estimated = {k: info.pop(k) for k in list(info) if k in ESTIMATION_KEYS or k.startswith(("sigma_kappa",
+                                                                                                "sigma_structure"))}
+        used = "identity (the OLS pilot's weight)" if info["pilot"].startswith("ols") else \
+            "the sample covariance of the OLS residuals (the WLS pilot's weight)"
         info = {**info, **cv, "sigma": S_pilot.tolist(), "sigma_diag": np.diag(S_pilot).tolist(), "kappa": 0.0,
-                "estimated_sigma": info["sigma"], "estimated_kappa": info["kappa"]}
+                "kappa_share": 0.0, "covariance_model": used, "estimated_covariance": estimated}
         return fit_weighted(sensor, S_pilot[None], self.name, self._common(), info, what="the pilot's weight covariance")
 
 

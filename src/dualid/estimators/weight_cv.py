@@ -8,7 +8,8 @@ above WLS's on 15 of 15 splits (+0.0026 ± 0.0003 N m), joint 2 below (benchmark
 is better is a property of the data, so ``select="cv"`` (the default) asks the data:
 
 - the training samples (at most ``CV_SAMPLES``, evenly strided) are cut into K contiguous folds (time blocks,
-  so neighbouring, correlated samples are not split between training and test);
+  so neighbouring, correlated samples are not split between training and test; K = ``folds``, fewer when there
+  are fewer than 2 samples per fold, and no choice, recorded, below 4 samples);
 - for each fold the whole estimator (pilot, (Σ, κ), weighted fit) is fitted on the other folds, and both its
   pilot and its GLS fit predict the held-out fold;
 - the score of a candidate is the rms over coordinates of NRMSE_a = √(SSE_a / N) / rms(τ_a), SSE pooled over
@@ -29,6 +30,7 @@ from collections.abc import Callable
 import numpy as np
 
 from dualid.errors import DualidError
+from dualid.estimators.covariance_select import MIN_FOLD, blocked_folds
 from dualid.problem import IdentificationProblem
 
 CV_FOLDS = 5  # contiguous folds
@@ -50,15 +52,17 @@ def choose_weight(sensor: IdentificationProblem, fit_pair: Callable[[Identificat
     rows = cv_rows(sensor.N)
     data = sensor.subset(rows)
     N, n = data.N, data.n
-    edges = np.linspace(0, N, folds + 1).astype(int)
+    K = min(int(folds), N // MIN_FOLD)
+    info: dict = {"cv_folds": K, "cv_samples": N}
+    if K < 2:
+        return {**info, "weight_choice": "gls", "cv_fallback": f"{N} samples, too few to cross-validate (at least "
+                f"{2 * MIN_FOLD}); the GLS fit is kept"}
     sse = {"pilot": np.zeros(n), "gls": np.zeros(n)}
-    info: dict = {"cv_folds": folds, "cv_samples": N}
-    for k in range(folds):
-        held = np.arange(edges[k], edges[k + 1])
+    for k, held in enumerate(blocked_folds(N, K)):
         try:
             theta = dict(zip(("pilot", "gls"), fit_pair(data.subset(np.setdiff1d(np.arange(N), held)))))
-        except DualidError as exc:  # recorded, and the GLS fit is kept
-            return {**info, "weight_choice": "gls", "cv_fallback": f"fold {k + 1} of {folds} could not be fitted "
+        except (DualidError, np.linalg.LinAlgError) as exc:  # recorded, and the GLS fit is kept
+            return {**info, "weight_choice": "gls", "cv_fallback": f"fold {k + 1} of {K} could not be fitted "
                     f"({type(exc).__name__}: {str(exc)[:160]}); the GLS fit is kept"}
         test = data.subset(held)
         for name, th in theta.items():
