@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
+import re
 import sys
 import time
 from pathlib import Path
@@ -58,7 +59,7 @@ def main(argv=None) -> int:
     ap.add_argument("--methods", default="ols,wls,dm,dm-paper")
     ap.add_argument("--out", type=Path, default=HERE / "dfki_splits")
     args = ap.parse_args(argv)
-    methods = [make(s) for s in args.methods.split(",")]
+    methods = [make(s) for s in re.split(r",(?![^{]*})", args.methods)]  # commas inside {…} belong to the JSON
     rigid = dualid.RigidBodyModel.from_urdf(DATA / "pendubot_model_2.1.urdf")
     model = dualid.with_joint_terms(rigid, viscous=True, coulomb=True, coulomb_velocity=0.01, armature=True)
     logs = {n: dualid.preprocess(dualid.load_log(DATA / f"{n}.csv", COLUMNS, tuple(rigid.coordinates)), STEPS)
@@ -89,11 +90,13 @@ def main(argv=None) -> int:
     return 0
 
 
-def _paired(d: np.ndarray, better) -> str:
-    """mean ± standard error of per-split differences, and on how many splits the method is at least as good."""
+def _paired(d: np.ndarray, ref: np.ndarray, better) -> str:
+    """mean ± standard error of per-split differences d = method − WLS (ref: WLS's values), and on how many splits the
+    method is at least as good (a difference within 1e-6 of WLS's value counts as a tie, i.e. as good)."""
     if d.size < 2:
         return "–"
-    return f"{d.mean():+.4f} ± {d.std(ddof=1) / np.sqrt(d.size):.4f} ({int(np.sum(better(d)))}/{d.size})"
+    good = better(d) | (np.abs(d) <= 1e-6 * np.abs(ref))
+    return f"{d.mean():+.4f} ± {d.std(ddof=1) / np.sqrt(d.size):.4f} ({int(np.sum(good))}/{d.size})"
 
 
 def to_markdown(result: dict) -> str:
@@ -118,8 +121,10 @@ def to_markdown(result: dict) -> str:
         mine = [ok[(s, m)] for s in splits if (s, m) in ok]
         cells = [f"{np.mean([f(r) for r in mine]):.4f}" if mine else "–" for _, f, _ in scores]
         for _, f, better in scores:
-            d = np.array([f(ok[(s, m)]) - f(ok[(s, "wls")]) for s in splits if (s, m) in ok and (s, "wls") in ok])
-            cells.append("–" if m == "wls" else _paired(d, better))
+            both = [s for s in splits if (s, m) in ok and (s, "wls") in ok]
+            ref = np.array([f(ok[(s, "wls")]) for s in both])
+            d = np.array([f(ok[(s, m)]) for s in both]) - ref
+            cells.append("–" if m == "wls" else _paired(d, ref, better))
         out.append(f"| {m} | {fails} | " + " | ".join(cells) + " |")
     chosen = {}
     for r in rows:

@@ -96,7 +96,8 @@ def _fit(estimator, problem):
                       "wall_time_s": time.perf_counter() - t0}
     return res, {"ok": True, "status": str(res.status), "solver": str(res.solver), "iterations": res.iterations,
                  "wall_time_s": time.perf_counter() - t0, "objective": float(res.objective),
-                 "info": {k: v for k, v in res.info.items() if isinstance(v, (int, float, str, bool))}}
+                 "info": {k: v for k, v in res.info.items() if isinstance(v, (int, float, str, bool))}
+                 | {f"cv_score_{k}": v for k, v in res.info.get("cv_score", {}).items()}}
 
 
 class _Tests:
@@ -326,7 +327,8 @@ def to_markdown(result: dict) -> str:
 
     def paired(title, family_rows, key_cols, key_fn, metric, base="wls"):
         """Per run: metric(method) − metric(base) on the same data set; mean ± standard error over runs, and
-        how many runs the method is at least as high (k/n). Failed fits make the pair missing (n says so)."""
+        how many runs the method is at least as high (k/n; within 1e-6 relative counts as a tie, i.e. as high). Failed
+        fits make the pair missing (n says so)."""
         others = [m for m in methods if m != base]
         out.extend(["", f"### {title}", "", "| " + " | ".join(key_cols + [f"{m} − {base}" for m in others]) + " |",
                     "|" + " --- |" * len(key_cols) + " ---: |" * len(others)])
@@ -338,12 +340,14 @@ def to_markdown(result: dict) -> str:
         for k in keys:
             cells = []
             for meth in others:
-                d = np.array([v[meth] - v[base] for (kk, _), v in runs.items() if kk == k and meth in v and base in v])
+                pairs = [(v[meth], v[base]) for (kk, _), v in runs.items() if kk == k and meth in v and base in v]
+                d = np.array([a - b for a, b in pairs])
                 if d.size == 0:
                     cells.append("–")
                     continue
                 se = d.std(ddof=1) / np.sqrt(d.size) if d.size > 1 else float("nan")
-                cells.append(f"{d.mean():+.4f} ± {se:.4f} ({int(np.sum(d >= 0))}/{d.size})")
+                tie = 1e-6 * np.array([abs(b) for _, b in pairs])  # equal to 1e-6 (relative) counts as at least as high
+                cells.append(f"{d.mean():+.4f} ± {se:.4f} ({int(np.sum(d >= -tie))}/{d.size})")
             out.append("| " + " | ".join([str(x) for x in k] + cells) + " |")
 
     noise = [r for r in rows if r["family"] == "noise"]
