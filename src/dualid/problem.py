@@ -225,6 +225,11 @@ def identifiability_of(problem) -> Identifiability:
     return identifiability(A, problem.parameters)
 
 
+def strided_rows(N: int, max_samples: int) -> slice:
+    """Every k-th of N samples, k the smallest stride that leaves at most ``max_samples`` (every sample if N ≤ it)."""
+    return slice(0, None, -(-N // max_samples))
+
+
 def sample_blocks(problem, chunk: int):
     """(block, rows, offset) over every sample of ``problem`` (an IdentificationProblem or a ChunkedProblem):
     ``block`` an in-memory IdentificationProblem, ``rows`` a slice of at most ``chunk`` of its samples, and

@@ -51,7 +51,7 @@ from dualid.estimators.metric_guard import DEFAULT_BOUND, given_reference, refer
 from dualid.estimators.result import IdentificationResult
 from dualid.estimators.statistics import statistics
 from dualid.estimators.weight_cv import CV_FOLDS, SELECTS, choose_weight
-from dualid.problem import IdentificationProblem
+from dualid.problem import IdentificationProblem, strided_rows
 
 PILOTS = ("wls", "ols", "dm-paper")
 SOLVERS = ("newton", "CLARABEL", "SCS")
@@ -245,8 +245,8 @@ class FeasibleGLS:
             theta_ref, pilot, S_pilot = None, "none (κ = 0)", None
         # (Σ, κ) from the residuals of at most COVARIANCE_SAMPLES evenly strided samples: few numbers, and the
         # likelihood's iterations each pass over the samples it is given
-        step = -(-sensor.N // COVARIANCE_SAMPLES)
-        rows = slice(0, None, step)
+        rows = strided_rows(sensor.N, COVARIANCE_SAMPLES)
+        step = rows.step
         M_some = r_some = None
         if theta_ref is not None:
             some = sensor if isinstance(sensor, IdentificationProblem) else sensor.subset(rows)  # streamed: collect
@@ -298,12 +298,14 @@ class FeasibleGLS:
         if cv["weight_choice"] == "gls":
             return dataclasses.replace(result, info={**result.info, **cv})
         # the weight used is the pilot's; what was estimated for the GLS fit is kept under "estimated_covariance"
-        estimated = {k: info.pop(k) for k in list(info) if k in ESTIMATION_KEYS or k.startswith(("sigma_kappa",
-                                                                                                "sigma_structure"))}
+        def of_estimate(key: str) -> bool:
+            return key in ESTIMATION_KEYS or key.startswith(("sigma_kappa", "sigma_structure"))
+
         used = "identity (the OLS pilot's weight)" if info["pilot"].startswith("ols") else \
             "the sample covariance of the OLS residuals (the WLS pilot's weight)"
-        info = {**info, **cv, "sigma": S_pilot.tolist(), "sigma_diag": np.diag(S_pilot).tolist(), "kappa": 0.0,
-                "kappa_share": 0.0, "covariance_model": used, "estimated_covariance": estimated}
+        info = {**{k: v for k, v in info.items() if not of_estimate(k)}, **cv, "sigma": S_pilot.tolist(),
+                "sigma_diag": np.diag(S_pilot).tolist(), "kappa": 0.0, "kappa_share": 0.0, "covariance_model": used,
+                "estimated_covariance": {k: v for k, v in info.items() if of_estimate(k)}}
         return fit_weighted(sensor, S_pilot[None], self.name, self._common(), info, what="the pilot's weight covariance")
 
 

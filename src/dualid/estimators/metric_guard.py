@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from dualid.errors import ConfigError, DataError, MetricError
-from dualid.problem import IdentificationProblem, sample_blocks
+from dualid.problem import IdentificationProblem, sample_blocks, strided_rows
 
 
 def _tri_inverse(L):
@@ -101,8 +101,7 @@ def guard_sample(problem: IdentificationProblem, max_samples: int = GUARD_SAMPLE
     count): a collapse the guard exists for (a body made massless) shows at every sample."""
     if problem.N <= max_samples:
         return problem, None
-    step = -(-problem.N // max_samples)
-    some = problem.subset(slice(0, None, step))
+    some = problem.subset(strided_rows(problem.N, max_samples))
     return some, some.N
 
 

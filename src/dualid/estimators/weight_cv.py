@@ -31,7 +31,7 @@ import numpy as np
 
 from dualid.errors import DualidError
 from dualid.estimators.covariance_select import MIN_FOLD, blocked_folds
-from dualid.problem import IdentificationProblem
+from dualid.problem import IdentificationProblem, strided_rows
 
 CV_FOLDS = 5  # contiguous folds
 CV_SAMPLES = 20_000  # at most this many evenly strided training samples take part in the choice
@@ -40,7 +40,7 @@ SELECTS = ("cv", "none")
 
 def cv_rows(N: int, max_samples: int = CV_SAMPLES) -> slice:
     """The evenly strided samples the cross-validation uses (every sample when N ≤ max_samples)."""
-    return slice(0, None, -(-N // max_samples))
+    return strided_rows(N, max_samples)
 
 
 def choose_weight(sensor: IdentificationProblem, fit_pair: Callable[[IdentificationProblem], tuple],
@@ -49,8 +49,8 @@ def choose_weight(sensor: IdentificationProblem, fit_pair: Callable[[Identificat
 
     fit_pair(sub) → (θ_pilot, θ_gls) fitted on the sub-problem ``sub`` (the estimator without selection).
     """
-    rows = cv_rows(sensor.N)
-    data = sensor.subset(rows)
+    in_memory = isinstance(sensor, IdentificationProblem) and sensor.N <= CV_SAMPLES
+    data = sensor if in_memory else sensor.subset(cv_rows(sensor.N))  # a streamed problem is collected
     N, n = data.N, data.n
     K = min(int(folds), N // MIN_FOLD)
     info: dict = {"cv_folds": K, "cv_samples": N}
