@@ -44,7 +44,7 @@ SCORE_NOTE = ("τ: inverse dynamics τ̂ = Y(q, v, a)θ̂ from measured q, v and
               "effort. a: forward dynamics â = M̂⁻¹(τ − ĥ) from measured q, v, τ, against the differentiated "
               "accelerations. NCC: normalized cross-correlation, maximum over shifts within ±{window} s.")
 SOLVER_NOTES = ("fallback_reason", "solver_warnings", "fallback", "sigma_kappa_fallback", "covariance_model",
-                "sigma_structure", "pilot", "projected_parameters", "projected_note", "diverging_direction")  # the last two: an
+                "sigma_structure", "pilot", "projected_parameters", "projected_note", "diverging_direction")  # the last three: an
 # infimum approached only as parameters grow (estimators.newton.closure; dm-paper's optimum at infinity)
 
 
