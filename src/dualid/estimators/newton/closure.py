@@ -119,6 +119,7 @@ def complete(theta: np.ndarray, cons: FeasibleSet, projected: tuple[Projected, .
     notes, labels = [], []
     for pr in projected:
         c = cons.lmis[pr.block]
+        label = names[pr.k] if names is not None else f"θ[{pr.k}]"
         theta[pr.k] = 0.0
         Q = c.C(theta)  # the block without the projected term
         S = pr.P.T @ Q @ pr.P
@@ -140,12 +141,10 @@ def complete(theta: np.ndarray, cons: FeasibleSet, projected: tuple[Projected, .
             except np.linalg.LinAlgError:
                 theta[pr.k] = 2.0 * max(theta[pr.k], SLACK * top / pr.lam)
         else:
-            label = names[pr.k] if names is not None else f"θ[{pr.k}]"
             raise SolverError(f"closure: no value of {label} makes its consistency block positive definite (the "
                               "rest of the block, compressed, is singular: smallest eigenvalue "
                               f"{float(np.linalg.eigvalsh(S)[0]):.3g}); the closed fit did not end inside its cone",
                               status="closure_failed")
-        label = names[pr.k] if names is not None else f"θ[{pr.k}]"
         notes.append(f"{label} = {theta[pr.k]:.6g}")
         labels.append(label)
     info = {"projected_parameters": f"{', '.join(notes)} ({NOT_DETERMINED})",
