@@ -97,7 +97,8 @@ def _fit(estimator, problem):
     return res, {"ok": True, "status": str(res.status), "solver": str(res.solver), "iterations": res.iterations,
                  "wall_time_s": time.perf_counter() - t0, "objective": float(res.objective),
                  "info": {k: v for k, v in res.info.items() if isinstance(v, (int, float, str, bool))}
-                 | {f"cv_score_{k}": v for k, v in res.info.get("cv_score", {}).items()}}
+                 | {f"cv_score_{k}": v for k, v in res.info.get("cv_score", {}).items()}
+                 | {f"cv_motion_score_{k}": v for k, v in res.info.get("cv_motion_score", {}).items()}}
 
 
 class _Tests:

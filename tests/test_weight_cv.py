@@ -28,31 +28,62 @@ def _metric_noise(rng, N=300, scale=0.3):
     return dataclasses.replace(problem, tau=tau), theta
 
 
-def _by_hand(problem, folds=5):
-    """The cross-validation scores recomputed from the folds: pilot = the library's WLS (cvxpy), GLS = dm unselected."""
+def _scores(problem, thetas_per_fold, folds=5):
+    """(torque scores, motion scores) from the folds by hand: torque NRMSE per coordinate against rms(τ); motion:
+    the forward-dynamics error M(θ)⁻¹ r (explicit inverses) per coordinate against the two candidates' mean."""
     N = problem.N
     edges = np.linspace(0, N, folds + 1).astype(int)
-    sse = {"pilot": 0.0, "gls": 0.0}
-    sse = {k: np.zeros(problem.n) for k in sse}
+    sse = {k: np.zeros(problem.n) for k in ("pilot", "gls")}
+    motion = {k: np.zeros(problem.n) for k in ("pilot", "gls")}
     for k in range(folds):
         held = np.arange(edges[k], edges[k + 1])
-        train = problem.subset(np.setdiff1d(np.arange(N), held))
         test = problem.subset(held)
-        theta = {"pilot": WLS(allow_unidentifiable=True).fit(train).theta,
-                 "gls": FeasibleGLS(select="none", allow_unidentifiable=True).fit(train).theta}
-        for name, th in theta.items():
-            sse[name] += np.sum(test.residual(th) ** 2, axis=0)
+        for name, th in thetas_per_fold(problem.subset(np.setdiff1d(np.arange(N), held))).items():
+            r = test.tau - np.einsum("nap,p->na", test.Y, th)
+            sse[name] += np.sum(r**2, axis=0)
+            motion[name] += np.sum(np.einsum("nab,nb->na", np.linalg.inv(test.metric.evaluate(th)), r) ** 2, axis=0)
     rms = np.sqrt(np.mean(problem.tau**2, axis=0))
-    return {name: float(np.sqrt(np.mean(s / N / rms**2))) for name, s in sse.items()}
+    scale = (motion["pilot"] + motion["gls"]) / 2
+    return ({name: float(np.sqrt(np.mean(s / N / rms**2))) for name, s in sse.items()},
+            {name: float(np.sqrt(np.mean(s / scale))) for name, s in motion.items()})
 
 
-def test_the_scores_are_the_cross_validated_torque_errors_of_pilot_and_gls():
+def _by_hand(problem, folds=5):
+    """The cross-validation scores recomputed from the folds: pilot = the library's WLS (cvxpy), GLS = dm unselected."""
+    return _scores(problem, lambda train: {
+        "pilot": WLS(allow_unidentifiable=True).fit(train).theta,
+        "gls": FeasibleGLS(select="none", allow_unidentifiable=True).fit(train).theta}, folds)
+
+
+def test_the_scores_are_the_cross_validated_torque_and_motion_errors_of_pilot_and_gls():
     problem, _ = _metric_noise(np.random.default_rng(3))
     res = FeasibleGLS().fit(problem)
-    expected = _by_hand(problem)
+    torque, motion = _by_hand(problem)
     assert res.info["cv_folds"] == 5 and res.info["cv_samples"] == problem.N
+    assert res.info["cv_criteria"] == "torque+motion"
     for name in ("pilot", "gls"):
-        assert res.info["cv_score"][name] == pytest.approx(expected[name], rel=1e-6)
+        assert res.info["cv_score"][name] == pytest.approx(torque[name], rel=1e-6)
+        assert res.info["cv_motion_score"][name] == pytest.approx(motion[name], rel=1e-6)
+
+
+def test_the_gls_fit_is_kept_only_when_it_loses_on_neither_torque_nor_motion():
+    """Random candidate pairs: select="cv" keeps the GLS candidate iff it is no worse on both scores, "cv-torque" iff
+    no worse on torque; among the pairs are some where the two rules disagree (the motion score decides)."""
+    problem, theta = _metric_noise(np.random.default_rng(11), N=150)
+    rng = np.random.default_rng(12)
+    split = 0
+    for _ in range(30):
+        pair = {"pilot": theta * (1 + 0.05 * rng.standard_normal(theta.size)),
+                "gls": theta * (1 + 0.05 * rng.standard_normal(theta.size))}
+        torque, motion = _scores(problem, lambda train: pair)
+        both = choose_weight(problem, lambda sub: (pair["pilot"], pair["gls"]), 5)
+        alone = choose_weight(problem, lambda sub: (pair["pilot"], pair["gls"]), 5, "cv-torque")
+        assert alone["cv_criteria"] == "torque" and both["cv_criteria"] == "torque+motion"
+        wins = torque["gls"] <= torque["pilot"], motion["gls"] <= motion["pilot"]
+        assert both["weight_choice"] == ("gls" if all(wins) else "pilot")
+        assert alone["weight_choice"] == ("gls" if wins[0] else "pilot")
+        split += both["weight_choice"] != alone["weight_choice"]
+    assert split >= 3
 
 
 def test_metric_isotropic_residuals_keep_the_gls_fit():
@@ -69,7 +100,7 @@ def test_the_pilot_branch_returns_the_pilots_weighted_fit_with_its_weight(monkey
     """When the pilot predicts better, dm is the pilot's own weighted fit: θ = WLS's, κ = 0 and Σ = WLS's weight
     (recorded, so the sandwich rebuilds the weight that was used), the estimated (Σ, κ) kept beside it."""
     problem, _ = _metric_noise(np.random.default_rng(5))
-    monkeypatch.setattr(gls_module, "choose_weight", lambda sensor, fit_pair, folds: {
+    monkeypatch.setattr(gls_module, "choose_weight", lambda sensor, fit_pair, folds, select: {
         "weight_choice": "pilot", "cv_score": {"pilot": 1.0, "gls": 2.0}, "cv_folds": folds, "cv_samples": sensor.N})
     est = FeasibleGLS()
     res = est.fit(problem)
@@ -112,7 +143,7 @@ def test_a_fold_that_cannot_be_fitted_keeps_the_gls_fit_and_says_so():
         return np.zeros(problem.p), np.zeros(problem.p)
 
     info = choose_weight(problem, fit_pair, 5)
-    assert info == {"cv_folds": 5, "cv_samples": 100, "weight_choice": "gls", "cv_fallback":
+    assert info == {"cv_folds": 5, "cv_samples": 100, "cv_criteria": "torque+motion", "weight_choice": "gls", "cv_fallback":
                     "fold 2 of 5 could not be fitted (SolverError: no strictly feasible start); the GLS fit is kept"}
 
 
@@ -127,7 +158,7 @@ def test_no_selection_where_there_is_no_weighted_pilot():
 
 
 @pytest.mark.parametrize("kwargs, match", [
-    ({"select": "aic"}, "select: expected one of ('cv', 'none'), got 'aic'"),
+    ({"select": "aic"}, "select: expected one of ('cv', 'cv-torque', 'none'), got 'aic'"),
     ({"cv_folds": 1}, "cv_folds: expected an integer ≥ 2, got 1"),
     ({"cv_folds": 2.5}, "cv_folds: expected an integer ≥ 2, got 2.5"),
 ])
@@ -164,9 +195,15 @@ def test_too_few_samples_to_cross_validate_keep_the_gls_fit_and_say_so():
 def test_the_fit_report_states_the_choice_and_both_scores():
     from dualid.report.fit_report import weight_note
 
-    info = {"weight_choice": "pilot", "cv_score": {"gls": 0.38812, "pilot": 0.38634}, "cv_folds": 5, "cv_samples": 4000}
+    info = {"weight_choice": "pilot", "cv_score": {"gls": 0.38812, "pilot": 0.38634}, "cv_folds": 5, "cv_samples": 4000,
+            "cv_criteria": "torque+motion", "cv_motion_score": {"gls": 1.0213, "pilot": 0.97864}}
     assert weight_note("dm", info) == ("dm: weight: its pilot's weighted fit (κ = 0), chosen by 5-fold cross-validation "
-                                       "on 4000 samples (held-out torque NRMSE: GLS 0.3881, pilot 0.3863)")
+                                       "(torque and motion) on 4000 samples (held-out torque NRMSE: GLS 0.3881, pilot "
+                                       "0.3863; motion error, relative: GLS 1.021, pilot 0.9786)")
+    torque_only = {k: v for k, v in info.items() if k not in ("cv_criteria", "cv_motion_score")}
+    assert weight_note("dm", torque_only) == ("dm: weight: its pilot's weighted fit (κ = 0), chosen by 5-fold "
+                                              "cross-validation on 4000 samples (held-out torque NRMSE: GLS 0.3881, "
+                                              "pilot 0.3863)")
     assert weight_note("dm", {**info, "weight_choice": "gls"}).startswith("dm: weight: the GLS fit Σ + κM(θ_ref), chosen")
     fallback = {"weight_choice": "gls", "cv_fallback": "3 samples, too few to cross-validate (at least 4); the GLS fit is kept"}
     assert weight_note("dm", fallback) == ("dm: weight: gls; 3 samples, too few to cross-validate (at least 4); the GLS "

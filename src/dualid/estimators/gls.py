@@ -100,8 +100,8 @@ class FeasibleGLS:
     solver: str = "newton"  # "newton" (dualid's interior point, constant metric) or a cvxpy solver
     solver_options: tuple | None = None  # newton: tol, max_iter; cvxpy: its options (a dict or pairs)
     allow_unidentifiable: bool = False
-    select: str = "cv"  # "cv": keep the GLS fit or its OLS/WLS pilot, whichever predicts held-out folds better
-    # (estimators.weight_cv); "none": always the GLS fit
+    select: str = "cv"  # "cv": the GLS fit unless its OLS/WLS pilot predicts held-out torque or motion better
+    # (estimators.weight_cv); "cv-torque": judged on torque alone; "none": always the GLS fit
     cv_folds: int = CV_FOLDS
     name = "dm"
 
@@ -294,7 +294,7 @@ class FeasibleGLS:
             r = plain.fit(sub)
             return np.asarray(r.info["theta_ref"]), r.theta
 
-        cv = choose_weight(sensor, fit_pair, self.cv_folds)
+        cv = choose_weight(sensor, fit_pair, self.cv_folds, self.select)
         if cv["weight_choice"] == "gls":
             return dataclasses.replace(result, info={**result.info, **cv})
         # the weight used is the pilot's; what was estimated for the GLS fit is kept under "estimated_covariance"

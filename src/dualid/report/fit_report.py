@@ -54,8 +54,12 @@ def weight_note(m: str, info: dict) -> str:
     if "cv_score" in info:
         sc = info["cv_score"]
         which = "the GLS fit Σ + κM(θ_ref)" if choice == "gls" else "its pilot's weighted fit (κ = 0)"
-        return (f"{m}: weight: {which}, chosen by {info['cv_folds']}-fold cross-validation on {info['cv_samples']} "
-                f"samples (held-out torque NRMSE: GLS {sc['gls']:.4g}, pilot {sc['pilot']:.4g})")
+        motion = info.get("cv_motion_score")
+        moved = f"; motion error, relative: GLS {motion['gls']:.4g}, pilot {motion['pilot']:.4g}" if motion else ""
+        judged = " (torque and motion)" if info.get("cv_criteria") == "torque+motion" else ""
+        return (f"{m}: weight: {which}, chosen by {info['cv_folds']}-fold cross-validation{judged} on "
+                f"{info['cv_samples']} samples (held-out torque NRMSE: GLS {sc['gls']:.4g}, pilot {sc['pilot']:.4g}"
+                f"{moved})")
     return f"{m}: weight: {choice}" + (f"; {info['cv_fallback']}" if "cv_fallback" in info else "")
 
 
