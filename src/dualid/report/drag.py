@@ -23,7 +23,7 @@ from dualid.evaluation.validation import Validation
 from dualid.report.base_parameters import base_section
 from dualid.report.document import Bullets, Image, Pre, Report, Section, Table, Text, runs_phrase
 from dualid.report.figures import cycle_color, new_figure
-from dualid.report.fit_report import png, preprocessing_table, run_section
+from dualid.report.fit_report import fit_notes, png, preprocessing_table, run_section
 from dualid.report.io import jsonable, markdown_table, write_json
 from dualid.report.metadata import run_metadata
 from dualid.report.outdir import write_output
@@ -139,17 +139,18 @@ def drag_report(outcome: DragFitOutcome, meta: dict) -> Report:
     ))
     warnings = Section("Warnings", (Bullets(tuple(outcome.warnings)),) if outcome.warnings else ())
     ident = Section("Identifiability", (Pre(outcome.identifiability.describe()),))
-    rows = []
+    rows, notes = [], []
     for m, f in outcome.fits.items():
         if f.ok:
             r = f.result
+            notes += fit_notes(m, r)
             fallback = r.info.get("solver_chain", "") if r.info.get("fallback_used") else "no"
             mins = min(float(np.linalg.eigvalsh(C)[0]) for C in outcome.model.drag_matrices(r.theta).values())
             rows.append((m, r.status, r.solver, fallback, f"{r.solve_time:.2f}", r.is_consistent, f"{mins:.3g}"))
         else:
             rows.append((m, f"failed: {f.error}", "", "", "", "", ""))
     fits = Section("Fits", (Table(("method", "status", "solver", "fallback", "time [s]", "consistent",
-                                   "min eig(C_b)"), tuple(rows)),))
+                                   "min eig(C_b)"), tuple(rows)), *((Bullets(tuple(notes)),) if notes else ())))
     validations = {m: f.validation for m, f in outcome.fits.items() if f.ok and f.validation is not None}
     blocks: list = []
     if validations:

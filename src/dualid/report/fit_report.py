@@ -181,6 +181,16 @@ def margin_note(method: str, info: dict) -> str:
             f"smallest ratio C_b(θ̂) : C_b(θ_ref) {fmt_value(info.get('margin_min_ratio'))}, {where}{enforced}")
 
 
+def fit_notes(m: str, r) -> list[str]:
+    """What a reader should know about how method m's fit r was obtained: a solver chain that was not a fallback,
+    the SOLVER_NOTES keys it recorded, dm's weight choice, a margin."""
+    chain = str(r.info.get("solver_chain", r.solver))
+    notes = [f"{m}: solver chain: {chain}"] if "→" in chain and not r.info.get("fallback_used") else []
+    notes += [f"{m}: {k.replace('_', ' ')}: {fmt_value(r.info[k])}" for k in SOLVER_NOTES if k in r.info]
+    notes += [weight_note(m, r.info)] if "weight_choice" in r.info else []
+    return notes + ([margin_note(m, r.info)] if "margin_epsilon" in r.info else [])
+
+
 def _fits(d: FitReportData) -> Section:
     rows, notes = [], []
     for m, f in d.outcome.fits.items():
@@ -193,11 +203,7 @@ def _fits(d: FitReportData) -> Section:
         rows.append((m, r.status, r.solver, chain if r.info.get("fallback_used") else "no",
                      f"{r.solve_time:.2f}", fmt(r.iterations), str(r.is_consistent), guard_cell(r.info),
                      d.urdfs.get(m, "")))
-        notes += [f"{m}: solver chain: {chain}"] if "→" in chain and not r.info.get("fallback_used") else []
-        notes += [f"{m}: {k.replace('_', ' ')}: {fmt_value(r.info[k])}" for k in SOLVER_NOTES
-                  if k in r.info]
-        notes += [weight_note(m, r.info)] if "weight_choice" in r.info else []
-        notes += [margin_note(m, r.info)] if "margin_epsilon" in r.info else []
+        notes += fit_notes(m, r)
     table = Table(("method", "status", "solver", "fallback", "time [s]", "iterations", "consistent",
                    "metric vs URDF", "URDF"), tuple(rows),
                   note="fallback: when used, the solvers tried in order and the one that produced θ̂. "
