@@ -23,7 +23,9 @@ from __future__ import annotations
 import ctypes
 import glob
 import os
+import re
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,7 +34,7 @@ import numpy as np
 
 from dualid.errors import ConsistencyError, ModelError
 from dualid.model.rigid_body import RigidBodyModel
-from dualid.model.urdf import identified_urdf
+from dualid.model.urdf import identified_urdf, not_determined_comments
 
 FULL_PRECISION = 17  # significant digits for a lossless round trip of a double
 
@@ -90,6 +92,24 @@ def _absolute_meshes(urdf_text: str, source_dir: Path) -> tuple[str, list[str]]:
     return ET.tostring(root, encoding="unicode"), uris
 
 
+def _comment_bodies(xml: str, comments: dict[str, list[str]]) -> str:
+    """``xml`` with each joint's comments as the first lines inside the body that joint moves (MjSpec keeps no
+    comments of the URDF it read; its writer puts every opening tag on a line of its own)."""
+    root = ET.fromstring(xml)
+    for joint, texts in comments.items():
+        bodies = [b.get("name") for b in root.iter("body") if any(j.get("name") == joint for j in b.findall("joint"))]
+        found = [] if len(bodies) != 1 else list(
+            re.finditer(rf'^( *)<body name="{re.escape(bodies[0])}"[^\n]*>\n', xml, re.MULTILINE))
+        if len(found) != 1:
+            raise ModelError(f"write_mjcf: cannot place the note on joint {joint!r}'s body in MuJoCo's MJCF: expected "
+                             f"one <body> holding that joint on a line of its own, found bodies {bodies} and "
+                             f"{len(found)} such lines")
+        indent = found[0].group(1) + "  "
+        lines = "".join(f"{indent}<!--{text}-->\n" for text in texts)
+        xml = xml[:found[0].end()] + lines + xml[found[0].end():]
+    return xml
+
+
 def identified_mjcf(
     source_urdf: str | Path,
     model: RigidBodyModel,
@@ -97,11 +117,13 @@ def identified_mjcf(
     out_dir: str | Path | None = None,
     friction: dict[str, tuple[float, float]] | None = None,
     armature: dict[str, float] | None = None,
+    not_determined: Mapping[str, str] | None = None,
 ) -> MjcfText:
     """The MJCF of ``source_urdf`` with the identified inertials θ (model.parameters.p,), per-joint
     friction {joint: (damping [N m s/rad], Coulomb [N m])} and armature {joint: [kg m²]}.
 
     Mesh files of collision geoms are referred to relative to ``out_dir`` (absolute when None).
+    ``not_determined`` ({parameter label: why}) is said in XML comments on the bodies, as in the URDF.
     ``dualid.report.mjcf.write_mjcf`` writes it to a file.
     """
     import mujoco
@@ -110,6 +132,7 @@ def identified_mjcf(
     if model.base_coordinates:
         raise ModelError("write_mjcf: floating-base models are not supported yet (MuJoCo's free joint uses world-frame "
                          "linear velocities, Pinocchio's free flyer body-frame ones); write the URDF instead")
+    comments = not_determined_comments(model, not_determined, "write_mjcf")
     text = identified_urdf(source_urdf, model, theta, friction=friction)  # armature goes on the spec below
     text, uris = _absolute_meshes(text, source_urdf.resolve().parent)
     if uris:
@@ -147,7 +170,7 @@ def identified_mjcf(
             mesh.file = os.path.relpath(mesh.file, out_dir)
         spec.modelfiledir = str(out_dir)  # to_xml compiles again: resolve them from there too
     with _xml_precision(FULL_PRECISION) as digits:
-        xml = spec.to_xml()
+        xml = _comment_bodies(spec.to_xml(), comments)
     if digits < FULL_PRECISION:
         notes.append(f"written at MuJoCo's default precision ({digits} significant digits): its precision setter "
                      "is not available in this build")

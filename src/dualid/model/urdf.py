@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -82,6 +83,25 @@ def _merged_links(root: ET.Element, link: str) -> list[str]:
     return out
 
 
+def not_determined_comments(model: RigidBodyModel, not_determined: Mapping[str, str] | None,
+                            where: str = "write_urdf") -> dict[str, list[str]]:
+    """{body (block name): [comment text]} for the parameters ``not_determined`` names ({parameter label: why it is
+    not determined by the data}, e.g. a mass the fit completed: estimators.newton.closure), found through the
+    model's parameter blocks; a label that is not one of the model's parameters is refused."""
+    not_determined = dict(not_determined or {})
+    P = model.parameters
+    unknown = sorted(set(not_determined) - set(P.names))
+    if unknown:
+        raise ModelError(f"{where}: not_determined names {unknown}, which are not parameters of the model; expected "
+                         f"inertial parameter names such as {P.names[0]!r}")
+    out: dict[str, list[str]] = {}
+    for b in P.blocks:
+        labels = [P.names[i] for i in b.indices if P.names[i] in not_determined]
+        if labels:
+            out[b.name] = [f" dualid: {label}: {not_determined[label]} " for label in labels]
+    return out
+
+
 def _relocate_meshes(root: ET.Element, source_dir: Path, out_dir: Path) -> None:
     """Keep relative mesh filenames pointing at the same files from the written URDF's folder."""
     if source_dir == out_dir:
@@ -99,6 +119,7 @@ def identified_urdf(
     out_dir: str | Path | None = None,
     friction: dict[str, tuple[float, float]] | None = None,
     armature: dict[str, float] | None = None,
+    not_determined: Mapping[str, str] | None = None,
 ) -> str:
     """The text of a copy of ``source_urdf`` with the identified inertials θ (and optional joint friction).
 
@@ -106,7 +127,9 @@ def identified_urdf(
     (model.parameters.p,). ``friction`` maps joint names to (damping [N m s/rad], Coulomb friction
     [N m]) written as <dynamics damping= friction=>; ``armature`` maps joint names to rotor inertia
     [kg m²], written as a non-standard <dynamics armature=> (URDF has no field for it; urdfdom and
-    Pinocchio ignore it, ``dualid validate`` reads it back). Relative mesh filenames are rewritten to
+    Pinocchio ignore it, ``dualid validate`` reads it back). ``not_determined`` maps parameter labels
+    (model.parameters.names) to why the data do not determine them; each is said in an XML comment on the
+    link that carries its body (``not_determined_comments``). Relative mesh filenames are rewritten to
     point at the same files from ``out_dir`` (the folder the text will be written to).
     ``dualid.report.urdf.write_urdf`` writes it to a file.
     """
@@ -118,6 +141,7 @@ def identified_urdf(
             f"{theta.shape}; pass only the rigid-body part θ[:{model.parameters.p}] of a larger model"
         )
     bodies = {b.name: _check_body(b.name, theta[list(b.indices)]) for b in model.parameters.blocks}
+    notes = not_determined_comments(model, not_determined)
 
     tree = ET.parse(source_urdf, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True)))
     root = tree.getroot()
@@ -150,6 +174,8 @@ def identified_urdf(
             f" dualid: identified inertia of the whole body moved by joint {name!r}"
             + (f" (includes the fixed-joint links {', '.join(merged)}, whose inertials are zeroed) " if merged else " "),
         )
+        for k, text in enumerate(notes.get(name, ()), start=1):  # after the identified-inertia comment
+            links[carrier].insert(k, ET.Comment(text))
         for link in merged:
             if link in links:
                 _replace_inertial(

@@ -19,6 +19,7 @@ from dualid.errors import DualidError
 from dualid.model.joint_terms import JointTermsModel
 from dualid.report.document import Bullets, Section, Text
 from dualid.report.mjcf import write_mjcf
+from dualid.report.not_determined import not_determined
 from dualid.report.urdf import write_urdf
 from dualid.robot.fit import FitOutcome, MethodFit
 
@@ -48,15 +49,17 @@ def write_model_files(outcome: FitOutcome, out: Path) -> tuple[dict[str, Path], 
         friction = model.friction(theta) if isinstance(model, JointTermsModel) else {}
         armature = model.armature_values(theta) if isinstance(model, JointTermsModel) else {}
         entry = {"theta": which}
+        # a completed mass (not determined by the data) is said on its body when the files carry θ̂ itself
+        nd = not_determined(f.result, outcome.rigid.parameters.names) if which == RAW else {}
         try:
             path = write_urdf(outcome.config.model.urdf, outcome.rigid, theta[:p0], out / f"{m}.urdf", overwrite=True,
-                              friction=friction, armature=armature)
+                              friction=friction, armature=armature, not_determined=nd)
             entry["urdf"] = written.setdefault(path.name, path).name
         except (DualidError, ValueError) as exc:  # e.g. a fit on the consistency boundary the URDF writer refuses
             entry["urdf"] = f"not written: {exc}"
         try:
             path, mjcf = write_mjcf(outcome.config.model.urdf, outcome.rigid, theta[:p0], out / f"{m}.xml",
-                                    overwrite=True, friction=friction, armature=armature)
+                                    overwrite=True, friction=friction, armature=armature, not_determined=nd)
             entry["mjcf"] = written.setdefault(path.name, path).name
             entry["mjcf_notes"] = "; ".join(mjcf.notes)
         except (DualidError, ValueError) as exc:

@@ -26,6 +26,7 @@ from dualid.report.fit_report import fit_report, report_data, score_table, valid
 from dualid.report.io import jsonable, write_json
 from dualid.report.metadata import run_metadata
 from dualid.report.model_files import plausible_record, write_model_files
+from dualid.report.not_determined import body_records
 from dualid.report.outdir import write_output
 from dualid.report.render import write_report
 from dualid.robot.fit import FitOutcome
@@ -85,7 +86,7 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str], meta: dict | N
             "model_files_theta": (files or {}).get(m, {}).get("theta"),
             "mjcf_notes": (files or {}).get(m, {}).get("mjcf_notes"),
             "plausible": plausible_record(f),
-            "bodies": [b.as_dict() for b in r.bodies],
+            "bodies": body_records(r),  # with not_determined_by_data on a body whose mass the fit completed
             "training_scores": None if m not in train else train[m].as_dict(),
         })
     return jsonable({

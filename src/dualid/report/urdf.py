@@ -19,13 +19,15 @@ def write_urdf(
     overwrite: bool = False,
     friction: dict[str, tuple[float, float]] | None = None,
     armature: dict[str, float] | None = None,
+    not_determined: dict[str, str] | None = None,
 ) -> Path:
     """Write ``identified_urdf(source_urdf, model, θ, ...)`` to ``out_path``; refuses an existing file
     unless overwrite=True. Returns the written path."""
     out_path = Path(out_path)
     if out_path.exists() and not overwrite:
         raise OutputError(f"write_urdf: {out_path} already exists; pass overwrite=True to replace it")
-    text = identified_urdf(source_urdf, model, theta, out_path.parent, friction=friction, armature=armature)
+    text = identified_urdf(source_urdf, model, theta, out_path.parent, friction=friction, armature=armature,
+                           not_determined=not_determined)
     out_path.parent.mkdir(parents=True, exist_ok=True)
     out_path.write_text(text)
     return out_path
