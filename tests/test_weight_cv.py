@@ -208,3 +208,16 @@ def test_the_fit_report_states_the_choice_and_both_scores():
     fallback = {"weight_choice": "gls", "cv_fallback": "3 samples, too few to cross-validate (at least 4); the GLS fit is kept"}
     assert weight_note("dm", fallback) == ("dm: weight: gls; 3 samples, too few to cross-validate (at least 4); the GLS "
                                            "fit is kept")
+
+
+def test_a_candidate_whose_metric_is_singular_loses_on_motion():
+    """θ = 0 has M(q, 0) singular (no inertia, nothing to simulate): its motion error is infinite and the GLS fit,
+    the true θ here, is kept; the other way round the pilot is returned."""
+    problem, theta = _metric_noise(np.random.default_rng(13), N=100)
+    zero = np.zeros_like(theta)
+    with pytest.raises(np.linalg.LinAlgError):
+        np.linalg.cholesky(problem.metric.evaluate(zero)[:1])
+    kept = choose_weight(problem, lambda sub: (zero, theta), 5)
+    assert kept["weight_choice"] == "gls" and kept["cv_motion_score"]["pilot"] == np.inf
+    returned = choose_weight(problem, lambda sub: (theta, zero), 5)
+    assert returned["weight_choice"] == "pilot" and returned["cv_motion_score"]["gls"] == np.inf

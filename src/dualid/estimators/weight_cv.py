@@ -93,7 +93,7 @@ def choose_weight(sensor: IdentificationProblem, fit_pair: Callable[[Identificat
     rms = np.where(rms > 0, rms, 1.0)
     score = {name: float(np.sqrt(np.mean(s / N / rms**2))) for name, s in sse.items()}
     scale = 0.5 * (sse_motion["pilot"] + sse_motion["gls"])
-    scale = np.where(scale > 0, scale, 1.0)  # both exact there: both 0
+    scale = np.where((scale > 0) & np.isfinite(scale), scale, 1.0)  # both exact there (0), or one cannot simulate (∞)
     motion = {name: float(np.sqrt(np.mean(s / scale))) for name, s in sse_motion.items()}
     scores = {"torque": score, "motion": motion}
     gls_wins = all(scores[c]["gls"] <= scores[c]["pilot"] for c in criteria)
