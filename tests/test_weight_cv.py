@@ -102,10 +102,19 @@ def test_the_pilot_branch_returns_the_pilots_weighted_fit_with_its_weight(monkey
     problem, _ = _metric_noise(np.random.default_rng(5))
     monkeypatch.setattr(gls_module, "choose_weight", lambda sensor, fit_pair, folds, select: {
         "weight_choice": "pilot", "cv_score": {"pilot": 1.0, "gls": 2.0}, "cv_folds": folds, "cv_samples": sensor.N})
+    calls = []
+    fit_weighted = gls_module.fit_weighted
+    monkeypatch.setattr(gls_module, "fit_weighted", lambda *a, **k: calls.append(a[2]) or fit_weighted(*a, **k))
     est = FeasibleGLS()
     res = est.fit(problem)
     wls = WLS().fit(problem)
     assert rel(res.theta, wls.theta) < 1e-6
+    # the pilot's own fit is returned (not fitted again), under dm's name; with other solver options it is refitted
+    assert calls == ["ols", "wls", "dm"] and res.method == "dm"
+    np.testing.assert_array_equal(res.theta, res.info["theta_ref"])
+    calls.clear()
+    tight = FeasibleGLS(solver_options={"tol": 1e-10}).fit(problem)
+    assert calls == ["ols", "wls", "dm", "dm"] and rel(tight.theta, res.theta) < 1e-6
     assert res.info["kappa"] == 0.0 and res.info["kappa_share"] == 0.0 and res.info["estimated_covariance"]["kappa"] > 0
     # what the result says about its weight describes the weight used, not the GLS fit it did not return
     assert res.info["covariance_model"] == "the sample covariance of the OLS residuals (the WLS pilot's weight)"

@@ -109,7 +109,7 @@ def test_dm_pilots_and_kappa_zero_take_the_constant_path(cholesky_calls):
     newton = {"constrained": True, "solver": "newton", "solver_options": {}, "allow_unidentifiable": False}
     for pilot in ("ols", "wls"):
         cholesky_calls.clear()
-        theta, _, _ = FeasibleGLS(pilot=pilot)._newton_pilot(problem, newton)
+        theta = FeasibleGLS(pilot=pilot)._newton_pilot(problem, newton)[0].fit.theta
         assert _batched(cholesky_calls, problem.n) == [], pilot
         # the same pilot by the per-sample path: an (N, n, n) identity
         eye = np.broadcast_to(np.eye(3), (problem.N, 3, 3))

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -76,6 +77,14 @@ def _as_tuple(x, name: str, ndim: int) -> tuple | None:
 
 
 # --- the estimator -----------------------------------------------------------------------------
+class WeightedPilot(NamedTuple):
+    """dm's OLS/WLS pilot: S (n, n), the covariance whose inverse weighs it (I for OLS, Σ̂ of the OLS residuals for
+    WLS), and its fit on all the data (what dm returns when the cross-validation prefers the pilot)."""
+
+    S: np.ndarray
+    fit: IdentificationResult
+
+
 @dataclass(frozen=True)
 class FeasibleGLS:
     """Σ r_iᵀ (Σ_i + κ M_i(θ_ref))⁻¹ r_i with (Σ, κ) from a fixed pilot's residuals (module docstring).
@@ -159,9 +168,9 @@ class FeasibleGLS:
         """θ_ref and how it was obtained, in the sensor chart."""
         return self._pilot(sensor)[:2]
 
-    def _pilot(self, sensor: IdentificationProblem) -> tuple[np.ndarray, str, np.ndarray | None]:
-        """(θ_ref, how it was obtained, the covariance (n, n) whose inverse weighs the pilot's own fit: I for OLS,
-        WLS's Σ̂; None for a given θ_ref or the paper's DM), in the sensor chart."""
+    def _pilot(self, sensor: IdentificationProblem) -> tuple[np.ndarray, str, WeightedPilot | None]:
+        """(θ_ref, how it was obtained, the OLS/WLS pilot's weight and fit; None for a given θ_ref or the paper's
+        DM), in the sensor chart."""
         if self.theta_ref is not None:
             theta = np.array(self.theta_ref)
             if theta.shape != (sensor.p,):
@@ -176,25 +185,25 @@ class FeasibleGLS:
             # fails, ``fit_weighted`` fits the same problem by cvxpy, polished on the closed set as well (not the
             # library's OLS/WLS, which keep the original set); what ran is in the label (result.info["pilot"])
             # whatever the final fit's solver: the same pilot, so the solvers fit the same weighted problem
-            theta, S, fallback = self._newton_pilot(sensor, {**c, "solver": "newton", "solver_options": {}})
-            return theta, self.pilot + (f" ({fallback})" if fallback else ""), S
+            pilot, fallback = self._newton_pilot(sensor, {**c, "solver": "newton", "solver_options": {}})
+            return pilot.fit.theta, self.pilot + (f" ({fallback})" if fallback else ""), pilot
         from dualid.estimators.dual_metric import DualMetric
 
         return DualMetric(constrained=c["constrained"],
                           allow_unidentifiable=c["allow_unidentifiable"]).fit(sensor).theta, "dm-paper", None
 
-    def _newton_pilot(self, sensor: IdentificationProblem, newton: dict) -> tuple[np.ndarray, np.ndarray, str]:
-        """(θ, S, fallback): OLS, then for a WLS pilot the weighted fit with S = Σ̂ of the OLS residuals (S = I for
+    def _newton_pilot(self, sensor: IdentificationProblem, newton: dict) -> tuple[WeightedPilot, str]:
+        """(pilot, fallback): OLS, then for a WLS pilot the weighted fit with S = Σ̂ of the OLS residuals (S = I for
         OLS); fallback: what ``fit_weighted`` recorded when Newton failed and cvxpy fitted instead ("" if nothing)."""
         eye = np.eye(sensor.n)[None]  # one (1, n, n) block: a constant weight, factored once (newton.weighted)
         ols = fit_weighted(sensor, eye, "ols", newton, {})
         notes = [f"ols: {ols.info['solver_fallback']}"] if "solver_fallback" in ols.info else []
         if self.pilot == "ols":
-            return ols.theta, np.eye(sensor.n), "; ".join(notes)
+            return WeightedPilot(np.eye(sensor.n), ols), "; ".join(notes)
         S = residual_covariance(sensor, ols.theta)
         wls = fit_weighted(sensor, S[None], "wls", newton, {})
         notes += [f"wls: {wls.info['solver_fallback']}"] if "solver_fallback" in wls.info else []
-        return wls.theta, S, "; ".join(notes)
+        return WeightedPilot(S, wls), "; ".join(notes)
 
     def covariance(self, sensor: IdentificationProblem, theta_ref: np.ndarray,
                    M: np.ndarray | None = None, r: np.ndarray | None = None) -> tuple[np.ndarray, float, dict]:
@@ -240,9 +249,9 @@ class FeasibleGLS:
         sensor = problem.in_sensor_chart()
         need_pilot = not (self.kappa == 0.0 and self.sigma is not None) or self.theta_ref is not None
         if need_pilot:
-            theta_ref, pilot, S_pilot = self._pilot(sensor)
+            theta_ref, pilot, weighted_pilot = self._pilot(sensor)
         else:
-            theta_ref, pilot, S_pilot = None, "none (κ = 0)", None
+            theta_ref, pilot, weighted_pilot = None, "none (κ = 0)", None
         # (Σ, κ) from the residuals of at most COVARIANCE_SAMPLES evenly strided samples: few numbers, and the
         # likelihood's iterations each pass over the samples it is given
         rows = strided_rows(sensor.N, COVARIANCE_SAMPLES)
@@ -270,7 +279,7 @@ class FeasibleGLS:
         )
         result = fit_weighted(sensor, C, self.name, self._common(), info,
                               what=f"the residual covariance Σ + κ M_i(θ_ref) (κ = {kappa:.3g})")
-        result = self._select(sensor, result, info, S_pilot)
+        result = self._select(sensor, result, info, weighted_pilot)
         ref = given_reference(sensor, self.guard_reference, "FeasibleGLS")
         label = "given guard_reference" if ref is not None else f"pilot ({pilot})"
         ref = theta_ref if ref is None else ref
@@ -280,10 +289,10 @@ class FeasibleGLS:
         return result
 
     def _select(self, sensor: IdentificationProblem, result: IdentificationResult, info: dict,
-                S_pilot: np.ndarray | None) -> IdentificationResult:
+                pilot: WeightedPilot | None) -> IdentificationResult:
         """The GLS fit ``result`` (``info``: what fit() recorded before the fit), or its pilot's weighted fit when that
         predicts held-out folds better (estimators.weight_cv)."""
-        if self.select == "none" or S_pilot is None or self.sigma is not None:
+        if self.select == "none" or pilot is None or self.sigma is not None:
             why = ("select='none'" if self.select == "none" else
                    "no selection: Σ and κ were given" if self.sigma is not None else
                    f"no selection: the pilot ({info['pilot']}) is not a weighted least squares")
@@ -303,10 +312,14 @@ class FeasibleGLS:
 
         used = "identity (the OLS pilot's weight)" if info["pilot"].startswith("ols") else \
             "the sample covariance of the OLS residuals (the WLS pilot's weight)"
-        info = {**{k: v for k, v in info.items() if not of_estimate(k)}, **cv, "sigma": S_pilot.tolist(),
-                "sigma_diag": np.diag(S_pilot).tolist(), "kappa": 0.0, "kappa_share": 0.0, "covariance_model": used,
+        info = {**{k: v for k, v in info.items() if not of_estimate(k)}, **cv, "sigma": pilot.S.tolist(),
+                "sigma_diag": np.diag(pilot.S).tolist(), "kappa": 0.0, "kappa_share": 0.0, "covariance_model": used,
                 "estimated_covariance": {k: v for k, v in info.items() if of_estimate(k)}}
-        return fit_weighted(sensor, S_pilot[None], self.name, self._common(), info, what="the pilot's weight covariance")
+        common = self._common()
+        if common["solver"] == "newton" and not common["solver_options"]:  # the pilot's fit is this very fit (the
+            # same weighted problem, solver and options): returned under dm's name, not fitted a second time
+            return dataclasses.replace(pilot.fit, method=self.name, info={**pilot.fit.info, **info})
+        return fit_weighted(sensor, pilot.S[None], self.name, common, info, what="the pilot's weight covariance")
 
 
 def fit_weighted(sensor: IdentificationProblem, C, method: str, common: dict, info: dict,
