@@ -19,14 +19,13 @@ from pathlib import Path
 import yaml
 
 from dualid.estimators.methods import method as method_entry
-from dualid.estimators.newton.closure import NOT_DETERMINED
 from dualid.evaluation.validation import Validation
 from dualid.report.base_parameters import UNCERTAINTY_NOTE, definitions, method_record
 from dualid.report.fit_report import fit_report, report_data, score_table, validation_report
 from dualid.report.io import jsonable, write_json
 from dualid.report.metadata import run_metadata
 from dualid.report.model_files import plausible_record, write_model_files
-from dualid.report.not_determined import body_records
+from dualid.report.not_determined import body_records, not_determined
 from dualid.report.outdir import write_output
 from dualid.report.render import write_report
 from dualid.robot.fit import FitOutcome
@@ -40,7 +39,7 @@ def method_entry_record(m: str, f, P) -> dict:
     errors, base parameters with intervals and the held-out validation; for a failed fit, its error."""
     if not f.ok:
         return {"description": method_entry(m).description, "error": f.error}
-    r = f.result
+    r, nd = f.result, not_determined(f.result)
     return {
         "description": method_entry(m).description,
         "status": r.status,
@@ -51,8 +50,7 @@ def method_entry_record(m: str, f, P) -> dict:
         "objective": r.objective,
         "physically_consistent": bool(r.is_consistent),
         "parameters": [{"name": n, "unit": u, "value": float(x), "std_error": se,
-                        **({"determined_by_data": False, "note": NOT_DETERMINED}  # estimators.newton.closure
-                           if n in r.info.get("projected_names", ()) else {})}
+                        **({"determined_by_data": False, "note": nd[n]} if n in nd else {})}  # newton.closure
                        for n, u, x, se in zip(P.names, P.units, r.theta, f.uncertainty)],
         "base_parameters": method_record(f),
         "validation": None if f.validation is None else f.validation.as_dict(),
