@@ -107,3 +107,32 @@ def test_dm_is_chart_invariant_on_the_benchmark_arm_whose_first_link_mass_ran_of
     assert np.linalg.norm(Y @ b.theta - tau) <= 1e-6 * np.linalg.norm(tau)  # before: 2e-4 held out
     assert a.info["projected_parameters"].startswith("j0.m = ")
     assert b.objective == pytest.approx(a.objective, rel=1e-8)  # before: 13212.89 vs 13214.58
+
+
+
+
+
+def test_a_cvxpy_point_below_the_infimum_outside_the_set_does_not_beat_the_closed_run():
+    """The polish of a cvxpy answer on the closed set (dm's fits by Clarabel). Clarabel can stop far along j0.m's ray
+    (seen on these data: j0.m = 1.7e13 kg, Ixx = Iyy = 3.4e12, Izz = −7.7e-5), a point inside the set to a tolerance
+    relative to that size but outside it exactly (Izz < 0), with f below the infimum. Such a point used to be kept as
+    'certified by newton', beside a projected-mass note that described the closed run's θ, not the one returned."""
+    from dualid.estimators.certify import polish
+    from dualid.estimators.statistics import statistics
+    from dualid.model.consistency import feasible_set
+
+    problem, names = _problem()
+    theta_cvx = np.zeros(problem.p)
+    for name, value in {"j0.m": 1.7e13, "j0.mc_x": B, "j0.Ixx": 3.4e12, "j0.Iyy": 3.4e12, "j0.Izz": -1e-4}.items():
+        theta_cvx[names.index(name)] = value
+    stats = statistics(problem)
+    f_inf = 2 * A**2 + 2 * EXTRA
+    assert feasible_set(problem.parameters, True).margin(theta_cvx) < 0 < f_inf - stats.objective(problem, theta_cvx)
+    assert problem.parameters.is_consistent(theta_cvx)  # to the library's relative tolerance
+    theta, label, polished, certified, info = polish(theta_cvx, stats, problem.parameters, True, None, "CLARABEL",
+                                                     closure=True)
+    assert label == "CLARABEL optimal (outside the set by rounding) → newton on the closed set (newton.closure)"
+    assert (polished, certified) == (True, True)
+    assert stats.objective(problem, theta) == pytest.approx(f_inf, rel=1e-9)
+    m = float(info["projected_parameters"].split(" = ")[1].split(" ")[0])
+    assert theta[names.index("j0.m")] == pytest.approx(m, rel=1e-5)  # the note describes the θ returned

@@ -23,7 +23,10 @@ only as it grows), the polish on the closed set is the answer whatever the two o
 stopping point along that ray, within its tolerance of the infimum but placed by rounding (a certified cvxpy θ
 kept within ``TOL`` used to leave dm's prediction depending on where Clarabel stopped, and without the completed
 parameter's note). The chain says so ("→ newton on the closed set"). Not when the closed run ends above cvxpy's θ
-by more than ``TOL`` (it is a feasible point of the closed set, so that run missed its infimum): then as above. Nor on
+by more than ``TOL`` and cvxpy's θ is in the set exactly (a point of the closed set, so that run missed its infimum):
+then as above. A cvxpy θ below the infimum but outside the set (far along the ray a tolerance relative to the block's
+size admits a slightly negative axis inertia) does not count: the closed run's θ is returned, the chain says
+"outside the set by rounding"; the completed parameter's note always describes the θ returned. Nor on
 exact data (the shortcut above): f is at the rounding floor, the infimum is attained (f = 0 at a consistent θ), and a
 polish there is rounding-dominated (a WLS pilot on the stress corpus's exact RR chain, weights Σ̂⁻¹ ~ 1e23, came back
 1.4e7 times higher in f and moved dm's weights by 1e7).
@@ -57,6 +60,7 @@ def certified_objective(stats, parameters, regularizer):
 def polish(theta_cvx, stats, parameters, constrained, regularizer, solver, closure: bool = False):
     """(θ, label, polished, certified, info) — see the module doc."""
     from dualid.estimators.quadratic_newton import fit_quadratic_newton
+    from dualid.model.consistency import feasible_set
 
     f = certified_objective(stats, parameters, regularizer)
     f_cvx = f(theta_cvx)
@@ -77,13 +81,17 @@ def polish(theta_cvx, stats, parameters, constrained, regularizer, solver, closu
     above = (f_cvx - f_new) / max(abs(f_new), 1e-300) if np.isfinite(f_cvx) else np.inf
     info = {"certified_gap": float(ipm["relative_gap"]), "cvxpy_above_certified": float(above),
             "certify_iterations": int(ipm["iterations"])}
-    if "projected_parameters" in ipm and (above > TOL or closed):
-        info.update({k: v for k, v in ipm.items() if k.startswith("projected_")})
-    if closed and "projected_parameters" in ipm and above >= -TOL:  # not worse than cvxpy's θ (a feasible point of
-        # the closed set too): else the closed run did not reach its infimum and cvxpy's θ is checked as below
-        return theta, f"{solver} optimal ({above:.1e} above) → newton on the closed set (newton.closure)", True, True, info
+    projected = {k: v for k, v in ipm.items() if k.startswith("projected_")}  # describes θ, not θ_cvx
+    if closed and projected:
+        outside = feasible_set(parameters, True).margin(theta_cvx) < 0
+        if above >= -TOL or outside:  # cvxpy's θ counts against the closed run only as a point of the set (exactly,
+            # no tolerance: along the ray a relative one admits an axis inertia below 0, i.e. f below the infimum)
+            why = "outside the set by rounding" if above < -TOL else f"{above:.1e} above"
+            return theta, f"{solver} optimal ({why}) → newton on the closed set (newton.closure)", True, True, \
+                {**info, **projected}
+        # else the closed run did not reach its infimum and cvxpy's θ is checked as below
     if above > TOL:
-        return theta, f"{solver} optimal but {above:.1e} above → newton polished", True, True, info
+        return theta, f"{solver} optimal but {above:.1e} above → newton polished", True, True, {**info, **projected}
     return theta_cvx, f"{solver} optimal (certified by newton: {max(above, 0.0):.1e})", False, True, info
 
 
