@@ -97,6 +97,19 @@ def test_a_fit_with_a_completed_mass_says_it_in_all_three_outputs(written):
     assert bodies["Joint1"]["mass"] == pytest.approx(outcome.fits["dm"].result.theta[0], rel=1e-12)
 
 
+def test_the_results_own_record_says_it_too(written):
+    """IdentificationResult.as_dict() (the study's JSON, a library user's record) carries the same notes as
+    parameters.yaml: on the completed parameter and on its body."""
+    outcome, out = written
+    result = outcome.fits["dm"].result
+    d = result.as_dict()
+    assert [p["name"] for p in d["parameters"] if p.get("determined_by_data") is False] == ["Joint1.m"]
+    assert {p["note"] for p in d["parameters"] if "note" in p} == {NOT_DETERMINED}
+    assert [b["name"] for b in d["bodies"] if "not_determined_by_data" in b] == ["Joint1"]
+    yaml_bodies = yaml.safe_load((out / "parameters.yaml").read_text())["methods"]["dm"]["bodies"]
+    assert [b.get("not_determined_by_data") for b in d["bodies"]] == [b.get("not_determined_by_data") for b in yaml_bodies]
+
+
 def test_files_carrying_the_plausible_theta_have_no_such_comment(tmp_path):
     """θ_plausible (the default) takes an unseen mass from the prior, not from the completion (0.37 kg here against
     the completed 0.99 kg): the files carry no note, parameters.yaml's bodies (of θ̂) still do."""

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from dualid.estimators.newton.closure import NOT_DETERMINED
 from dualid.model.consistency import BodyProperties, body_properties
 from dualid.model.margin import margin_info
 from dualid.model.parameters import ParameterSpace
@@ -38,6 +40,22 @@ class IdentificationResult:
     def bodies(self) -> tuple[BodyProperties, ...]:
         return body_properties(self.parameters, self.theta)
 
+    def not_determined(self, names: Collection[str] | None = None) -> dict[str, str]:
+        """{parameter label: NOT_DETERMINED} for every parameter the data do not determine: one the fit completed on
+        the closed feasible set (estimators.newton.closure; info["projected_names"]); only those among ``names`` when
+        given (e.g. the rigid-body parameters a URDF carries)."""
+        return {n: NOT_DETERMINED for n in self.info.get("projected_names", ()) if names is None or n in names}
+
+    def body_records(self) -> list[dict]:
+        """Each body's physical quantities at θ̂, with ``not_determined_by_data``: [its parameter labels] on a body
+        one of whose parameters the fit completed (absent on the others)."""
+        P, completed = self.parameters, self.not_determined()
+        out = []
+        for b, props in zip(P.blocks, self.bodies):  # body_properties: one entry per block, in order
+            labels = [P.names[i] for i in b.indices if P.names[i] in completed]
+            out.append({**props.as_dict(), **({"not_determined_by_data": labels} if labels else {})})
+        return out
+
     @property
     def is_consistent(self) -> bool:
         return self.parameters.is_consistent(self.theta, tol=1e-7)
@@ -46,6 +64,7 @@ class IdentificationResult:
         return {n: float(x) for n, x in zip(self.parameters.names, self.theta)}
 
     def as_dict(self) -> dict:
+        nd = self.not_determined()
         return {
             "method": self.method,
             "objective": self.objective,
@@ -55,9 +74,9 @@ class IdentificationResult:
             "iterations": self.iterations,
             "constrained": self.constrained,
             "parameters": [
-                {"name": n, "unit": u, "value": float(x)}
+                {"name": n, "unit": u, "value": float(x), **({"determined_by_data": False, "note": nd[n]} if n in nd else {})}
                 for n, u, x in zip(self.parameters.names, self.parameters.units, self.theta)
             ],
-            "bodies": [b.as_dict() for b in self.bodies],
+            "bodies": self.body_records(),
             "info": {k: v for k, v in self.info.items() if isinstance(v, (int, float, str, bool))},
         }

@@ -19,7 +19,6 @@ from dualid.errors import DualidError
 from dualid.model.joint_terms import JointTermsModel
 from dualid.report.document import Bullets, Section, Text
 from dualid.report.mjcf import write_mjcf
-from dualid.report.not_determined import not_determined
 from dualid.report.urdf import write_urdf
 from dualid.robot.fit import FitOutcome, MethodFit
 
@@ -50,7 +49,7 @@ def write_model_files(outcome: FitOutcome, out: Path) -> tuple[dict[str, Path], 
         armature = model.armature_values(theta) if isinstance(model, JointTermsModel) else {}
         entry = {"theta": which}
         # a completed mass (not determined by the data) is said on its body when the files carry θ̂ itself
-        nd = not_determined(f.result, outcome.rigid.parameters.names) if which == RAW else {}
+        nd = f.result.not_determined(outcome.rigid.parameters.names) if which == RAW else {}
         try:
             path = write_urdf(outcome.config.model.urdf, outcome.rigid, theta[:p0], out / f"{m}.urdf", overwrite=True,
                               friction=friction, armature=armature, not_determined=nd)

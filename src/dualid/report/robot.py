@@ -25,7 +25,6 @@ from dualid.report.fit_report import fit_report, report_data, score_table, valid
 from dualid.report.io import jsonable, write_json
 from dualid.report.metadata import run_metadata
 from dualid.report.model_files import plausible_record, write_model_files
-from dualid.report.not_determined import body_records, not_determined
 from dualid.report.outdir import write_output
 from dualid.report.render import write_report
 from dualid.robot.fit import FitOutcome
@@ -39,7 +38,7 @@ def method_entry_record(m: str, f, P) -> dict:
     errors, base parameters with intervals and the held-out validation; for a failed fit, its error."""
     if not f.ok:
         return {"description": method_entry(m).description, "error": f.error}
-    r, nd = f.result, not_determined(f.result)
+    r, nd = f.result, f.result.not_determined()
     return {
         "description": method_entry(m).description,
         "status": r.status,
@@ -84,7 +83,7 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str], meta: dict | N
             "model_files_theta": (files or {}).get(m, {}).get("theta"),
             "mjcf_notes": (files or {}).get(m, {}).get("mjcf_notes"),
             "plausible": plausible_record(f),
-            "bodies": body_records(r),  # with not_determined_by_data on a body whose mass the fit completed
+            "bodies": r.body_records(),  # with not_determined_by_data on a body whose mass the fit completed
             "training_scores": None if m not in train else train[m].as_dict(),
         })
     return jsonable({
