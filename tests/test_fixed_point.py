@@ -65,9 +65,9 @@ def test_subsample_warm_start_reaches_the_cold_fixed_point():
     # scipy's generalised eigenproblem at θ̂ (the last fit's weight is one step < tol older)
     from scipy.linalg import eigh
 
-    from dualid.estimators.gls import FeasibleGLS
+    from dualid.estimators.least_squares import OLS
 
-    ref = FeasibleGLS(pilot="ols").reference(problem)[0]  # the pilot itself (OLS by Newton; cvxpy's agrees to ~1e-10)
+    ref = OLS().fit(problem).theta  # the pilot by another solver: Clarabel, certified (the pilot is Newton's; ~1e-10)
     M, M_ref, r = problem.metric.evaluate(warm.theta), problem.metric.evaluate(ref), problem.residual(warm.theta)
     f = 0.0
     for i in range(problem.N):
@@ -79,7 +79,7 @@ def test_subsample_warm_start_reaches_the_cold_fixed_point():
 
     guard = guard_info(problem, warm.theta, ref, 100.0, "pilot (ols)")
     for key in ("metric_ratio_min", "metric_ratio_max"):
-        assert abs(warm.info[key] - guard[key]) < 1e-10
+        assert abs(warm.info[key] - guard[key]) < 1e-8  # the two pilots differ by ~1e-10 (their solvers' tolerance)
     assert warm.info["degenerate"] == guard["degenerate"]
     # invariant as the cold fit (the subsample is the same samples in every chart)
     for B in (random_chart(rng, problem.N, 3, True), np.diag([1e-6, 1.0, 1e6])):

@@ -252,6 +252,8 @@ def test_newton_and_cvxpy_paths_agree():
         newton = FeasibleGLS(**kw).fit(problem)
         cvx = FeasibleGLS(solver="CLARABEL", **kw).fit(problem)
         assert newton.solver == "newton" and cvx.solver == "CLARABEL"
+        if not kw:  # the pilot is dualid's Newton fit whatever the solver, and the label says so to a Clarabel user
+            assert (newton.info["pilot"], cvx.info["pilot"]) == ("wls", "wls (by dualid's Newton method on the closed set)")
         assert rel(newton.theta, cvx.theta) < 1e-5
         assert rel(newton.objective, cvx.objective) < 1e-7
     with pytest.raises(ConfigError, match="solver"):

@@ -1,9 +1,10 @@
-"""The session-5 chunk kernels (dualid.estimators.newton.kernels) against AffineMetric.evaluate / apply_quad."""
+"""The session-5 chunk kernels (dualid.estimators.newton.kernels) against AffineMetric.apply_quad, and
+AffineMetric.evaluate (with and without its symmetrisation) against M_i = Σ_b J_bᵀ (Σ_k θ_k E_k) J_b + M0_i by loops."""
 
 import numpy as np
 import pytest
 
-from dualid.estimators.newton.kernels import metric_lower, residual_jacobian
+from dualid.estimators.newton.kernels import residual_jacobian
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.rigid_body import spatial_inertia_basis
 
@@ -33,9 +34,20 @@ def test_kernels_match_affine_metric(kind):
     rng = np.random.default_rng(1)
     theta, w, Y = rng.normal(size=p), rng.normal(size=(N, n)), rng.normal(size=(N, n, p))
     rows = slice(3, 30)
-    M = metric_lower(metric, theta, rows)
-    ref = metric.evaluate(theta, rows)
+    ref = np.zeros((N, n, n))  # by loops, sample by sample
+    for i in range(N):
+        for t in metric.terms:
+            E = t.E[i] if t.per_sample else t.E
+            G = sum(theta[k] * E[j] for j, k in enumerate(t.indices))
+            ref[i] += t.J[i].T @ G @ t.J[i]
+        if metric.M0 is not None:
+            ref[i] += metric.M0[i]
+    ref = ref[rows]
+    M = metric.evaluate(theta, rows, symmetric=False)
     assert np.allclose(np.tril(M), np.tril(ref), rtol=1e-13, atol=1e-12 * np.abs(ref).max())
+    Ms = metric.evaluate(theta, rows)
+    assert np.array_equal(Ms, np.swapaxes(Ms, 1, 2))
+    assert np.allclose(Ms, ref, rtol=1e-13, atol=1e-12 * np.abs(ref).max())
     Y_before = Y[rows].copy()
     D, wMw = residual_jacobian(metric, Y[rows], w[rows], rows)
     D_ref, wMw_ref = metric.apply_quad(w[rows], rows, out=Y[rows].copy())

@@ -183,10 +183,13 @@ class FeasibleGLS:
             # reached only as an unseen mass grows (newton.closure): a pilot stopped along that ray moves with
             # rounding, and the weights with it (re-chart change of dm up to 1.2e-5, docs/statistics.md). If Newton
             # fails, ``fit_weighted`` fits the same problem by cvxpy, polished on the closed set as well (not the
-            # library's OLS/WLS, which keep the original set); what ran is in the label (result.info["pilot"])
+            # library's OLS/WLS, which keep the original set); what ran is in the label (result.info["pilot"],
+            # which also says so when the user's solver is a cvxpy one)
             # whatever the final fit's solver: the same pilot, so the solvers fit the same weighted problem
             pilot, fallback = self._newton_pilot(sensor, {**c, "solver": "newton", "solver_options": {}})
-            return pilot.fit.theta, self.pilot + (f" ({fallback})" if fallback else ""), pilot
+            # said in the label when the user chose a cvxpy solver for the fit: the pilot is not that solver's
+            how = fallback or ("by dualid's Newton method on the closed set" if c["solver"] != "newton" else "")
+            return pilot.fit.theta, self.pilot + (f" ({how})" if how else ""), pilot
         from dualid.estimators.dual_metric import DualMetric
 
         return DualMetric(constrained=c["constrained"],

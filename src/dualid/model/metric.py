@@ -98,20 +98,24 @@ class AffineMetric:
         return self.M0.shape[0], self.M0.shape[1]
 
     # --- evaluation -------------------------------------------------------------------------
-    def evaluate(self, theta: np.ndarray, rows: slice | np.ndarray = slice(None)) -> np.ndarray:
-        """M_i(θ) for the selected samples, (N', n, n)."""
+    def evaluate(self, theta: np.ndarray, rows: slice | np.ndarray = slice(None), symmetric: bool = True) -> np.ndarray:
+        """M_i(θ) for the selected samples, (N', n, n); symmetric=False skips the final symmetrisation (M_i is then
+        symmetric up to rounding: a caller that reads only its lower triangle, e.g. a Cholesky factorisation)."""
         theta = np.asarray(theta, dtype=float)
         M = None
         for t in self.terms:
             G = t.G(theta)
             if t.per_sample:
                 G = G[rows]
-            J = t.J[rows]
-            term = np.swapaxes(J, 1, 2) @ G @ J
-            M = term if M is None else M + term
+            J = t.J[rows]  # (N', d, n)
+            term = np.matmul(np.swapaxes(J, 1, 2), np.matmul(G, J))
+            if M is None:
+                M = term
+            else:
+                M += term
         if self.M0 is not None:
             M = self.M0[rows].copy() if M is None else M + self.M0[rows]
-        return 0.5 * (M + np.swapaxes(M, 1, 2))
+        return 0.5 * (M + np.swapaxes(M, 1, 2)) if symmetric else M
 
     def quad(self, w: np.ndarray, rows: slice | np.ndarray = slice(None)) -> np.ndarray:
         """(N', p): w_iᵀ M_ik w_i for w (N', n)."""

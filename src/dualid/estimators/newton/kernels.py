@@ -1,11 +1,10 @@
 """Per-chunk kernels of the dual-metric derivatives, arranged for numpy's batched small products.
 
-Same mathematics as ``AffineMetric.evaluate`` / ``AffineMetric.apply_quad`` (the reference the tests compare
-with), re-arranged where that was measured to be cheaper on a 4,096-sample Crazyflie chunk (n = 8, p = 30, three
-bodies; benchmarks/speed_session5.md):
+Same mathematics as ``AffineMetric.apply_quad`` (the reference the tests compare with), re-arranged where that was
+measured to be cheaper on a 4,096-sample Crazyflie chunk (n = 8, p = 30, three bodies; benchmarks/speed_session5.md):
 
 - M_i(θ) = Σ_b J_bᵀ (G_b J_b): G_b J_b by one broadcast product, no explicit symmetrisation (the Cholesky reads
-  the lower triangle only): 530 → 420 ns per sample;
+  the lower triangle only): 530 → 420 ns per sample; that is ``AffineMetric.evaluate(θ, rows, symmetric=False)``;
 - [M_ik w_i]_k written straight into one (c, n, p) array (``matmul(…, out=…)``) and D = Y − A by one subtraction,
   instead of a copy of Y and a strided in-place update per body: 1,430 → 640 ns per sample;
 - Σ_i w_iᵀ M_ik w_i = Σ_de E_k,de S_de with S = Σ_i u_i u_iᵀ (u_i = J_i w_i): one (d×c)(c×d) GEMM instead of a
@@ -17,24 +16,6 @@ from __future__ import annotations
 import numpy as np
 
 from dualid.model.metric import AffineMetric
-
-
-def metric_lower(metric: AffineMetric, theta: np.ndarray, rows) -> np.ndarray:
-    """M_i(θ) (c, n, n) for the selected samples; symmetric up to rounding (use its lower triangle)."""
-    M = None
-    for t in metric.terms:
-        G = t.G(theta)
-        if t.per_sample:
-            G = G[rows]
-        J = t.J[rows]  # (c, d, n)
-        term = np.matmul(np.swapaxes(J, 1, 2), np.matmul(G, J))
-        if M is None:
-            M = term
-        else:
-            M += term
-    if metric.M0 is not None:
-        M = metric.M0[rows].copy() if M is None else M + metric.M0[rows]
-    return M
 
 
 def residual_jacobian(metric: AffineMetric, Y: np.ndarray, w: np.ndarray, rows) -> tuple[np.ndarray, np.ndarray]:

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dualid.estimators.newton.kernels import metric_lower, residual_jacobian
+from dualid.estimators.newton.kernels import residual_jacobian
 from dualid.problem import IdentificationProblem, sample_blocks
 
 CHUNK = 1024  # samples per block of a pass: the per-chunk temporaries (Y_i, D_i, L⁻¹D_i: c·n·p floats each) stay in
@@ -81,7 +81,7 @@ def dual_metric_derivatives(
         Y = block.Y[rows]  # (c, n, p)
         c = Y.shape[0]
         r = (Y.reshape(c * n, p) @ theta).reshape(c, n) - block.tau[rows]  # (c, n)
-        L = _cholesky(metric_lower(block.metric, theta, rows))  # M_i = L_i L_iᵀ
+        L = _cholesky(block.metric.evaluate(theta, rows, symmetric=False))  # M_i = L_i L_iᵀ
         if not order:
             z = _forward(L, r)  # L⁻¹ r
             f += float(np.sum(z * z))
@@ -111,7 +111,7 @@ def _force_scale(problem, theta, chunk) -> float:
     """Σ τ_iᵀ M_i(θ)⁻¹ τ_i: the size of the measured forces in the dual metric (the objective's scale)."""
     total = 0.0
     for block, rows, _ in sample_blocks(problem, chunk):
-        L = np.linalg.cholesky(metric_lower(block.metric, theta, rows))
+        L = np.linalg.cholesky(block.metric.evaluate(theta, rows, symmetric=False))
         z = _forward(L, block.tau[rows])  # L⁻¹ τ_i
         total += float(np.sum(z * z))
     return total
