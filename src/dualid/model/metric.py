@@ -108,7 +108,10 @@ class AffineMetric:
             if t.per_sample:
                 G = G[rows]
             J = t.J[rows]  # (N', d, n)
-            term = np.matmul(np.swapaxes(J, 1, 2), np.matmul(G, J))
+            Jt = np.swapaxes(J, 1, 2)
+            # the Newton kernels' order (G J first: benchmarks/speed_session5.md); the symmetrised M keeps its own
+            # order, so both give the values they gave before they shared this code
+            term = np.matmul(Jt, np.matmul(G, J)) if not symmetric else Jt @ G @ J
             if M is None:
                 M = term
             else:
