@@ -45,6 +45,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--out", type=Path, required=True)
     args = ap.parse_args()
+    if args.out.exists():
+        raise SystemExit(f"{args.out} exists; remove it first")
     kernels = {"lapack (session 7)": lapack_nll, "spd_inverse (session 8)": cm._gaussian_nll}
     est = FeasibleGLS(allow_unidentifiable=True)
     lines = ["| arm (DoF) | " + " | ".join(f"dm, {k} [s]" for k in kernels) + " | speed-up | ‖Δθ‖/‖θ‖ | same choice |",
