@@ -64,33 +64,35 @@ class _Whitening:
     def kind(self) -> str:
         return "mixed" if len(self.kinds) > 1 else next(iter(self.kinds), "none")
 
+    def _factored(self, block: IdentificationProblem, rows: slice) -> tuple[str, np.ndarray]:
+        """(kind, F) for the block's rows, recorded in ``kinds``: the caller's W_i (c, n, n), C_i⁻¹ = W_iᵀ W_i
+        ("factor": no Cholesky), the constant weight's L⁻¹ (n, n) ("constant") or the per-sample L_i (c, n, n)."""
+        if self.whiten is not None:
+            kind, F = "factor", self.whiten(block, rows)
+        else:
+            C = np.asarray(self.weight(block, rows))
+            if C.ndim == 3 and C.shape[0] == 1:
+                kind, F = "constant", self._constant(C[0])
+            else:
+                kind, F = "per-sample", _factor(self.problem, block, self.weight, rows, self.what, C)
+        self.kinds.add(kind)
+        return kind, F
+
     def __call__(self, block: IdentificationProblem, rows: slice) -> tuple[np.ndarray, np.ndarray]:
-        if self.whiten is not None:  # the caller's factor W_i (c, n, n), C_i⁻¹ = W_iᵀ W_i: no Cholesky
-            self.kinds.add("factor")
-            W = self.whiten(block, rows)
-            return np.matmul(W, block.Y[rows]), np.einsum("cab,cb->ca", W, block.tau[rows])
-        C = np.asarray(self.weight(block, rows))
-        if C.ndim == 3 and C.shape[0] == 1:
-            self.kinds.add("constant")
-            Li = self._constant(C[0])
-            return np.matmul(Li, block.Y[rows]), block.tau[rows] @ Li.T
-        self.kinds.add("per-sample")
-        Li = _tri_inverse(_factor(self.problem, block, self.weight, rows, self.what, C))
-        return np.matmul(Li, block.Y[rows]), np.einsum("cab,cb->ca", Li, block.tau[rows])
+        kind, F = self._factored(block, rows)
+        if kind == "constant":
+            return np.matmul(F, block.Y[rows]), block.tau[rows] @ F.T
+        W = F if kind == "factor" else _tri_inverse(F)  # L_i⁻¹ per sample
+        return np.matmul(W, block.Y[rows]), np.einsum("cab,cb->ca", W, block.tau[rows])
 
     def residual(self, block: IdentificationProblem, rows: slice, theta: np.ndarray) -> np.ndarray:
         """The whitened residuals L_i⁻¹ r_i (c, n) at θ: r_i first, then one n-vector per sample to whiten (not Y)."""
         Y = block.Y[rows]
         r = (Y.reshape(-1, Y.shape[-1]) @ theta).reshape(Y.shape[:2]) - block.tau[rows]  # (c, n)
-        if self.whiten is not None:
-            self.kinds.add("factor")
-            return np.einsum("cab,cb->ca", self.whiten(block, rows), r)
-        C = np.asarray(self.weight(block, rows))
-        if C.ndim == 3 and C.shape[0] == 1:
-            self.kinds.add("constant")
-            return r @ self._constant(C[0]).T
-        self.kinds.add("per-sample")
-        return _forward(_factor(self.problem, block, self.weight, rows, self.what, C), r)
+        kind, F = self._factored(block, rows)
+        if kind == "constant":
+            return r @ F.T
+        return np.einsum("cab,cb->ca", F, r) if kind == "factor" else _forward(F, r)
 
     def _constant(self, C: np.ndarray) -> np.ndarray:
         if self.Li is None or not np.array_equal(C, self.C):
