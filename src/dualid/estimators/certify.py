@@ -70,19 +70,21 @@ def polish(theta_cvx, stats, parameters, constrained, regularizer, solver, closu
                 "certify_iterations": 0}
         return theta_cvx, f"{solver} optimal (certified: f at the rounding floor, {info['certified_gap']:.1e} of f(0))", \
             False, True, info
-    closed = closure and regularizer is None and constrained and _projects(stats, parameters)
     try:
         theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, parameters, constrained=constrained,
                                           regularizer=regularizer, start=theta_cvx, closure=closure)
     except SolverError as exc:
+        closed = closure and regularizer is None and constrained and _projects(stats, parameters)
         where = " on the closed set (newton.closure)" if closed else ""
         return theta_cvx, f"{solver} optimal, not certified: newton check{where} failed ({exc.status})", False, False, {}
     f_new = f(theta)
     above = (f_cvx - f_new) / max(abs(f_new), 1e-300) if np.isfinite(f_cvx) else np.inf
     info = {"certified_gap": float(ipm["relative_gap"]), "cvxpy_above_certified": float(above),
             "certify_iterations": int(ipm["iterations"])}
-    projected = {k: v for k, v in ipm.items() if k.startswith("projected_")}  # describes θ, not θ_cvx
-    if closed and projected:
+    # the closure's completion (describes θ, not θ_cvx): present exactly when the fit ran on a closed set that
+    # projected a parameter out (newton.closure.on_closure, enabled by closure without a prior)
+    projected = {k: v for k, v in ipm.items() if k.startswith("projected_")}
+    if projected:
         outside = feasible_set(parameters, True).margin(theta_cvx) < 0
         if above >= -TOL or outside:  # cvxpy's θ counts against the closed run only as a point of the set (exactly,
             # no tolerance: along the ray a relative one admits an axis inertia below 0, i.e. f below the infimum)
