@@ -259,6 +259,7 @@ def parameter_tables(d: FitReportData) -> list[Table]:
         groups.setdefault(n.split(".", 1)[0] if "." in n else "other", []).append(k)
     columns = [o.fits[m].result.theta for m in ok] + [th for th, _ in o.references.values()]
     tiny = [1e-10 * float(np.max(np.abs(th))) for th in columns]  # solver round-off, shown as 0
+    nd = {m: o.fits[m].result.not_determined() for m in ok}  # completed parameters, marked "(n.d.)"
     tables = []
     for group, idx in groups.items():
         rows = []
@@ -268,7 +269,7 @@ def parameter_tables(d: FitReportData) -> list[Table]:
             for i, m in enumerate(ok):
                 se = o.fits[m].uncertainty[k] if o.fits[m].uncertainty else None
                 values[i] += f" ± {se:.2g}" if isinstance(se, float) else ""
-                values[i] += " (n.d.)" if P.names[k] in o.fits[m].result.info.get("projected_names", ()) else ""
+                values[i] += " (n.d.)" if P.names[k] in nd[m] else ""
             cells += values
             rows.append(tuple(cells))
         tables.append(Table(("parameter", "unit", *ok, *o.references), tuple(rows), title=group))
