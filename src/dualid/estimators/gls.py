@@ -183,11 +183,10 @@ class FeasibleGLS:
             # reached only as an unseen mass grows (newton.closure): a pilot stopped along that ray moves with
             # rounding, and the weights with it (re-chart change of dm up to 1.2e-5, docs/statistics.md). If Newton
             # fails, ``fit_weighted`` fits the same problem by cvxpy, polished on the closed set as well (not the
-            # library's OLS/WLS, which keep the original set); what ran is in the label (result.info["pilot"],
-            # which also says so when the user's solver is a cvxpy one)
-            # whatever the final fit's solver: the same pilot, so the solvers fit the same weighted problem
+            # library's OLS/WLS, which keep the original set). Whatever the final fit's solver it is the same pilot,
+            # so the solvers fit the same weighted problem; what ran is in the label (result.info["pilot"]), which
+            # also says so when the user's solver is a cvxpy one (the pilot is not that solver's)
             pilot, fallback = self._newton_pilot(sensor, {**c, "solver": "newton", "solver_options": {}})
-            # said in the label when the user chose a cvxpy solver for the fit: the pilot is not that solver's
             how = fallback or ("by dualid's Newton method on the closed set" if c["solver"] != "newton" else "")
             return pilot.fit.theta, self.pilot + (f" ({how})" if how else ""), pilot
         from dualid.estimators.dual_metric import DualMetric
