@@ -46,6 +46,20 @@ class IdentificationResult:
         given (e.g. the rigid-body parameters a URDF carries)."""
         return {n: NOT_DETERMINED for n in self.info.get("projected_names", ()) if names is None or n in names}
 
+    def parameter_records(self, std_errors=None) -> list[dict]:
+        """One entry per parameter: name, unit, value (θ̂), its ``std_error`` when std_errors (p,) are given, and
+        ``determined_by_data: false`` with the note on a parameter the fit completed (``not_determined``)."""
+        nd, P = self.not_determined(), self.parameters
+        out = []
+        for k, (n, u, x) in enumerate(zip(P.names, P.units, self.theta)):
+            entry = {"name": n, "unit": u, "value": float(x)}
+            if std_errors is not None:
+                entry["std_error"] = std_errors[k]
+            if n in nd:
+                entry.update(determined_by_data=False, note=nd[n])
+            out.append(entry)
+        return out
+
     def body_records(self) -> list[dict]:
         """Each body's physical quantities at θ̂, with ``not_determined_by_data``: [its parameter labels] on a body
         one of whose parameters the fit completed (absent on the others)."""
@@ -64,7 +78,6 @@ class IdentificationResult:
         return {n: float(x) for n, x in zip(self.parameters.names, self.theta)}
 
     def as_dict(self) -> dict:
-        nd = self.not_determined()
         return {
             "method": self.method,
             "objective": self.objective,
@@ -73,10 +86,7 @@ class IdentificationResult:
             "solve_time_s": self.solve_time,
             "iterations": self.iterations,
             "constrained": self.constrained,
-            "parameters": [
-                {"name": n, "unit": u, "value": float(x), **({"determined_by_data": False, "note": nd[n]} if n in nd else {})}
-                for n, u, x in zip(self.parameters.names, self.parameters.units, self.theta)
-            ],
+            "parameters": self.parameter_records(),
             "bodies": self.body_records(),
             "info": {k: v for k, v in self.info.items() if isinstance(v, (int, float, str, bool))},
         }

@@ -38,7 +38,7 @@ def method_entry_record(m: str, f, P) -> dict:
     errors, base parameters with intervals and the held-out validation; for a failed fit, its error."""
     if not f.ok:
         return {"description": method_entry(m).description, "error": f.error}
-    r, nd = f.result, f.result.not_determined()
+    r = f.result
     return {
         "description": method_entry(m).description,
         "status": r.status,
@@ -48,9 +48,7 @@ def method_entry_record(m: str, f, P) -> dict:
         "solve_time_s": r.solve_time,
         "objective": r.objective,
         "physically_consistent": bool(r.is_consistent),
-        "parameters": [{"name": n, "unit": u, "value": float(x), "std_error": se,
-                        **({"determined_by_data": False, "note": nd[n]} if n in nd else {})}  # newton.closure
-                       for n, u, x, se in zip(P.names, P.units, r.theta, f.uncertainty)],
+        "parameters": r.parameter_records(f.uncertainty),  # the completed ones say so (newton.closure)
         "base_parameters": method_record(f),
         "validation": None if f.validation is None else f.validation.as_dict(),
     }
