@@ -11,14 +11,14 @@ from dualid.errors import SolverError
 from dualid.estimators import certify
 from dualid.estimators.methods import make_estimator
 
-CASE = "chain RPR, 3 dof, 5 %"  # Clarabel solves its WLS fit accurately
+CASE = "chain RPR, 3 dof, 5 %"  # Clarabel solves its OLS fit accurately (its WLS fit is on the closed set: no cvxpy)
 
 
 def test_a_clarabel_optimal_above_the_optimum_is_polished_and_says_by_how_much(monkeypatch):
     """Clarabel's answer moved 10 % toward the true θ (feasible: the set is convex) and still labelled 'optimal' —
     what Clarabel did on boundary priors in the stress corpus (1e-5 … 4e-2 above), made deterministic."""
     problem, theta_true = corpus_problem(CASE)
-    honest = make_estimator("wls", allow_unidentifiable=True).fit(problem)
+    honest = make_estimator("ols", allow_unidentifiable=True).fit(problem)
     assert honest.info["solver_chain"].startswith("CLARABEL optimal (certified by newton: ")
     seen = {}
     polish = certify.polish
@@ -30,7 +30,7 @@ def test_a_clarabel_optimal_above_the_optimum_is_polished_and_says_by_how_much(m
         return polish(worse, stats, parameters, constrained, regularizer, solver, closure=closure)
 
     monkeypatch.setattr(certify, "polish", moved)
-    result = make_estimator("wls", allow_unidentifiable=True).fit(problem)
+    result = make_estimator("ols", allow_unidentifiable=True).fit(problem)
     assert (result.status, result.solver, result.info["fallback_used"]) == ("optimal", "newton", True)
     above = result.info["cvxpy_above_certified"]
     assert result.info["solver_chain"] == f"CLARABEL optimal but {above:.1e} above → newton polished"
@@ -49,7 +49,7 @@ def test_a_clarabel_optimal_that_cannot_be_certified_is_reported_inaccurate(monk
         raise SolverError("quadratic Newton: broken for the test", status="max_iterations")
 
     monkeypatch.setattr(qn, "fit_quadratic_newton", broken)
-    result = make_estimator("wls", allow_unidentifiable=True).fit(problem)
+    result = make_estimator("ols", allow_unidentifiable=True).fit(problem)
     assert result.status == "optimal_inaccurate" and result.solver == "CLARABEL"
     assert result.info["solver_chain"] == "CLARABEL optimal, not certified: newton check failed (max_iterations)"
 

@@ -1,7 +1,7 @@
 """Every path of dm's weighted fit is made on the closed feasible set (estimators.newton.closure), and the closure
 finds the unseen mass also where rounding leaves its regressor column not exactly zero.
 
-- the weighted Newton fit whose cheap start fails (a bound the central point violates): before, ``gls.fit_weighted``
+- the weighted Newton fit whose cheap start fails (a bound the central point violates): before, ``quadratic_fit.fit_weighted``
   refitted the materialised constant metric without the closure (j0.m = 3.5·10⁹ kg where rounding left it);
 - a cvxpy answer that the Newton polish certified within ``certify.TOL``: before, it was returned as it was (j0.m =
   1.7·10⁷ kg where Clarabel stopped, no completion note);
@@ -21,8 +21,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from dualid.estimators.gls import FeasibleGLS, fit_weighted
+from dualid.estimators.gls import FeasibleGLS
 from dualid.estimators.newton.closure import NOT_DETERMINED, ZERO_CURVATURE, close, complete
+from dualid.estimators.quadratic_fit import fit_weighted
 from dualid.model.consistency import feasible_set
 from dualid.model.metric import AffineMetric
 

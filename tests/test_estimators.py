@@ -153,7 +153,7 @@ def test_infeasible_constraints_raise_with_the_solver_status():
 def test_a_false_infeasibility_claim_is_refuted_by_the_interior_point(monkeypatch):
     """cvxpy's "infeasible" ends a fit only when dualid's interior point finds no feasible optimum either (a badly
     scaled conic problem can be called infeasible: the margin's pullback fit in test_margin was); the chain says so."""
-    import dualid.estimators.least_squares as ls
+    import dualid.estimators.quadratic_fit as ls
 
     problem, _ = drag_problem(np.random.default_rng(0), N=20, n=3)
     expected = OLS().fit(problem)

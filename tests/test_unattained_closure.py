@@ -136,3 +136,41 @@ def test_a_cvxpy_point_below_the_infimum_outside_the_set_does_not_beat_the_close
     assert stats.objective(problem, theta) == pytest.approx(f_inf, rel=1e-9)
     m = float(info["projected_parameters"].split(" = ")[1].split(" ")[0])
     assert theta[names.index("j0.m")] == pytest.approx(m, rel=1e-5)  # the note describes the θ returned
+
+
+def test_wls_on_an_unattained_infimum_is_dms_pilot_on_the_closed_set_bit_for_bit():
+    """WLS (and the OLS fit its Σ̂ comes from) goes to the closed set where the closure projects a parameter out
+    (least_squares.WLS → quadratic_fit.closed_fit): there it reaches the infimum, Izz → 0, instead of a stopping point
+    along the mass's ray, and it is exactly ``dm``'s WLS pilot, so a ``dm`` that keeps its pilot returns ``wls``."""
+    from dualid import WLS
+    from dualid.estimators.gls import FeasibleGLS
+
+    problem, names = _problem()
+    wls = WLS(allow_unidentifiable=True).fit(problem)
+    assert wls.solver == "newton"
+    assert wls.info["solver_chain"] == ("newton on the closed set (newton.closure): the infimum is approached only as "
+                                        "an unseen parameter grows, where CLARABEL stops by rounding, so CLARABEL was "
+                                        "not run")
+    assert list(wls.not_determined()) == ["j0.m"]
+    assert abs(wls.theta[names.index("j0.Izz")]) < 1e-7 and wls.theta[names.index("j0.mc_x")] == pytest.approx(B)
+    pilot, how = FeasibleGLS(allow_unidentifiable=True).reference(problem)
+    assert how == "wls" and np.array_equal(wls.theta, pilot)
+
+
+def test_wls_keeps_its_cvxpy_solver_where_the_infimum_is_attained():
+    """The same data with the mass bounded (j0.m ≤ 10 kg): nothing is projected, the minimum is attained at the
+    bound, and WLS is Clarabel's (certified by dualid's interior point) as before."""
+    from dataclasses import replace
+
+    from dualid import WLS
+
+    problem, names = _problem()
+    P = problem.parameters
+    hi = np.full(problem.p, np.inf)
+    hi[names.index("j0.m")] = 10.0
+    lo = np.asarray(P.lower if P.lower is not None else [-np.inf] * problem.p, dtype=float)
+    bounded = replace(problem, parameters=P.with_bounds(lo, hi))
+    wls = WLS(allow_unidentifiable=True).fit(bounded)
+    assert wls.info["solver_chain"].startswith("CLARABEL optimal")
+    assert "projected_parameters" not in wls.info
+    assert wls.theta[names.index("j0.m")] == pytest.approx(10.0, rel=1e-6)

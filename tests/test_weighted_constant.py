@@ -13,10 +13,11 @@ import numpy as np
 import pytest
 
 from dualid.errors import MetricError
-from dualid.estimators.gls import FeasibleGLS, fit_weighted
+from dualid.estimators.gls import FeasibleGLS
 from dualid.estimators.least_squares import residual_covariance
 from dualid.estimators.newton import weighted
 from dualid.estimators.newton.weighted import fit_weighted_newton, weighted_objective
+from dualid.estimators.quadratic_fit import fit_weighted
 from tests.factories import drag_problem
 from tests.test_invariance import rel
 

@@ -57,7 +57,7 @@ def check_covariance(covariance, who: str) -> tuple[tuple[float, ...], ...] | No
 def is_problem_property(exc: SolverError) -> bool:
     """Infeasible, unbounded or an optimum at infinity: a property of the problem, which another solver cannot
     change (no fallback). The quadratic fits check a cvxpy "infeasible" with dualid's interior point first
-    (``least_squares._solve_with_fallback``): a badly scaled conic problem can be called infeasible."""
+    (``quadratic_fit._solve_with_fallback``): a badly scaled conic problem can be called infeasible."""
     return bool(exc.status) and any(s in exc.status for s in ("infeasible", "unbounded", "at_infinity"))
 
 

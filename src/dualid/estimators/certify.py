@@ -74,7 +74,7 @@ def polish(theta_cvx, stats, parameters, constrained, regularizer, solver, closu
         theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, parameters, constrained=constrained,
                                           regularizer=regularizer, start=theta_cvx, closure=closure)
     except SolverError as exc:
-        closed = closure and regularizer is None and constrained and _projects(stats, parameters)
+        closed = closure and regularizer is None and constrained and projects(stats, parameters)
         where = " on the closed set (newton.closure)" if closed else ""
         return theta_cvx, f"{solver} optimal, not certified: newton check{where} failed ({exc.status})", False, False, {}
     f_new = f(theta)
@@ -97,7 +97,7 @@ def polish(theta_cvx, stats, parameters, constrained, regularizer, solver, closu
     return theta_cvx, f"{solver} optimal (certified by newton: {max(above, 0.0):.1e})", False, True, info
 
 
-def _projects(stats, parameters) -> bool:
+def projects(stats, parameters) -> bool:
     """Does the closure project some parameter out of this fit (``newton.closure.close`` on its statistics)?"""
     from dualid.estimators.newton.closure import close
     from dualid.model.consistency import feasible_set

@@ -10,7 +10,7 @@ a chart-invariant trust region around a fixed pilot θ_ref:
 (the generalised eigenvalues of M_i(θ_k) against M_i(θ_ref) clipped to [1/c, c]), damped
 geometrically between iterations (M̄ ← M̄_prev^{1−η} M̄_new^η in the pencil's eigenbasis, η =
 ``damping``), and θ_{k+1} = argmin Σ r_iᵀ M̄_i⁻¹ r_i under the usual constraints. Every step is a
-weighted least squares (estimators.gls.fit_weighted). The clip and the pencil are chart-invariant,
+weighted least squares (estimators.quadratic_fit.fit_weighted). The clip and the pencil are chart-invariant,
 and the pilot is fitted in the sensor chart, so the estimator is invariant under the charts the
 problem records.
 
@@ -29,9 +29,10 @@ import numpy as np
 
 from dualid.errors import ConfigError, DataError, MetricError, SolverError
 from dualid.estimators.base import freeze_options
-from dualid.estimators.gls import PILOTS, FeasibleGLS, fit_weighted
+from dualid.estimators.gls import PILOTS, FeasibleGLS
 from dualid.estimators.metric_guard import DEFAULT_BOUND, guard_from_ratios
 from dualid.estimators.newton.objective import _tri_inverse
+from dualid.estimators.quadratic_fit import fit_weighted
 from dualid.problem import IdentificationProblem
 
 CHUNK = 8192  # samples per block: the weight and the pencil are computed blockwise (no (N, n, n) temporaries)

@@ -43,14 +43,14 @@ from typing import NamedTuple
 
 import numpy as np
 
-from dualid.errors import ConfigError, MetricError, SolverError
-from dualid.estimators.base import check_identifiable, freeze_options
+from dualid.errors import ConfigError
+from dualid.estimators.base import freeze_options
 from dualid.estimators.covariance_model import full_likelihood_estimate, likelihood_estimate, moment_estimate
 from dualid.estimators.covariance_select import select_structure
-from dualid.estimators.least_squares import fit_quadratic, residual_covariance
+from dualid.estimators.least_squares import residual_covariance
 from dualid.estimators.metric_guard import DEFAULT_BOUND, given_reference, reference_guard
+from dualid.estimators.quadratic_fit import fit_weighted
 from dualid.estimators.result import IdentificationResult
-from dualid.estimators.statistics import statistics
 from dualid.estimators.weight_cv import CV_FOLDS, SELECTS, choose_weight
 from dualid.problem import IdentificationProblem, strided_rows
 
@@ -182,8 +182,9 @@ class FeasibleGLS:
             # WLS: M_i = Σ̂ from the OLS residuals), which fits on the closed feasible set where the infimum is
             # reached only as an unseen mass grows (newton.closure): a pilot stopped along that ray moves with
             # rounding, and the weights with it (re-chart change of dm up to 1.2e-5, docs/statistics.md). If Newton
-            # fails, ``fit_weighted`` fits the same problem by cvxpy, polished on the closed set as well (not the
-            # library's OLS/WLS, which keep the original set). Whatever the final fit's solver it is the same pilot,
+            # fails, ``fit_weighted`` fits the same problem by cvxpy, polished on the closed set as well. Where the
+            # closure projects a parameter out, the library's WLS is this same fit (``least_squares.closed_fit``),
+            # bit for bit; elsewhere it is its cvxpy solver's. Whatever the final fit's solver it is the same pilot,
             # so the solvers fit the same weighted problem; what ran is in the label (result.info["pilot"]), which
             # also says so when the user's solver is a cvxpy one (the pilot is not that solver's)
             pilot, fallback = self._newton_pilot(sensor, {**c, "solver": "newton", "solver_options": {}})
@@ -322,51 +323,3 @@ class FeasibleGLS:
             # same weighted problem, solver and options): returned under dm's name, not fitted a second time
             return dataclasses.replace(pilot.fit, method=self.name, info={**pilot.fit.info, **info})
         return fit_weighted(sensor, pilot.S[None], self.name, common, info, what="the pilot's weight covariance")
-
-
-def fit_weighted(sensor: IdentificationProblem, C, method: str, common: dict, info: dict,
-                 what: str = "the weight's covariance") -> IdentificationResult:
-    """argmin Σ r_iᵀ C_i⁻¹ r_i (C (N, n, n) or (1, n, n), ≻ 0, or a function rows → C_i of a block of
-    samples, so no N-sized array is needed) under the constraints.
-
-    solver "newton": the dual-metric interior-point method of ``estimators.newton`` on the problem
-    with the constant metric M_i = C_i (its objective is then exactly this one), run on the weighted
-    sufficient statistics (``newton.weighted``); it converges to 1e-9 relative, also where the data
-    determine θ only up to a null space. A cvxpy solver: by
-    whitening, C_i = L_i L_iᵀ, the per-sample chart B_i = L_i⁻ᵀ (r̃_i = L_i⁻¹ r_i), then OLS in
-    ``least_squares.fit_quadratic``.
-    """
-    weight = C if callable(C) else (lambda block, rows, C=np.asarray(C): C if C.shape[0] == 1 else C[rows])
-    if common["solver"] == "newton":
-        from dualid.estimators.newton.weighted import fit_weighted_newton
-
-        if not common["allow_unidentifiable"]:
-            check_identifiable(sensor, what=f"{method} regressor")
-        try:  # from the weighted statistics (two passes over the data; phase I on the closed set if the cheap
-            # start fails: no fit of the materialised metric without the closure, newton.closure)
-            result = fit_weighted_newton(sensor, weight, constrained=common["constrained"], method=method,
-                                         what=f"{method}: {what}", **common["solver_options"])
-            return dataclasses.replace(result, info={**result.info, **info})
-        except np.linalg.LinAlgError:
-            pass  # the message below
-        except SolverError as exc:  # the same problem by cvxpy (whitened); recorded in the result
-            info = {**info, "solver_fallback": f"CLARABEL after newton failed: {str(exc)[:200]}"}
-            common = {**common, "solver": "CLARABEL", "solver_options": {}}
-    if not isinstance(sensor, IdentificationProblem):  # streamed: whitening needs every sample at once
-        sensor = sensor.materialise()
-    C = np.broadcast_to(weight(sensor, slice(None)), (sensor.N, sensor.n, sensor.n))
-    try:
-        L = np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 1, 2)))
-    except np.linalg.LinAlgError as exc:
-        lam = np.linalg.eigvalsh(C)[:, 0]
-        raise MetricError(
-            f"{method}: {what} must be positive definite at every sample, but it is not at "
-            f"{int(np.sum(~(lam > 0)))} of {sensor.N} samples (smallest eigenvalue {lam.min():.3g}); give a "
-            "positive-definite Σ or a pilot with a positive-definite metric"
-        ) from exc
-    white = sensor.in_coordinates(np.swapaxes(np.linalg.inv(L), 1, 2))
-    return fit_quadratic(
-        white, statistics(white), method=method, constrained=common["constrained"], solver=common["solver"],
-        solver_options=common["solver_options"], allow_unidentifiable=common["allow_unidentifiable"], info=info,
-        closure=True,  # the polish of the cvxpy answer on the closed feasible set, as the Newton fit (newton.closure)
-    )

@@ -14,186 +14,20 @@ from typing import Any
 
 import numpy as np
 
-from dualid.errors import ConfigError, ConsistencyError, DataError, SolverError
+from dualid.errors import ConfigError, ConsistencyError, DataError
 from dualid.estimators.base import (
     SOLVERS,
-    captured_warnings,
     check_covariance,
-    check_identifiable,
     check_nominal,
     freeze_options,
-    is_problem_property,
-    parameter_scale,
-    solve_cvxpy,
 )
 from dualid.estimators.metric_guard import DEFAULT_BOUND, check_guard_options, given_reference, reference_guard
-from dualid.estimators.quadratic_chart import signal_scale
+from dualid.estimators.quadratic_fit import closed_fit, fit_quadratic
 from dualid.estimators.result import IdentificationResult
-from dualid.estimators.statistics import Statistics, energy_statistics, statistics
-from dualid.linalg import gram_eigh, gram_rank
-from dualid.model.consistency import cvxpy_constraints, prior_blocks, pullback_metric, regularizer_value
+from dualid.estimators.statistics import energy_statistics, statistics
 from dualid.model.prior_lift import DEFAULT_FLOOR as PRIOR_FLOOR
 from dualid.model.prior_lift import lift_prior
 from dualid.problem import IdentificationProblem, sample_blocks
-
-
-def fit_quadratic(
-    problem: IdentificationProblem,
-    stats: Statistics,
-    *,
-    method: str,
-    constrained: bool,
-    solver: str,
-    solver_options: dict | None,
-    allow_unidentifiable: bool,
-    regularizer: tuple[str, np.ndarray, float] | None = None,
-    info: dict | None = None,
-    closure: bool = False,  # Newton polish / fallback on the closed feasible set (estimators.newton.closure; dm)
-) -> IdentificationResult:
-    """min θᵀHθ − 2gᵀθ + c (+ γ R(θ)) under the problem's constraints, in scaled variables θ = s ⊙ φ."""
-    import cvxpy as cp
-
-    p = problem.p
-    info = dict(info or {})
-    rank = gram_rank(stats.H)
-    info["rank"] = rank
-    if regularizer is None and not allow_unidentifiable:
-        check_identifiable(problem, rank=rank, what=f"{method} weighted regressor")
-
-    if stats.W is None and not stats.energy:  # H = Σ YᵀY: its diagonal holds the squared column norms (no pass)
-        s = np.sqrt(np.clip(np.diag(stats.H), 0.0, None))
-        s[s > 0] = 1.0 / s[s > 0]
-        s[s == 0] = 1.0
-    elif constrained or regularizer is not None:  # weighted or energy conic fit: the chart of its own statistics,
-        # invariant to units and noise level (estimators.quadratic_chart; the column norms of Y are neither)
-        s = signal_scale(stats.H, stats.c, problem.parameters, regularizer)
-    else:
-        s = parameter_scale(problem)
-    Hs = s[:, None] * stats.H * s[None, :]
-    gs = s * stats.g
-
-    if not constrained and regularizer is None:
-        import time
-
-        t0 = time.perf_counter()
-        phi = np.linalg.lstsq(Hs, gs, rcond=None)[0]  # minimum-norm minimiser (in scaled variables)
-        theta = s * phi
-        return IdentificationResult(
-            method, theta, problem.parameters, stats.objective(problem, theta), "optimal", "lstsq",
-            time.perf_counter() - t0, None, False, info,
-        )
-
-    w, U, keep = gram_eigh(Hs)
-    R = np.sqrt(w[keep])[:, None] * U[:, keep].T
-    b = (U[:, keep].T @ gs) / np.sqrt(w[keep])
-    # f(θ) = ‖Rφ − b‖² + f_min with f_min the unconstrained minimum; normalise by f_min so the
-    # solver's tolerances are relative to the attainable fit even when the data fit exactly
-    f_min = max(stats.c - float(b @ b), 0.0)
-    gamma = regularizer[2] if regularizer is not None else 0.0  # R is O(1) per block near θ₀
-    norm = max(f_min, gamma, 1e-10 * stats.c, 1e-300)
-    phi = cp.Variable(p)
-    theta = cp.multiply(s, phi)
-    if regularizer is None:
-        objective = cp.norm(R @ phi - b) / np.sqrt(norm)  # same minimiser, better conditioned
-    else:
-        objective = cp.sum_squares(R @ phi - b) / norm
-    if regularizer is not None:
-        kind, theta0, gamma = regularizer
-        terms = prior_blocks(kind, problem.parameters, theta0)
-        reg = 0
-        for idx, V, C0 in terms:
-            th = theta[idx]
-            k, m, _ = V.shape
-            if kind == "logdet":
-                # whitened block L⁻¹ C L⁻ᵀ with C0 = L Lᵀ (the prior's own chart, I at θ₀): the cone sees O(1)
-                # entries even for an ill-conditioned C0, and −log det C + tr(C0⁻¹C) changes only by a constant
-                Li = np.linalg.inv(np.linalg.cholesky(0.5 * (C0 + C0.T)))
-                VS = np.einsum("ab,kbc,dc->kad", Li, V, Li)
-                C = cp.reshape(VS.reshape(k, m * m).T @ th, (m, m), order="C")
-                reg = reg - cp.log_det(0.5 * (C + C.T)) + cp.trace(C)
-            else:
-                G = pullback_metric(V, C0)
-                # G = F Fᵀ exactly (eigen-factor): a ridge added for a Cholesky factor (1e-12·tr G) changes the
-                # objective by ~1e-4 relative on thin links, where tr G is dominated by a near-null direction of C0
-                w, U = np.linalg.eigh(0.5 * (G + G.T))
-                F = U * np.sqrt(np.maximum(w, 0.0))
-                reg = reg + cp.sum_squares(F.T @ (th - theta0[idx]))
-        objective = objective + (gamma / norm) * reg
-    constraints = cvxpy_constraints(theta, problem.parameters) if constrained else []
-    cvx = cp.Problem(cp.Minimize(objective), constraints)
-    theta_hat, status, used, iterations, solve_time = _solve_with_fallback(
-        cvx, phi, s, stats, problem, method, constrained, solver, solver_options, regularizer, info, closure
-    )
-    value = stats.objective(problem, theta_hat)
-    if regularizer is not None:
-        kind, theta0, gamma = regularizer
-        info["data_objective"] = value
-        value += gamma * regularizer_value(kind, problem.parameters, theta_hat, theta0)
-    return IdentificationResult(
-        method, theta_hat, problem.parameters, value, status, used, solve_time, iterations, constrained, info,
-    )
-
-
-def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solver, solver_options, regularizer, info,
-                         closure=False):
-    """cvxpy first; when it fails or returns only optimal_inaccurate, dualid's own interior-point method
-    (estimators.quadratic_newton). What happened is recorded in info (solver_chain, fallback_used,
-    solver_warnings); an inaccurate cvxpy result is returned only, and labelled, if that fails too."""
-    import time
-
-    from dualid.estimators.certify import polish
-    from dualid.estimators.quadratic_newton import fit_quadratic_newton
-
-    solved, failure, claim = None, None, None
-    with captured_warnings() as notes:  # cvxpy's warnings go into the result, not the terminal
-        try:
-            solved = solve_cvxpy(cvx, phi, solver, solver_options, what=f"{method} fit")
-        except SolverError as exc:
-            if not is_problem_property(exc):
-                failure = f"{solver} failed ({exc.status}): {exc}"
-            elif "infeasible" in exc.status:  # checked: a badly scaled conic problem can be called infeasible
-                claim, failure = exc, f"{solver} claimed {exc.status}"
-            else:
-                raise
-    if notes:
-        info["solver_warnings"] = " | ".join(notes)
-    if solved is not None and solved.status == "optimal":  # certified (or polished) by dualid's interior point
-        t0 = time.perf_counter()
-        theta, label, polished, certified, checked = polish(s * solved.value, stats, problem.parameters,
-                                                            constrained, regularizer, solver, closure=closure)
-        info.update(checked, solver_chain=label, fallback_used=polished)
-        if polished:
-            info["fallback_reason"] = label
-            return theta, "optimal", "newton", checked["certify_iterations"], time.perf_counter() - t0
-        status = "optimal" if certified else "optimal_inaccurate"
-        return theta, status, solved.solver, solved.iterations, solved.solve_time
-    first = failure or f"{solver} returned {solved.status}"
-    t0 = time.perf_counter()
-    try:
-        try:  # cold start first (the same path whatever rounding cvxpy's end point has), then from that end point
-            theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, constrained=constrained,
-                                              regularizer=regularizer, closure=closure)
-        except SolverError:
-            if solved is None:
-                raise
-            theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, constrained=constrained,
-                                              regularizer=regularizer, start=s * solved.value, closure=closure)
-    except SolverError as exc:
-        if claim is not None and exc.status == "no_start":  # no strictly feasible θ either: the claim stands
-            raise claim from exc
-        if claim is not None:
-            raise SolverError(f"{method} fit: {first}; dualid's interior-point method could not check it (it failed: "
-                              f"{exc})", status="all_solvers_failed") from exc
-        if solved is None:
-            raise SolverError(f"{method} fit: {first}; then dualid's interior-point method failed: {exc}",
-                              status="all_solvers_failed") from exc
-        info.update(solver_chain=f"{first} → newton failed ({exc.status}) → {solver} {solved.status}",
-                    fallback_used=False, fallback_reason=first)
-        return s * solved.value, solved.status, solved.solver, solved.iterations, solved.solve_time
-    info.update(solver_chain=f"{first} → newton optimal", fallback_used=True, fallback_reason=first,
-                relative_gap=ipm["relative_gap"])
-    info.update({k: v for k, v in ipm.items() if k.startswith("projected_")})  # newton.closure's completion
-    return theta, "optimal", "newton", ipm["iterations"], time.perf_counter() - t0
 
 
 @dataclass(frozen=True)
@@ -264,12 +98,18 @@ def residual_covariance(problem: IdentificationProblem, theta: np.ndarray, floor
     return (U * w) @ U.T
 
 
-def covariance_weight(problem: IdentificationProblem, covariance, reference: _Common) -> tuple[np.ndarray, dict]:
-    """W = Σ̂⁻¹ from a given covariance, or from the residuals of OLS under the same constraints."""
+def covariance_weight(problem: IdentificationProblem, covariance, reference: _Common,
+                      closed: bool = False) -> tuple[np.ndarray, dict]:
+    """W = Σ̂⁻¹ from a given covariance, or from the residuals of OLS under the same constraints (closed: that OLS fit
+    as ``closed_fit``, on the closed feasible set where its infimum is not attained, as the WLS fit that follows)."""
     theta_ols = None
     if covariance is None:
-        ols = OLS(reference.constrained, reference.solver, reference.solver_options, reference.allow_unidentifiable)
-        theta_ols = ols.fit(problem).theta
+        if closed:
+            theta_ols = closed_fit(problem, statistics(problem), np.eye(problem.n), "ols", reference).theta
+        else:
+            ols = OLS(reference.constrained, reference.solver, reference.solver_options,
+                      reference.allow_unidentifiable)
+            theta_ols = ols.fit(problem).theta
         covariance = residual_covariance(problem, theta_ols)
         source = "ols residuals"
     else:
@@ -295,12 +135,11 @@ class WLS(_Common):
         object.__setattr__(self, "covariance", check_covariance(self.covariance, "WLS"))
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
-        W, info = covariance_weight(problem, self.covariance, self)
-        return self._guarded(fit_quadratic(
-            problem, statistics(problem, W), method=self.name, constrained=self.constrained, solver=self.solver,
-            solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
-            info={k: v for k, v in info.items() if k in ("covariance", "covariance_matrix")},
-        ), problem, info["theta_ols"], "pilot (ols)")
+        W, info = covariance_weight(problem, self.covariance, self, closed=True)
+        S = np.asarray(info["covariance_matrix"])
+        return self._guarded(closed_fit(problem, statistics(problem, W), S, self.name, self, info={
+            k: v for k, v in info.items() if k in ("covariance", "covariance_matrix")}), problem, info["theta_ols"],
+            "pilot (ols)")
 
 
 @dataclass(frozen=True)
