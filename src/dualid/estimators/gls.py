@@ -183,7 +183,7 @@ class FeasibleGLS:
             # reached only as an unseen mass grows (newton.closure): a pilot stopped along that ray moves with
             # rounding, and the weights with it (re-chart change of dm up to 1.2e-5, docs/statistics.md). If Newton
             # fails, ``fit_weighted`` fits the same problem by cvxpy, polished on the closed set as well. Where the
-            # closure projects a parameter out, the library's WLS is this same fit (``least_squares.closed_fit``),
+            # closure projects a parameter out, the library's WLS is this same fit (``quadratic_fit.closed_fit``),
             # bit for bit; elsewhere it is its cvxpy solver's. Whatever the final fit's solver it is the same pilot,
             # so the solvers fit the same weighted problem; what ran is in the label (result.info["pilot"]), which
             # also says so when the user's solver is a cvxpy one (the pilot is not that solver's)

@@ -97,7 +97,7 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
     close to the central path (a polish); when that does not converge, the cold start below runs as without it.
     closure=True (without a prior): on the closed feasible set of ``newton.closure`` (dm's cvxpy path; OLS, energy
     and the priors keep the original set, whose stopping points along an unbounded unseen mass are moderate, e.g. as
-    priors; WLS fits such a problem by ``least_squares.closed_fit``)."""
+    priors; WLS fits such a problem by ``quadratic_fit.closed_fit``)."""
     cons, done = on_closure(feasible_set(parameters, constrained), np.asarray(H), c, parameters.names,
                             enabled=closure and regularizer is None)
     objective, theta_ls = quadratic_objective(H, g, c, parameters, regularizer)
