@@ -55,15 +55,15 @@ def _quadratic_reference(est, problem, start=None):
         stats = statistics(problem)
     elif isinstance(est, EnergyLS):
         stats = energy_statistics(problem)
-    elif isinstance(est, (WLS, RegularizedWLS)):  # WLS: its Σ̂ and fit on the closed set, as WLS.fit (closed_fit)
-        stats = statistics(problem, covariance_weight(problem, None, est, closed=isinstance(est, WLS))[0])
+    elif isinstance(est, (WLS, RegularizedWLS)):  # WLS (closed_set): its Σ̂ and fit on the closed set, as WLS.fit
+        stats = statistics(problem, covariance_weight(problem, None, est)[0])
         if isinstance(est, RegularizedWLS):
             th0 = lift_prior(problem.parameters, np.asarray(est.theta0), float(est.prior_floor))[0]
             reg = (est.regularizer, th0, float(est.gamma) * problem.N * problem.n)
     else:
         return None, None
     theta, _ = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, regularizer=reg, start=start,
-                                    closure=isinstance(est, WLS))
+                                    closure=est.closed_set)
     f = stats.objective(problem, theta)
     if reg is not None:
         f += reg[2] * regularizer_value(reg[0], problem.parameters, theta, reg[1])

@@ -43,6 +43,9 @@ class _Common:
     # estimator's own pilot or prior when it has one (WLS: its OLS fit; RegularizedWLS: θ₀)
     guard_reference: tuple | None = field(default=None, kw_only=True)
     guard_bound: float = field(default=DEFAULT_BOUND, kw_only=True)
+    # a class constant, not a field: fitted (with its Σ̂'s OLS) on the closed feasible set where the infimum is not
+    # attained (quadratic_fit.closed_fit); WLS only: OLS, energy and the priors keep the original set (estimators.md)
+    closed_set = False
 
     def __post_init__(self) -> None:
         name = type(self).__name__
@@ -98,13 +101,13 @@ def residual_covariance(problem: IdentificationProblem, theta: np.ndarray, floor
     return (U * w) @ U.T
 
 
-def covariance_weight(problem: IdentificationProblem, covariance, reference: _Common,
-                      closed: bool = False) -> tuple[np.ndarray, dict]:
-    """W = Σ̂⁻¹ from a given covariance, or from the residuals of OLS under the same constraints (closed: that OLS fit
-    as ``closed_fit``, on the closed feasible set where its infimum is not attained, as the WLS fit that follows)."""
+def covariance_weight(problem: IdentificationProblem, covariance, reference: _Common) -> tuple[np.ndarray, dict]:
+    """W = Σ̂⁻¹ from a given covariance, or from the residuals of OLS under the same constraints (for an estimator
+    with ``closed_set``, that OLS fit as ``closed_fit``: on the closed feasible set where its infimum is not attained,
+    as the WLS fit that follows)."""
     theta_ols = None
     if covariance is None:
-        if closed:
+        if reference.closed_set:
             theta_ols = closed_fit(problem, statistics(problem), np.eye(problem.n), "ols", reference).theta
         else:
             ols = OLS(reference.constrained, reference.solver, reference.solver_options,
@@ -129,13 +132,14 @@ class WLS(_Common):
 
     covariance: np.ndarray | None = None  # (n, n) symmetric positive definite; None: from OLS residuals
     name = "wls"
+    closed_set = True  # its fit and its Σ̂'s OLS fit by quadratic_fit.closed_fit
 
     def __post_init__(self) -> None:
         super().__post_init__()
         object.__setattr__(self, "covariance", check_covariance(self.covariance, "WLS"))
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
-        W, info = covariance_weight(problem, self.covariance, self, closed=True)
+        W, info = covariance_weight(problem, self.covariance, self)
         S = np.asarray(info["covariance_matrix"])
         return self._guarded(closed_fit(problem, statistics(problem, W), S, self.name, self, info={
             k: v for k, v in info.items() if k in ("covariance", "covariance_matrix")}), problem, info["theta_ols"],
