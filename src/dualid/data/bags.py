@@ -1,0 +1,222 @@
+"""Reading ROS 1 bags (``.bag``) and rosbag2 recordings (a folder with metadata.yaml, sqlite3 or MCAP
+storage) with the pure-Python ``rosbags`` library: the topics a ``TopicMap`` names become float channels on
+one time base, which ``load_log`` then reads through its column map like the columns of a CSV file.
+
+Time: each message's header.stamp (or, with ``stamps: receive``, the time the bag recorded it), in integer
+nanoseconds, relative to the first sample of the time base (``TopicMap.primary``): t = (stamp − stamp₀)/1e9.
+Topics at other rates are interpolated onto the time-base stamps where all topics overlap, vectors linearly
+(``preprocessing.interpolate``) and a base pose along the geodesic (``lie.interpolate_on_group``), the
+interpolation ``preprocessing.resample`` uses; a topic with the time base's own stamps is taken as it is.
+Every error names the bag, the topic and the field.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from dualid.data.bag_topics import BASE_TYPES, JOINT_STATE, ODOMETRY, POSE, TF, WRENCH, XYZ, XYZW, TopicMap
+from dualid.data.checks import check_gaps
+from dualid.data.lie import interpolate_on_group, unit_quaternions
+from dualid.data.preprocessing import interpolate
+from dualid.errors import DataError, MissingFileError
+
+BAG_SUFFIXES = (".bag", ".mcap", ".db3")
+
+
+def is_bag(path) -> bool:
+    """A ROS 1 bag, a rosbag2 storage file, or a rosbag2 folder (with metadata.yaml)."""
+    p = Path(path)
+    return p.suffix.lower() in BAG_SUFFIXES or (p.is_dir() and (p / "metadata.yaml").is_file())
+
+
+def _reader(path: Path):
+    from rosbags.highlevel import AnyReader
+
+    if not path.exists():
+        raise MissingFileError(f"bag not found: {path}")
+    if path.is_dir() and not (path / "metadata.yaml").is_file():
+        raise DataError(f"{path}: a folder but not a rosbag2 recording (no metadata.yaml)")
+    return AnyReader([path])
+
+
+def open_bag(path: Path, body):
+    """body(reader) inside an open reader; the library's errors as a DataError naming the bag."""
+    from rosbags.highlevel import AnyReaderError
+
+    try:
+        with _reader(path) as reader:
+            return body(reader)
+    except AnyReaderError as exc:  # a damaged, truncated or foreign file (rosbags wraps its readers' errors)
+        raise DataError(f"{path}: cannot read it as a ROS bag ({exc})") from None
+
+
+def _stamp(msg) -> int:
+    s = msg.header.stamp
+    return int(s.sec) * 1_000_000_000 + int(s.nanosec)
+
+
+@dataclass
+class _Series:
+    """One topic's messages: stamps [ns] and named float channels."""
+
+    topic: str
+    stamps: list
+    values: dict
+    frames: set
+
+
+def _joint_values(where: str, msg, k: int, wanted: list[str], velocity: bool) -> dict:
+    names = list(msg.name)
+    index = {n: i for i, n in enumerate(names)}
+    out = {}
+    for field in ("position", "velocity", "effort") if velocity else ("position", "effort"):
+        x = np.asarray(getattr(msg, field), dtype=float)
+        if x.size != len(names):
+            hint = "; set columns.topics.joint_states.velocity: false to take v from dq/dt" if field == "velocity" else ""
+            raise DataError(f"{where} field {field}: message {k} has {x.size} values for {len(names)} joint names{hint}")
+        for j in wanted:
+            if j not in index:
+                raise DataError(f"{where} field name: joint {j!r} is missing in message {k} (names there: {names}); "
+                                "map model joints to other names with columns.topics.joint_states.names")
+            out[f"{field}[{j}]"] = x[index[j]]
+    return out
+
+
+def _vec(obj, keys) -> list[float]:
+    return [float(getattr(obj, c)) for c in keys]
+
+
+def _collect(path: Path, topics: TopicMap, joints: list[str], reader) -> tuple[dict[str, _Series], dict[str, str]]:
+    info = reader.topics
+    wanted = topics.topics()
+    types = {}
+    for topic, key in wanted.items():
+        expected = (JOINT_STATE,) if key == "joint_states" else BASE_TYPES if key == "base" else (WRENCH,)
+        where = f"{path}: topic {topic!r} (columns.topics.{key})"
+        if topic not in info:
+            raise DataError(f"{where} is not in the bag; its topics: {sorted(info)}")
+        types[topic] = info[topic].msgtype
+        if types[topic] not in expected:
+            raise DataError(f"{where} has message type {types[topic]}; expected {' or '.join(expected)}")
+        if info[topic].msgcount == 0:
+            raise DataError(f"{where} has no messages")
+    if topics.base is not None:
+        b, kind = topics.base, types[topics.base.topic]
+        where = f"{path}: topic {b.topic!r} (columns.topics.base)"
+        if kind == TF and not (b.parent and b.child):
+            raise DataError(f"{where} is a {TF}: name the transform with parent and child frames")
+        if kind != TF and b.is_tf:
+            raise DataError(f"{where} is a {kind}, not a {TF}: leave out parent and child")
+        if kind == POSE and b.twist:
+            raise DataError(f"{where} is a {POSE}: it has no field twist; set columns.topics.base.twist: false")
+    series = {t: _Series(t, [], {}, set()) for t in wanted}
+    rows: dict[str, list] = {t: [] for t in wanted}
+    conns = [c for c in reader.connections if c.topic in wanted]
+    for conn, received, raw in reader.messages(connections=conns):
+        topic, kind = conn.topic, types[conn.topic]
+        msg = reader.deserialize(raw, conn.msgtype)
+        s, k, where = series[topic], len(rows[topic]), f"{path}: topic {topic!r}"
+        if kind == TF:
+            found = [tr for tr in msg.transforms if tr.header.frame_id == topics.base.parent  # type: ignore[union-attr]
+                     and tr.child_frame_id == topics.base.child]  # type: ignore[union-attr]
+            for tr in found:
+                s.stamps.append(_stamp(tr) if topics.stamps == "header" else received)
+                rows[topic].append(dict(zip([f"position.{c}" for c in XYZ] + [f"orientation.{c}" for c in XYZW],
+                                            _vec(tr.transform.translation, XYZ) + _vec(tr.transform.rotation, XYZW))))
+                s.frames.update({f"{tr.header.frame_id}->{tr.child_frame_id}"})
+            if not found:
+                s.frames.update(f"{tr.header.frame_id}->{tr.child_frame_id}" for tr in msg.transforms)
+            continue
+        s.stamps.append(_stamp(msg) if topics.stamps == "header" else received)
+        if kind == JOINT_STATE:
+            rows[topic].append(_joint_values(where, msg, k, joints, topics.velocity is not False and
+                                             (topics.base is None or topics.base_twist)))
+        elif kind == WRENCH:
+            w = msg.wrench
+            rows[topic].append(dict(zip([f"wrench.force.{c}" for c in XYZ] + [f"wrench.torque.{c}" for c in XYZ],
+                                        _vec(w.force, XYZ) + _vec(w.torque, XYZ))))
+            s.frames.add(msg.header.frame_id)
+        else:
+            pose = msg.pose.pose if kind == ODOMETRY else msg.pose
+            row = dict(zip([f"position.{c}" for c in XYZ] + [f"orientation.{c}" for c in XYZW],
+                           _vec(pose.position, XYZ) + _vec(pose.orientation, XYZW)))
+            if kind == ODOMETRY and topics.base_twist:
+                tw = msg.twist.twist
+                row.update(zip([f"twist.linear.{c}" for c in XYZ] + [f"twist.angular.{c}" for c in XYZ],
+                               _vec(tw.linear, XYZ) + _vec(tw.angular, XYZ)))
+            rows[topic].append(row)
+    frames = {}
+    for topic, s in series.items():
+        if types[topic] == TF and not rows[topic]:
+            raise DataError(f"{path}: topic {topic!r} field transforms: no transform {topics.base.parent}->"  # type: ignore[union-attr]
+                            f"{topics.base.child} (header.frame_id->child_frame_id); transforms there: {sorted(s.frames)}")
+        s.values = {f"{topic}.{c}": np.array([r[c] for r in rows[topic]]) for c in (rows[topic][0] if rows[topic] else {})}
+    for w in topics.wrenches:
+        found = series[w.topic].frames
+        if len(found) != 1 and w.frame is None:
+            raise DataError(f"{path}: topic {w.topic!r} field header.frame_id: the messages name {len(found)} frames "
+                            f"{sorted(found)}; expected one (or set columns.topics.wrenches.{w.name}.frame)")
+        frames[w.name] = w.frame or next(iter(found))
+    return series, frames
+
+
+def _check_stamps(path: Path, s: _Series, field: str) -> np.ndarray:
+    st = np.asarray(s.stamps, dtype=np.int64)
+    if st.size < 2:
+        raise DataError(f"{path}: topic {s.topic!r} has {st.size} sample; need at least 2")
+    d = np.diff(st)
+    if np.any(d <= 0):
+        k = int(np.argmax(d <= 0))
+        what = "repeats" if d[k] == 0 else "goes back"
+        raise DataError(f"{path}: topic {s.topic!r} field {field} {what} at message {k + 1}: {st[k]} ns then "
+                        f"{st[k + 1]} ns ({int(np.sum(d <= 0))} such steps); stamps must increase")
+    return st
+
+
+def read_bag(path, topics: TopicMap, joints) -> tuple[dict[str, np.ndarray], list[str], dict[str, str]]:
+    """(channels name -> (T,) on the time base, their order, wrench name -> frame) of a bag; ``joints``: the names
+    in the joint-state messages to read."""
+    path = Path(path)
+    series, frames = open_bag(path, lambda r: _collect(path, topics, list(joints), r))
+    field = "header.stamp" if topics.stamps == "header" else "receive time"
+    stamps = {t: _check_stamps(path, s, field) for t, s in series.items()}
+    lo, hi = max(int(s[0]) for s in stamps.values()), min(int(s[-1]) for s in stamps.values())
+    base_st = stamps[topics.primary]
+    keep = (base_st >= lo) & (base_st <= hi)
+    if keep.sum() < 2:
+        spans = {t: f"[{s[0] * 1e-9:.9f}, {s[-1] * 1e-9:.9f}] s" for t, s in stamps.items()}
+        raise DataError(f"{path}: the topics do not overlap in time ({field}): {spans}")
+    grid = base_st[keep]
+    t0 = int(grid[0])
+    t = (grid - t0) / 1e9
+    out = {topics.time_channel: t}
+    for topic, s in series.items():
+        st = stamps[topic]
+        same = st.size == base_st.size and np.array_equal(st, base_st)
+        values = {k: (v[keep] if same else v) for k, v in s.values.items()}
+        if not same:
+            ts = (st - t0) / 1e9
+            check_gaps(ts, f"{path}: topic {topic!r}")
+            values = _interpolated(path, topic, ts, values, t)
+        out.update(values)
+    return out, list(out), frames
+
+
+def _interpolated(path: Path, topic: str, ts: np.ndarray, values: dict, t: np.ndarray) -> dict:
+    """The channels of one topic at times t: a pose on SE(3) (geodesic), the rest linearly."""
+    names = list(values)
+    pose = [n for n in names if ".position." in n or ".orientation." in n]
+    out = {}
+    if pose:
+        x = np.stack([values[n] for n in pose], axis=1)
+        x[:, 3:7], _ = unit_quaternions(x[:, 3:7], f"{path}: topic {topic!r}", pose[3:7])
+        x = interpolate_on_group(ts, x, 6, t)
+        out.update({n: x[:, k] for k, n in enumerate(pose)})
+    rest = [n for n in names if n not in pose]
+    if rest:
+        x = interpolate(ts, np.stack([values[n] for n in rest], axis=1), t)
+        out.update({n: x[:, k] for k, n in enumerate(rest)})
+    return {n: out[n] for n in names}
