@@ -187,7 +187,8 @@ def read_bag(path, topics: TopicMap, joints) -> tuple[dict[str, np.ndarray], lis
     base_st = stamps[topics.primary]
     keep = (base_st >= lo) & (base_st <= hi)
     if keep.sum() < 2:
-        spans = {t: f"[{s[0] * 1e-9:.9f}, {s[-1] * 1e-9:.9f}] s" for t, s in stamps.items()}
+        sec = lambda ns: f"{int(ns) // 10**9}.{int(ns) % 10**9:09d}"
+        spans = {t: f"[{sec(s[0])}, {sec(s[-1])}] s" for t, s in stamps.items()}
         raise DataError(f"{path}: the topics do not overlap in time ({field}): {spans}")
     grid = base_st[keep]
     t0 = int(grid[0])
