@@ -242,3 +242,24 @@ def test_a_bag_without_a_config_fits_from_its_one_joint_state_topic(tmp_path):
     assert result.exit_code == 0, result.output
     report = json.loads((tmp_path / "o" / "parameters.json").read_text())
     assert report["data"]["columns"]["topics"]["joint_states"]["topic"] == "/joint_states"
+
+
+def test_validate_and_fit_stream_read_a_bag_as_its_csv(tmp_path):
+    import re
+
+    df, ns = dfki_frame(1000)
+    df.to_csv(tmp_path / "run.csv", index=False)
+    bag = write_bag(tmp_path / "run_sqlite", "sqlite3", joint_messages("sqlite3", df, ns))
+    outputs = {}
+    for log in (bag, tmp_path / "run.csv"):
+        val = runner.invoke(app, ["validate", "--model", str(URDF), "--data", str(log)])
+        assert val.exit_code == 0, val.output
+        columns = {"columns": {"topics": {"joint_states": "/joint_states"}}} if log == bag else {}
+        cfg = tmp_path / f"{log.name}.yaml"
+        cfg.write_text(yaml.safe_dump({"model": str(URDF), "train": [str(log)], "preprocessing": STEPS, **columns}))
+        stream = runner.invoke(app, ["fit-stream", "--model", str(URDF), "--data", str(log), "--config", str(cfg),
+                                     "--chunk", "100", "--allow-unidentifiable"])
+        assert stream.exit_code == 0, stream.output
+        outputs[log] = (val.stdout, re.sub(r"passes over the data, [\d.]+ s", "", stream.stdout))
+    assert outputs[bag] == outputs[tmp_path / "run.csv"]
+    assert "objective" in outputs[bag][1] and "Joint1.m " in outputs[bag][1]
