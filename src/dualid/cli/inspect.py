@@ -14,7 +14,8 @@ def _summary_lines(summary) -> list[str]:
     rows = [("topic", "type", "messages", "rate [Hz]", "duration [s]")]
     rows += [(t.topic, t.msgtype, str(t.count), f"{t.rate:.4g}", f"{t.duration:.4g}") for t in summary.topics]
     widths = [max(len(r[k]) for r in rows) for k in range(5)]
-    out = [f"{summary.path}: {summary.kind}, {summary.duration:.4g} s, {len(summary.topics)} topics"]
+    count = f"{len(summary.topics)} topic{'' if len(summary.topics) == 1 else 's'}"
+    out = [f"{summary.path}: {summary.kind}, {summary.duration:.4g} s, {count}"]
     for k, r in enumerate(rows):
         out.append("  " + "  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths))))
         t = summary.topics[k - 1] if k else None
