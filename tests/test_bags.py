@@ -263,3 +263,22 @@ def test_validate_and_fit_stream_read_a_bag_as_its_csv(tmp_path):
         outputs[log] = (val.stdout, re.sub(r"passes over the data, [\d.]+ s", "", stream.stdout))
     assert outputs[bag] == outputs[tmp_path / "run.csv"]
     assert "objective" in outputs[bag][1] and "Joint1.m " in outputs[bag][1]
+
+
+def test_a_bag_is_read_once_inside_reading_once(tmp_path, monkeypatch):
+    """dualid fit loads the first log twice (to choose the preprocessing, then to fit): a bag is parsed once."""
+    import dualid.data.bags as bags
+    from dualid.data.io import load_log
+    from dualid.data.tables import reading_once
+
+    df, ns = dfki_frame(100)
+    bag = write_bag(tmp_path / "run_mcap", "mcap", joint_messages("mcap", df, ns))
+    calls = []
+    read = bags._read_bag
+    monkeypatch.setattr(bags, "_read_bag", lambda *a: calls.append(a) or read(*a))
+    cmap = {"topics": {"joint_states": "/joint_states"}}
+    with reading_once():
+        first, again = (load_log(bag, cmap, joints=["Joint1", "Joint2"]) for _ in range(2))
+    assert len(calls) == 1 and np.array_equal(first.q, again.q)
+    load_log(bag, cmap, joints=["Joint1", "Joint2"])
+    assert len(calls) == 2  # outside: read each time

@@ -21,6 +21,7 @@ from dualid.data.bag_topics import BASE_TYPES, JOINT_STATE, ODOMETRY, POSE, TF, 
 from dualid.data.checks import check_gaps
 from dualid.data.lie import interpolate_on_group, unit_quaternions
 from dualid.data.preprocessing import interpolate
+from dualid.data.tables import read_once
 from dualid.errors import DataError, MissingFileError
 
 BAG_SUFFIXES = (".bag", ".mcap", ".db3")
@@ -89,11 +90,15 @@ def _vec(obj, keys) -> list[float]:
     return [float(getattr(obj, c)) for c in keys]
 
 
-def _collect(path: Path, topics: TopicMap, joints: list[str], reader) -> tuple[dict[str, _Series], dict[str, str]]:
-    info = reader.topics
-    wanted = topics.topics()
+POSE_FIELDS = [f"position.{c}" for c in XYZ] + [f"orientation.{c}" for c in XYZW]
+TWIST_FIELDS = [f"twist.{k}.{c}" for k in ("linear", "angular") for c in XYZ]
+WRENCH_FIELDS = [f"wrench.{k}.{c}" for k in ("force", "torque") for c in XYZ]
+
+
+def _check_topics(path: Path, topics: TopicMap, info) -> dict[str, str]:
+    """topic -> message type, after checking each mapped topic is in the bag, of its type and not empty."""
     types = {}
-    for topic, key in wanted.items():
+    for topic, key in topics.topics().items():
         expected = (JOINT_STATE,) if key == "joint_states" else BASE_TYPES if key == "base" else (WRENCH,)
         where = f"{path}: topic {topic!r} (columns.topics.{key})"
         if topic not in info:
@@ -112,48 +117,49 @@ def _collect(path: Path, topics: TopicMap, joints: list[str], reader) -> tuple[d
             raise DataError(f"{where} is a {kind}, not a {TF}: leave out parent and child")
         if kind == POSE and b.twist:
             raise DataError(f"{where} is a {POSE}: it has no field twist; set columns.topics.base.twist: false")
-    series = {t: _Series(t, [], {}, set()) for t in wanted}
-    rows: dict[str, list] = {t: [] for t in wanted}
-    conns = [c for c in reader.connections if c.topic in wanted]
-    for conn, received, raw in reader.messages(connections=conns):
-        topic, kind = conn.topic, types[conn.topic]
+    return types
+
+
+def _samples(kind: str, msg, topics: TopicMap, where: str, k: int, joints: list[str]) -> list[tuple]:
+    """(the part of the message whose header stamps it, its values by field) for each sample in message k."""
+    if kind == JOINT_STATE:
+        return [(msg, _joint_values(where, msg, k, joints, topics.velocity is not False and
+                                    (topics.base is None or topics.base_twist)))]
+    if kind == WRENCH:
+        return [(msg, dict(zip(WRENCH_FIELDS, _vec(msg.wrench.force, XYZ) + _vec(msg.wrench.torque, XYZ))))]
+    if kind == TF:
+        base = topics.base
+        return [(tr, dict(zip(POSE_FIELDS, _vec(tr.transform.translation, XYZ) + _vec(tr.transform.rotation, XYZW))))
+                for tr in msg.transforms if (tr.header.frame_id, tr.child_frame_id) == (base.parent, base.child)]  # type: ignore[union-attr]
+    pose = msg.pose.pose if kind == ODOMETRY else msg.pose
+    values = dict(zip(POSE_FIELDS, _vec(pose.position, XYZ) + _vec(pose.orientation, XYZW)))
+    if kind == ODOMETRY and topics.base_twist:
+        values.update(zip(TWIST_FIELDS, _vec(msg.twist.twist.linear, XYZ) + _vec(msg.twist.twist.angular, XYZ)))
+    return [(msg, values)]
+
+
+def _collect(path: Path, topics: TopicMap, joints: list[str], reader) -> tuple[dict[str, _Series], dict[str, str]]:
+    types = _check_topics(path, topics, reader.topics)
+    series = {t: _Series(t, [], {}, set()) for t in types}
+    rows: dict[str, list] = {t: [] for t in types}
+    seen: dict[str, int] = {t: 0 for t in types}  # messages per topic
+    for conn, received, raw in reader.messages(connections=[c for c in reader.connections if c.topic in types]):
+        topic, kind, s = conn.topic, types[conn.topic], series[conn.topic]
         msg = reader.deserialize(raw, conn.msgtype)
-        s, k, where = series[topic], len(rows[topic]), f"{path}: topic {topic!r}"
-        if kind == TF:
-            found = [tr for tr in msg.transforms if tr.header.frame_id == topics.base.parent  # type: ignore[union-attr]
-                     and tr.child_frame_id == topics.base.child]  # type: ignore[union-attr]
-            for tr in found:
-                s.stamps.append(_stamp(tr) if topics.stamps == "header" else received)
-                rows[topic].append(dict(zip([f"position.{c}" for c in XYZ] + [f"orientation.{c}" for c in XYZW],
-                                            _vec(tr.transform.translation, XYZ) + _vec(tr.transform.rotation, XYZW))))
-                s.frames.update({f"{tr.header.frame_id}->{tr.child_frame_id}"})
-            if not found:
-                s.frames.update(f"{tr.header.frame_id}->{tr.child_frame_id}" for tr in msg.transforms)
-            continue
-        s.stamps.append(_stamp(msg) if topics.stamps == "header" else received)
-        if kind == JOINT_STATE:
-            rows[topic].append(_joint_values(where, msg, k, joints, topics.velocity is not False and
-                                             (topics.base is None or topics.base_twist)))
-        elif kind == WRENCH:
-            w = msg.wrench
-            rows[topic].append(dict(zip([f"wrench.force.{c}" for c in XYZ] + [f"wrench.torque.{c}" for c in XYZ],
-                                        _vec(w.force, XYZ) + _vec(w.torque, XYZ))))
+        for part, values in _samples(kind, msg, topics, f"{path}: topic {topic!r}", seen[topic], joints):
+            s.stamps.append(_stamp(part) if topics.stamps == "header" else received)
+            rows[topic].append(values)
+        seen[topic] += 1
+        if kind == WRENCH:
             s.frames.add(msg.header.frame_id)
-        else:
-            pose = msg.pose.pose if kind == ODOMETRY else msg.pose
-            row = dict(zip([f"position.{c}" for c in XYZ] + [f"orientation.{c}" for c in XYZW],
-                           _vec(pose.position, XYZ) + _vec(pose.orientation, XYZW)))
-            if kind == ODOMETRY and topics.base_twist:
-                tw = msg.twist.twist
-                row.update(zip([f"twist.linear.{c}" for c in XYZ] + [f"twist.angular.{c}" for c in XYZ],
-                               _vec(tw.linear, XYZ) + _vec(tw.angular, XYZ)))
-            rows[topic].append(row)
-    frames = {}
+        elif kind == TF and not rows[topic]:  # listed in the error when the base's transform never comes
+            s.frames.update(f"{tr.header.frame_id}->{tr.child_frame_id}" for tr in msg.transforms)
     for topic, s in series.items():
-        if types[topic] == TF and not rows[topic]:
+        if not rows[topic]:  # only a /tf topic without the base's transform: the others have messages
             raise DataError(f"{path}: topic {topic!r} field transforms: no transform {topics.base.parent}->"  # type: ignore[union-attr]
                             f"{topics.base.child} (header.frame_id->child_frame_id); transforms there: {sorted(s.frames)}")
-        s.values = {f"{topic}.{c}": np.array([r[c] for r in rows[topic]]) for c in (rows[topic][0] if rows[topic] else {})}
+        s.values = {f"{topic}.{c}": np.array([r[c] for r in rows[topic]]) for c in rows[topic][0]}
+    frames = {}
     for w in topics.wrenches:
         found = series[w.topic].frames
         if len(found) != 1 and w.frame is None:
@@ -178,8 +184,14 @@ def _check_stamps(path: Path, s: _Series, field: str) -> np.ndarray:
 
 def read_bag(path, topics: TopicMap, joints) -> tuple[dict[str, np.ndarray], list[str], dict[str, str]]:
     """(channels name -> (T,) on the time base, their order, wrench name -> frame) of a bag; ``joints``: the names
-    in the joint-state messages to read."""
+    in the joint-state messages to read. Inside ``tables.reading_once`` each bag is read once per map."""
     path = Path(path)
+    if not path.exists():
+        raise MissingFileError(f"bag not found: {path}")
+    return read_once(path, (topics, tuple(joints)), lambda: _read_bag(path, topics, joints))
+
+
+def _read_bag(path: Path, topics: TopicMap, joints) -> tuple[dict[str, np.ndarray], list[str], dict[str, str]]:
     series, frames = open_bag(path, lambda r: _collect(path, topics, list(joints), r))
     field = "header.stamp" if topics.stamps == "header" else "receive time"
     stamps = {t: _check_stamps(path, s, field) for t, s in series.items()}

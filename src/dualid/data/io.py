@@ -116,7 +116,7 @@ class ColumnMap:
             names = tuple(joints) if joints is not None else tuple(k for k, _ in topics.names)
             cmap = ColumnMap.from_dict({**topics.columns(names), "units": d.get("units") or {}})
             return replace(cmap, topics=topics)
-        allowed = ["time", "joints", "units", "base", "wrenches", "topics"]  # topics: handled above
+        allowed = ["time", "joints", "units", "base", "wrenches", "topics"]
         unknown = sorted(set(d) - set(allowed))
         if unknown:
             raise DataError(f"column map: unknown keys {unknown}; allowed: {allowed}")
