@@ -282,3 +282,34 @@ def test_a_bag_is_read_once_inside_reading_once(tmp_path, monkeypatch):
     assert len(calls) == 1 and np.array_equal(first.q, again.q)
     load_log(bag, cmap, joints=["Joint1", "Joint2"])
     assert len(calls) == 2  # outside: read each time
+
+
+def test_the_crazyflie_pendulum_fits_from_odometry_passive_joint_states_and_thrust(tmp_path):
+    """examples/floating/crazyflie: the base as Odometry without its twist, the passive pendulum joints as JointState
+    messages without velocities or efforts (passive), the thrust as a WrenchStamped on base_link (ROS 1): θ equal to the
+    example config's CSV fit to 1e-12."""
+    cf = ROOT / "examples" / "floating" / "crazyflie"
+    example = yaml.safe_load((cf / "fit.yaml").read_text())
+    df = pd.read_csv(cf / "train_0.csv").iloc[:600].copy()
+    ns = np.round(df["time"].to_numpy() * 1e9).astype(np.int64)
+    df["time"] = ns / 1e9
+    df.to_csv(tmp_path / "cf.csv", index=False)
+    m = Messages("ros1")
+    msgs = []
+    for n, r in zip(ns, df.itertuples()):
+        n = EPOCH + int(n)
+        msgs += [("/odom", "nav_msgs/msg/Odometry", n + 1, m.odometry(n, [r.base_x, r.base_y, r.base_z],
+                                                                      [r.base_qx, r.base_qy, r.base_qz, r.base_qw],
+                                                                      np.zeros(6))),
+                 ("/joint_states", JS, n + 2, m.joint_state(n, ["alpha2", "alpha1"], [r.alpha2, r.alpha1])),
+                 ("/thrust", "geometry_msgs/msg/WrenchStamped", n + 3,
+                  m.wrench(n, "base_link", [0, 0, r.thrust], [r.torque_x, r.torque_y, r.torque_z]))]
+    bag = write_bag(tmp_path / "cf.bag", "ros1", msgs)
+    common = {"model": {"urdf": str(cf / example["model"]["urdf"]), "floating_base": True},
+              "preprocessing": example["preprocessing"], "joint_terms": example["joint_terms"], **QUICK}
+    csv = fit(tmp_path, "csv", {**common, "columns": example["columns"], "train": [str(tmp_path / "cf.csv")]})
+    topics = {"base": {"topic": "/odom", "twist": False}, "wrenches": {"thrust": "/thrust"},
+              "joint_states": {"topic": "/joint_states", "passive": ["alpha1", "alpha2"]}}
+    got = fit(tmp_path, "bag", {**common, "columns": {"topics": topics}, "train": [str(bag)]})
+    for method in QUICK["methods"]:
+        assert np.abs(theta(got, method) - theta(csv, method)).max() <= 1e-12, method

@@ -7,9 +7,10 @@ YAML form (inside ``columns``)::
       stamps: header                      # header (each message's header.stamp, default) or receive (the bag's record time)
       time_base: /joint_states            # optional: the topic whose stamps are the time base (default: the joint
                                           # states, else the base topic); the others are interpolated onto them
-      joint_states: /joint_states         # sensor_msgs/JointState; or {topic, velocity, names}
+      joint_states: /joint_states         # sensor_msgs/JointState; or {topic, velocity, names, passive}
       #   velocity: null (default: logged when every source has one), true, or false (v from dq/dt)
       #   names: {Joint1: shoulder_joint}  (model joint -> its name in the messages; default the same name)
+      #   passive: [alpha1]               (unactuated joints: τ = 0, their effort is not read)
       base: {topic: /odom}                # nav_msgs/Odometry (pose and twist), geometry_msgs/PoseStamped
                                           # (twist: false), or tf2_msgs/TFMessage with {parent: odom, child:
                                           # base_link}; twist: false also ignores an odometry's twist
@@ -91,6 +92,7 @@ class TopicMap:
     joint_states: str | None = None
     velocity: bool | None = None
     names: tuple[tuple[str, str], ...] = ()  # (model joint, name in the messages)
+    passive: tuple[str, ...] = ()  # model joints without an actuator (τ = 0)
     base: BaseTopic | None = None
     wrenches: tuple[WrenchTopic, ...] = ()
     stamps: str = "header"
@@ -101,11 +103,14 @@ class TopicMap:
         d = _keys(d, ("stamps", "time_base", "joint_states", "base", "wrenches"), "")
         if d.get("stamps", "header") not in STAMPS:
             raise DataError(f"{_WHERE}.stamps: expected one of {list(STAMPS)}, got {d.get('stamps')!r}")
-        js = None if d.get("joint_states") is None else _keys(d["joint_states"], ("topic", "velocity", "names"),
+        js = None if d.get("joint_states") is None else _keys(d["joint_states"], ("topic", "velocity", "names", "passive"),
                                                               "joint_states", "topic")
         names = (js or {}).get("names") or {}
         if not isinstance(names, Mapping) or not all(isinstance(v, str) and v for v in names.values()):
             raise DataError(f"{_WHERE}.joint_states.names: expected {{model joint: name in the messages}}, got {names!r}")
+        passive = (js or {}).get("passive") or []
+        if not isinstance(passive, list) or not all(isinstance(j, str) and j for j in passive):
+            raise DataError(f"{_WHERE}.joint_states.passive: expected a list of model joints, got {passive!r}")
         base = None
         if d.get("base") is not None:
             b = _keys(d["base"], ("topic", "parent", "child", "twist"), "base", "topic")
@@ -120,8 +125,8 @@ class TopicMap:
         if js is None and base is None:
             raise DataError(f"{_WHERE}: name a joint_states topic or a base topic")
         out = TopicMap(None if js is None else js["topic"], _flag((js or {}).get("velocity"), "joint_states.velocity", True),
-                       tuple((str(k), str(v)) for k, v in names.items()), base, tuple(ws), d.get("stamps", "header"),
-                       d.get("time_base"))
+                       tuple((str(k), str(v)) for k, v in names.items()), tuple(passive), base, tuple(ws),
+                       d.get("stamps", "header"), d.get("time_base"))
         if out.time_base is not None and out.time_base not in out.topics():
             raise DataError(f"{_WHERE}.time_base: {out.time_base!r} is none of the mapped topics {list(out.topics())}")
         if out.velocity and base is not None and not out.base_twist:
@@ -135,7 +140,8 @@ class TopicMap:
             out["time_base"] = self.time_base
         if self.joint_states is not None:
             out["joint_states"] = {"topic": self.joint_states, "velocity": self.velocity,
-                                   **({"names": dict(self.names)} if self.names else {})}
+                                   **({"names": dict(self.names)} if self.names else {}),
+                                   **({"passive": list(self.passive)} if self.passive else {})}
         if self.base is not None:
             b = self.base
             out["base"] = {"topic": b.topic, "twist": b.twist, **({"parent": b.parent, "child": b.child} if b.parent else {})}
@@ -176,13 +182,14 @@ class TopicMap:
         js = self.joint_states
         if joints and js is None:
             raise DataError(f"{_WHERE}: the model has joints {list(joints)} but no joint_states topic is named")
-        unknown = [j for j, _ in self.names if j not in joints]
-        if unknown:
-            raise DataError(f"{_WHERE}.joint_states.names: {unknown} are not model joints; model joints: {list(joints)}")
+        for key, listed in (("names", [j for j, _ in self.names]), ("passive", self.passive)):
+            unknown = [j for j in listed if j not in joints]
+            if unknown:
+                raise DataError(f"{_WHERE}.joint_states.{key}: {unknown} are not model joints; model joints: {list(joints)}")
         out: dict = {"time": self.time_channel, "joints": {}}
         for j in joints:
             m = self.message_name(j)
-            out["joints"][j] = {"position": f"{js}.position[{m}]", "effort": f"{js}.effort[{m}]",
+            out["joints"][j] = {"position": f"{js}.position[{m}]", "effort": 0 if j in self.passive else f"{js}.effort[{m}]",
                                 **({"velocity": f"{js}.velocity[{m}]"} if logged_v else {})}
         if self.base is not None:
             b = self.base.topic

@@ -69,20 +69,22 @@ class _Series:
     frames: set
 
 
-def _joint_values(where: str, msg, k: int, wanted: list[str], velocity: bool) -> dict:
+def _joint_values(where: str, msg, k: int, fields: dict[str, list[str]]) -> dict:
+    """{field[joint]: value} of one JointState message; ``fields``: the joints (message names) read per field."""
     names = list(msg.name)
     index = {n: i for i, n in enumerate(names)}
+    missing = [j for j in fields["position"] if j not in index]
+    if missing:
+        raise DataError(f"{where} field name: joint {missing[0]!r} is missing in message {k} (names there: {names}); "
+                        "map model joints to other names with columns.topics.joint_states.names")
     out = {}
-    for field in ("position", "velocity", "effort") if velocity else ("position", "effort"):
+    for field, joints in fields.items():
         x = np.asarray(getattr(msg, field), dtype=float)
-        if x.size != len(names):
-            hint = "; set columns.topics.joint_states.velocity: false to take v from dq/dt" if field == "velocity" else ""
+        if joints and x.size != len(names):
+            hint = {"velocity": "; set columns.topics.joint_states.velocity: false to take v from dq/dt",
+                    "effort": "; list unactuated joints in columns.topics.joint_states.passive"}.get(field, "")
             raise DataError(f"{where} field {field}: message {k} has {x.size} values for {len(names)} joint names{hint}")
-        for j in wanted:
-            if j not in index:
-                raise DataError(f"{where} field name: joint {j!r} is missing in message {k} (names there: {names}); "
-                                "map model joints to other names with columns.topics.joint_states.names")
-            out[f"{field}[{j}]"] = x[index[j]]
+        out.update((f"{field}[{j}]", x[index[j]]) for j in joints)
     return out
 
 
@@ -123,8 +125,11 @@ def _check_topics(path: Path, topics: TopicMap, info) -> dict[str, str]:
 def _samples(kind: str, msg, topics: TopicMap, where: str, k: int, joints: list[str]) -> list[tuple]:
     """(the part of the message whose header stamps it, its values by field) for each sample in message k."""
     if kind == JOINT_STATE:
-        return [(msg, _joint_values(where, msg, k, joints, topics.velocity is not False and
-                                    (topics.base is None or topics.base_twist)))]
+        passive = {topics.message_name(j) for j in topics.passive}
+        velocity = topics.velocity is not False and (topics.base is None or topics.base_twist)
+        fields = {"position": joints, "velocity": joints if velocity else [],
+                  "effort": [j for j in joints if j not in passive]}
+        return [(msg, _joint_values(where, msg, k, fields))]
     if kind == WRENCH:
         return [(msg, dict(zip(WRENCH_FIELDS, _vec(msg.wrench.force, XYZ) + _vec(msg.wrench.torque, XYZ))))]
     if kind == TF:

@@ -77,6 +77,7 @@ class JointStatesTopic(_Section):
     velocity: bool | None = Field(None, description="null: the logged velocities when every source has one (the base "
                                                     "too); false: v from dq/dt")
     names: dict[str, str] | None = Field(None, description="model joint -> its name in the messages")
+    passive: list[str] | None = Field(None, description="unactuated model joints: τ = 0, their effort is not read")
 
 
 class BaseTopicSection(_Section):
