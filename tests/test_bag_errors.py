@@ -151,3 +151,34 @@ def test_a_malformed_bag_is_one_typed_line_naming_topic_and_field_and_exit_2(tmp
 
     assert isinstance(debug.exception, DataError)  # the project's error tree, not a library's exception
     shutil.rmtree(tmp_path / "o", ignore_errors=True)
+
+
+@pytest.mark.parametrize("topics,message", [
+    ({"joint_states": "/js", "rate": 500}, "column map: topics.: unknown keys ['rate']"),
+    ({"joint_states": "/js", "time_base": "/odom"}, "topics.time_base: '/odom' is none of the mapped topics ['/js']"),
+    ({"joint_states": {"topic": "/js", "velocity": True}, "base": {"topic": "/tf", "parent": "odom", "child": "base"}},
+     "joint_states.velocity: true needs a base twist too"),
+    ({"joint_states": {"topic": "/js", "names": {"Joint9": "j9"}}}, "joint_states.names: ['Joint9'] are not model joints"),
+    ({"joint_states": {"topic": "/js", "passive": ["Joint9"]}}, "joint_states.passive: ['Joint9'] are not model joints"),
+    ({"stamps": "sent", "joint_states": "/js"}, "topics.stamps: expected one of ['header', 'receive'], got 'sent'"),
+    ({"wrenches": {"ft": "/ft"}}, "topics: name a joint_states topic or a base topic"),
+])
+def test_a_topic_map_that_cannot_be_used_names_its_key(topics, message):
+    from dualid.data.io import ColumnMap
+    from dualid.errors import DataError
+
+    with pytest.raises(DataError, match=message.replace("[", r"\[").replace("(", r"\(")):
+        ColumnMap.from_dict({"topics": topics}, ["Joint1", "Joint2"])
+
+
+def test_a_bag_with_two_joint_state_topics_needs_a_config_and_inspect_refuses_a_non_bag(tmp_path):
+    bag = _bag(tmp_path, joints() + joints(topic="/arm/joint_states"))
+    result = runner.invoke(app, ["fit", "--model", str(URDF), "--data", str(bag), "--out", str(tmp_path / "o")])
+    assert result.exit_code == 2
+    assert (f"{bag}: 2 sensor_msgs/msg/JointState topics ['/arm/joint_states', '/joint_states']; name the joint states "
+            "in a config") in " ".join(result.stderr.split())
+    (tmp_path / "t").mkdir()
+    for path, text in ((_text_file(tmp_path, "run.csv"), "not a ROS bag"),
+                       (_truncated(tmp_path / "t", "ros1"), "cannot read it as a ROS bag")):
+        listing = runner.invoke(app, ["inspect", str(path)])
+        assert listing.exit_code == 2 and text in listing.stderr and str(path) in listing.stderr

@@ -313,3 +313,35 @@ def test_the_crazyflie_pendulum_fits_from_odometry_passive_joint_states_and_thru
     got = fit(tmp_path, "bag", {**common, "columns": {"topics": topics}, "train": [str(bag)]})
     for method in QUICK["methods"]:
         assert np.abs(theta(got, method) - theta(csv, method)).max() <= 1e-12, method
+
+
+def test_joints_renamed_in_the_messages_and_another_time_base(tmp_path):
+    """names maps model joints to the messages' names; time_base puts every topic on another topic's stamps."""
+    from dualid.data.io import load_log
+
+    df, ns = dfki_frame(300)
+    msgs = joint_messages("ros1", df, ns)
+    m = Messages("ros1")
+    renamed = []
+    for topic, msgtype, rec, msg in msgs:
+        names = [{"Joint1": "shoulder", "Joint2": "elbow"}.get(n, n) for n in msg.name]
+        renamed.append((topic, msgtype, rec, m.joint_state(_stamp(msg), names, msg.position, msg.velocity, msg.effort)))
+    ft = [("/ft", "geometry_msgs/msg/WrenchStamped", EPOCH + int(n) + 7, m.wrench(EPOCH + int(n) + 5, "tool", [1, 0, 0],
+                                                                                  [0, 0, 0])) for n in ns[::3]]
+    bag = write_bag(tmp_path / "named.bag", "ros1", sorted(renamed + ft, key=lambda x: x[2]))
+    plain = write_bag(tmp_path / "plain.bag", "ros1", msgs)
+    names = {"topics": {"joint_states": {"topic": "/joint_states", "names": {"Joint1": "shoulder", "Joint2": "elbow"}}}}
+    got = load_log(bag, names, joints=["Joint1", "Joint2"])
+    ref = load_log(plain, {"topics": {"joint_states": "/joint_states"}}, joints=["Joint1", "Joint2"])
+    assert np.array_equal(got.q, ref.q) and np.array_equal(got.tau, ref.tau)
+    on_ft = load_log(bag, {"topics": {**names["topics"], "wrenches": {"ft": "/ft"}, "time_base": "/ft"}},
+                     joints=["Joint1", "Joint2"])
+    expected = (ns[::3] - ns[0]) / 1e9  # the wrench stamps, 5 ns after joint samples 0, 3, …, 297 of 300
+    assert np.array_equal(on_ft.t, expected) and on_ft.T == 100
+    k = 10  # a wrench stamp lies 5 ns after joint sample 3k: q interpolated linearly between samples 3k and 3k + 1
+    u = 5 / (ns[3 * k + 1] - ns[3 * k])
+    assert np.allclose(on_ft.q[k], (1 - u) * ref.q[3 * k] + u * ref.q[3 * k + 1], rtol=0, atol=1e-12)
+
+
+def _stamp(msg) -> int:
+    return int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
