@@ -42,7 +42,9 @@ class BagSummary:
 def _topic(reader, topic: str, info, times: list[int], first, start: int) -> TopicSummary:
     t = np.asarray(times, dtype=np.int64)
     duration = float(t[-1] - t[0]) / 1e9 if t.size else 0.0
-    joints, velocity, frames = (), False, ()
+    joints: tuple[str, ...] = ()
+    frames: tuple[str, ...] = ()
+    velocity = False
     if first is not None:
         msg = reader.deserialize(first[1], first[0].msgtype)
         if info.msgtype == JOINT_STATE:

@@ -77,7 +77,7 @@ def _joint_values(where: str, msg, k: int, fields: dict[str, list[str]]) -> dict
     if missing:
         raise DataError(f"{where} field name: joint {missing[0]!r} is missing in message {k} (names there: {names}); "
                         "map model joints to other names with columns.topics.joint_states.names")
-    out = {}
+    out: dict[str, float] = {}
     for field, joints in fields.items():
         x = np.asarray(getattr(msg, field), dtype=float)
         if joints and x.size != len(names):
@@ -161,8 +161,9 @@ def _collect(path: Path, topics: TopicMap, joints: list[str], reader) -> tuple[d
             s.frames.update(f"{tr.header.frame_id}->{tr.child_frame_id}" for tr in msg.transforms)
     for topic, s in series.items():
         if not rows[topic]:  # only a /tf topic without the base's transform: the others have messages
-            raise DataError(f"{path}: topic {topic!r} field transforms: no transform {topics.base.parent}->"  # type: ignore[union-attr]
-                            f"{topics.base.child} (header.frame_id->child_frame_id); transforms there: {sorted(s.frames)}")
+            pair = "" if topics.base is None else f"{topics.base.parent}->{topics.base.child} "
+            raise DataError(f"{path}: topic {topic!r} field transforms: no transform {pair}(header.frame_id->"
+                            f"child_frame_id); transforms there: {sorted(s.frames)}")
         s.values = {f"{topic}.{c}": np.array([r[c] for r in rows[topic]]) for c in rows[topic][0]}
     frames = {}
     for w in topics.wrenches:
