@@ -182,3 +182,12 @@ def test_a_bag_with_two_joint_state_topics_needs_a_config_and_inspect_refuses_a_
                        (_truncated(tmp_path / "t", "ros1"), "cannot read it as a ROS bag")):
         listing = runner.invoke(app, ["inspect", str(path)])
         assert listing.exit_code == 2 and text in listing.stderr and str(path) in listing.stderr
+
+
+def test_the_topics_form_needs_the_model_joints_from_the_library():
+    from dualid.data.io import ColumnMap
+    from dualid.errors import DataError
+
+    with pytest.raises(DataError, match=r"the joints to read are the model's; pass them \(load_log\(\.\.\., joints=…\)\)"):
+        ColumnMap.from_dict({"topics": {"joint_states": "/js"}})
+    assert ColumnMap.from_dict({"topics": {"base": "/odom"}}).base is not None  # a single floating body has none

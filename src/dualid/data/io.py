@@ -113,7 +113,9 @@ class ColumnMap:
             if set(d) - {"topics", "units"}:
                 raise DataError(f"column map: the topics form takes 'topics' and 'units' only, got {sorted(d)}")
             topics = TopicMap.from_dict(d["topics"])
-            names = tuple(joints) if joints is not None else tuple(k for k, _ in topics.names)
+            if joints is None and topics.joint_states is not None:
+                raise DataError("column map: topics: the joints to read are the model's; pass them (load_log(..., joints=…))")
+            names = tuple(joints or ())
             cmap = ColumnMap.from_dict({**topics.columns(names), "units": d.get("units") or {}})
             return replace(cmap, topics=topics)
         allowed = ["time", "joints", "units", "base", "wrenches", "topics"]
