@@ -207,7 +207,7 @@ def test_dfki_files_give_dualids_held_out_scores(tmp_path):
     config = FitConfig.from_yaml(example).with_overrides(methods=("dm",), references=())
     outcome = fit_robot(config)
     (tmp_path / "out").mkdir()
-    _, record = write_model_files(outcome, tmp_path / "out")  # what dualid fit writes (without the figures)
+    record = write_model_files(outcome, tmp_path / "out").record()  # what dualid fit writes (without the figures)
     fit = outcome.fits["dm"]
     assert record["dm"] == {"theta": written_theta(fit)[1], "urdf": "dm.urdf", "mjcf": "dm.xml",
                             "mjcf_notes": record["dm"]["mjcf_notes"]}
