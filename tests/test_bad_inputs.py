@@ -801,3 +801,23 @@ def test_a_floating_body_without_wrenches_is_refused(tmp_path):
 
     with pytest.raises(DataError, match="the floating base has no wrench section"):
         check_effort("box.csv", np.zeros((10, 6)), None, [], True)
+
+
+def test_report_says_which_model_files_were_written_and_why_not(tmp_path):
+    """A mesh MuJoCo cannot read (an ASCII STL) leaves no MJCF: report.md and parameters.yaml say why; a mesh
+    not found leaves the MJCF without it, and the report says so."""
+    pkg = tmp_path / "share" / "arm_description" / "meshes"
+    pkg.mkdir(parents=True)
+    (pkg / "link1.stl").write_text("solid t\nendsolid t\n")
+    urdf = write_urdf(tmp_path, URDF.replace("</inertial>\n  </link>\n  <link name=\"link2\">",
+                                             "</inertial>\n  " + MESH + "\n  <link name=\"link2\">", 1))
+    for name, extra, said in (("bad", ["--package-path", str(tmp_path / "share")], "ols.xml not written: write_mjcf: "
+                               "MuJoCo refused the identified model"), ("missing", [], "1 collision mesh not found")):
+        out = tmp_path / name
+        result = runner.invoke(app, fit(tmp_path, urdf)[:-1] + [str(out), *extra])
+        assert result.exit_code == 0, _text(result)
+        report = " ".join((out / "report.md").read_text().split())
+        assert "## Model files" in report and said in report
+        record = yaml.safe_load((out / "parameters.yaml").read_text())["methods"]["ols"]
+        assert (record["mjcf"].startswith("not written: write_mjcf: MuJoCo refused") if name == "bad"
+                else record["mjcf"] == "ols.xml" and "not found" in record["mjcf_notes"])

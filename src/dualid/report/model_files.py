@@ -21,7 +21,7 @@ import numpy as np
 
 from dualid.errors import DualidError
 from dualid.model.joint_terms import JointTermsModel
-from dualid.report.document import Bullets, Section, Text
+from dualid.report.document import Bullets, Section, Table, Text
 from dualid.report.mjcf import write_mjcf
 from dualid.report.urdf import write_urdf
 from dualid.robot.fit import FitOutcome, MethodFit
@@ -113,14 +113,14 @@ def write_model_files(outcome: FitOutcome, out: Path) -> ModelFiles:
                               friction=friction, armature=armature, not_determined=nd)
             files.append(ModelFile(m, "urdf", path))
         except (DualidError, ValueError) as exc:  # e.g. a fit on the consistency boundary the URDF writer refuses
-            files.append(ModelFile(m, "urdf", None, str(exc)))
+            files.append(ModelFile(m, "urdf", None, " ".join(str(exc).split())))  # one line (MuJoCo's have several)
         try:
             path, mjcf = write_mjcf(urdf, outcome.rigid, theta[:p0], out / f"{m}.xml", overwrite=True,
                                     friction=friction, armature=armature, not_determined=nd, logged=ranges,
                                     package_path=outcome.config.model.package_path)
             files.append(ModelFile(m, "mjcf", path, notes=mjcf.notes))
         except (DualidError, ValueError) as exc:
-            files.append(ModelFile(m, "mjcf", None, str(exc)))
+            files.append(ModelFile(m, "mjcf", None, " ".join(str(exc).split())))
     return ModelFiles(tuple(files), tuple(thetas))
 
 
@@ -180,3 +180,23 @@ def plausible_section(outcome: FitOutcome) -> Section:
     items = plausible_lines(outcome)
     return Section("Plausible parameters", (Text(PLAUSIBLE_INTRO), Bullets(tuple(i.removeprefix("- ") for i in items)))
                    if items else ())
+
+
+MODEL_FILES_NOTE = ("Load the .xml in MuJoCo or in Pinocchio's MJCF reader (buildModelFromMJCF): it carries the armature, "
+                    "damping and frictionloss. Every URDF reader (Pinocchio's, MuJoCo's, Gazebo's) loses the armature, "
+                    "which URDF has no field for; dualid validate reads both files whole.")
+
+
+def model_files_section(files: ModelFiles | None) -> Section:
+    """The report's 'Model files' section: per method the files written (or why not), and what the MJCF writer
+    dropped or changed (missing meshes, joint ranges the logs leave, …)."""
+    if files is None or not files.files:
+        return Section("Model files")
+    cells: dict[str, dict[str, str]] = {m: {"theta": which} for m, which in files.theta}
+    for f in files.files:
+        cells[f.method][f.kind] = f.path.name if f.path is not None else "not written"
+    rows = tuple((m, c.get("urdf", "—"), c.get("mjcf", "—"), c["theta"]) for m, c in cells.items())
+    items = [f"{f.method}.{'urdf' if f.kind == 'urdf' else 'xml'} not written: {f.reason}" for f in files.not_written]
+    items += list(dict.fromkeys(n for f in files.files for n in f.notes))
+    return Section("Model files", (Table(("method", "URDF", "MJCF", "parameters carried"), rows), Text(MODEL_FILES_NOTE),
+                                   *((Bullets(tuple(items)),) if items else ())))
