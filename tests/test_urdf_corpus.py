@@ -102,6 +102,36 @@ def _fit_and_load(urdf: Path, tmp: Path, package_path: bool) -> tuple[RigidBodyM
     return rigid, files, [str(w.message) for w in caught if issubclass(w.category, DualidWarning)]
 
 
+def _mass_matrix(pm: pin.Model, angles: dict[str, float]) -> np.ndarray:
+    """Pinocchio's M(q) (upper triangle completed) at one angle per joint (cos, sin for a continuous one)."""
+    q = pin.neutral(pm)
+    for j in range(1, pm.njoints):
+        k, x = pm.joints[j].idx_q, angles[pm.names[j]]
+        q[k:k + pm.joints[j].nq] = (np.cos(x), np.sin(x)) if pm.joints[j].nq == 2 else (x,)
+    M = pin.crba(pm, pm.createData(), q)
+    return np.triu(M) + np.triu(M, 1).T
+
+
+def _same_mass_matrix(mj: mujoco.MjModel, from_mjcf: pin.Model, from_urdf: pin.Model, rng) -> None:
+    """M(q) at a random q: MuJoCo's and Pinocchio's MJCF reader's (both with the armature; crba adds it) agree
+    with that of Pinocchio's URDF reader on the written URDF (which has no armature), joint by joint name."""
+    names = [from_urdf.names[j] for j in range(1, from_urdf.njoints)]
+    angles = dict(zip(names, rng.uniform(-1, 1, len(names))))
+    md = mujoco.MjData(mj)
+    for n in names:
+        md.qpos[mj.jnt_qposadr[mj.joint(n).id]] = angles[n]
+    mujoco.mj_forward(mj, md)
+    M = np.zeros((mj.nv, mj.nv))
+    mujoco.mj_fullM(mj, md, M)
+    dofs = [mj.jnt_dofadr[mj.joint(n).id] for n in names]
+    M = M[np.ix_(dofs, dofs)]
+    armature = np.diag(mj.dof_armature[dofs])
+    tol = {"rtol": 1e-7, "atol": 1e-9 * np.abs(M).max()}
+    np.testing.assert_allclose(_mass_matrix(from_urdf, angles) + armature, M, **tol)
+    order = [from_mjcf.getJointId(n) - 1 for n in names]
+    np.testing.assert_allclose(_mass_matrix(from_mjcf, angles)[np.ix_(order, order)], M, **tol)
+
+
 @pytest.mark.parametrize("robot", sorted(CORPUS))
 def test_public_urdf_fits_and_its_files_load_everywhere(robot, tmp_path):
     rel, package_path, _ = CORPUS[robot]
@@ -117,6 +147,7 @@ def test_public_urdf_fits_and_its_files_load_everywhere(robot, tmp_path):
     assert from_urdf.nv == rigid.nv
     assert from_mjcf.nv == rigid.nv  # every body, also those MuJoCo wrote under a <frame>
     assert "<frame" not in xml.read_text()
+    _same_mass_matrix(mj, from_mjcf, from_urdf, np.random.default_rng(1))
     moving = sum(from_urdf.inertias[j].mass for j in range(1, from_urdf.njoints))
     assert moving > 0
     np.testing.assert_allclose(mj.body_mass[mj.body_weldid != 0].sum(), moving, rtol=1e-9)  # bodies not welded to the world

@@ -127,8 +127,8 @@ def _for_pinocchio(xml: str, base: str) -> str:
             k = list(parent).index(frame)
             parent.remove(frame)
             for child in reversed(list(frame)):
-                if set(child.attrib) & {"euler", "axisangle", "xyaxes", "zaxis"}:
-                    raise ModelError(f"write_mjcf: cannot fold a <frame> into a <{child.tag}> oriented other than by quat")
+                if set(child.attrib) & {"euler", "axisangle", "xyaxes", "zaxis", "fromto"}:
+                    raise ModelError(f"write_mjcf: cannot fold a <frame> into a <{child.tag}> placed other than by pos and quat")
                 if child.tag not in ("joint", "inertial"):  # a joint's pos and axis are in its body's frame
                     pos = np.zeros(3)
                     mujoco.mju_rotVecQuat(pos, np.fromstring(child.get("pos", "0 0 0"), sep=" "), q_f)
