@@ -748,11 +748,15 @@ def test_package_path_resolves_meshes_and_the_mjcf_keeps_them(tmp_path, monkeypa
                                     + np.array([(np.zeros(3), v[list(f)], 0) for f in faces], dtype=record).tobytes())
     urdf = write_urdf(tmp_path, URDF.replace("</inertial>\n  </link>\n  <link name=\"link2\">",
                                              "</inertial>\n  " + MESH + "\n  <link name=\"link2\">", 1))
-    for extra, env in ((["--package-path", str(tmp_path / "share")], None), ([], str(tmp_path / "share"))):
+    mesh_urdf = write_urdf(tmp_path, urdf.read_text(), "mesh.urdf")
+    config = write_config(tmp_path, {"model": {"urdf": "mesh.urdf", "package_path": ["share"]}})  # relative to the config
+    for args, env in ((fit(tmp_path, mesh_urdf)[:-2] + ["--package-path", str(tmp_path / "share"), "--out"], None),
+                      (["fit", "--config", str(config), "--out"], None),
+                      (fit(tmp_path, mesh_urdf)[:-1], str(tmp_path / "share"))):
         if env:
             monkeypatch.setenv("ROS_PACKAGE_PATH", env)
-        out = tmp_path / ("o" + str(bool(env)))
-        result = runner.invoke(app, fit(tmp_path, urdf)[:-1] + [str(out), *extra])
+        out = tmp_path / f"o{len(list(tmp_path.glob('o*')))}"
+        result = runner.invoke(app, args + [str(out)])
         assert result.exit_code == 0 and "not found" not in _text(result), _text(result)
         xml = (out / "ols.xml").read_text()
         assert 'file="' in xml and "link1.stl" in xml
