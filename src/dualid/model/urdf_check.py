@@ -71,8 +71,8 @@ def _numbers(text: str | None, count: int, where: str, path: Path) -> np.ndarray
     return x
 
 
-def _inertia(inertial: ET.Element, link: str, path: Path) -> bool:
-    """Check one <inertial>; True when it is a massless frame with a non-zero inertia (warned, to be ignored)."""
+def _inertia(inertial: ET.Element, link: str, path: Path) -> None:
+    """Check one <inertial> (a massless frame with a non-zero inertia: warned; ``massless_frames`` lists them)."""
     where = f"link {link!r} <inertial>"
     _check_duplicates(inertial, where, path)
     mass_el = inertial.find("mass")
@@ -86,7 +86,7 @@ def _inertia(inertial: ET.Element, link: str, path: Path) -> bool:
     if inertia_el is None:
         if mass > 0:
             raise ModelError(f"{path}: {where} has a mass of {mass} kg but no <inertia>")
-        return False
+        return
     values = {}
     for key in _INERTIA_KEYS:
         raw = inertia_el.get(key, "0")
@@ -100,7 +100,7 @@ def _inertia(inertial: ET.Element, link: str, path: Path) -> bool:
     if mass == 0 and np.abs(lam).max() > 0:
         _warn(f"{path}: {where}: a mass of 0 kg with a non-zero inertia ({shown}); treated as a massless frame "
               "(its inertia is ignored: a body without mass has none). Give the link its mass if it has one")
-        return True
+        return
     if lam[0] < -tol:
         raise ModelError(
             f"{path}: {where} <inertia>: expected a positive semi-definite matrix, got principal moments "
@@ -109,7 +109,6 @@ def _inertia(inertial: ET.Element, link: str, path: Path) -> bool:
         raise ModelError(
             f"{path}: {where} <inertia>: principal moments {np.array2string(lam, precision=4)} kg m² break the "
             f"triangle inequality (the two smallest must sum to at least the largest; no body has them) ({shown})")
-    return False
 
 
 def massless_frames(root: ET.Element) -> list[str]:
