@@ -196,7 +196,7 @@ def _file_tau(path: Path, names, runs, vc: float, loader: str) -> list[np.ndarra
 
 
 def test_dfki_files_give_dualids_held_out_scores(tmp_path):
-    """The issue's done-when: the DFKI example's dm.xml, loaded unchanged in Pinocchio and MuJoCo, gives
+    """The DFKI example's dm.xml, loaded unchanged in Pinocchio and MuJoCo, gives
     the held-out τ RMSE of dualid's own validation to 1e-6 N m; dm.urdf loses the armature, and with it
     the joint-2 score."""
     from dualid.report.model_files import write_model_files, written_theta

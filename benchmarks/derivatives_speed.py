@@ -1,7 +1,7 @@
-"""One pass of the dual-metric derivatives (f, ∇f, ∇²f over all samples), before and after the session-5 kernels,
-side by side in one process, on the benchmark Crazyflie and arm7 (issue 12, point 6).
+"""One pass of the dual-metric derivatives (f, ∇f, ∇²f over all samples), before and after the batched kernels,
+side by side in one process, on the benchmark Crazyflie and arm7.
 
-    OPENBLAS_NUM_THREADS=1 python benchmarks/speed_session5.py --sizes 20000,100000 --out benchmarks/speed_session5.json
+    OPENBLAS_NUM_THREADS=1 python benchmarks/derivatives_speed.py --sizes 20000,100000 --out benchmarks/derivatives_speed.json
 
 "before" is the pass as it was on main 15bd74f (``AffineMetric.evaluate`` and ``apply_quad`` on a copy of Y,
 4,096-sample chunks), re-stated here; "after" is ``dualid.estimators.newton.dual_metric_derivatives`` with its
@@ -147,7 +147,7 @@ def main() -> None:
             if agree > 1e-10:
                 raise SystemExit(f"{name} N={N}: before and after differ by {agree:.3g} (relative)")
     if args.out:
-        args.out.write_text(json.dumps({"command": "OPENBLAS_NUM_THREADS=1 python benchmarks/speed_session5.py "
+        args.out.write_text(json.dumps({"command": "OPENBLAS_NUM_THREADS=1 python benchmarks/derivatives_speed.py "
                                         + " ".join(sys.argv[1:]), "passes": rows, "fits": fit_rows}, indent=1))
 
 
