@@ -345,3 +345,13 @@ def test_joints_renamed_in_the_messages_and_another_time_base(tmp_path):
 
 def _stamp(msg) -> int:
     return int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
+
+
+def test_the_topics_form_keeps_which_units_were_stated():
+    """check_units reads ColumnMap.stated (a prismatic joint with an angular unit stated is refused): the topics form
+    states the same units as the column form."""
+    from dualid.data.io import ColumnMap
+
+    topics = ColumnMap.from_dict({"topics": {"joint_states": "/js"}, "units": {"position": "deg"}}, ["Joint1"])
+    plain = ColumnMap.from_dict({"joints": {"Joint1": {"position": "q", "effort": "t"}}, "units": {"position": "deg"}})
+    assert topics.stated == plain.stated == (("", "position"),) and topics.topics is not None

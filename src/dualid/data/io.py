@@ -19,7 +19,8 @@ Rows are counted from 0 (the first data row, after any header) in error messages
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import copy
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
@@ -66,6 +67,8 @@ class ColumnMap:
     base: BaseColumns | None = None  # a floating base's pose (and twist) columns (dualid.data.floating_columns)
     wrenches: tuple[WrenchColumns, ...] = ()  # external wrenches on named frames
     topics: TopicMap | None = None  # a ROS bag's topics (dualid.data.bag_topics): the columns are its channels
+    # (joint or "", quantity) of each unit the map was given (the others are SI by default): set by __post_init__
+    stated: tuple[tuple[str, str], ...] = field(default=(), compare=False, repr=False)
 
     def __post_init__(self) -> None:
         joints = tuple(self.joints)
@@ -86,6 +89,7 @@ class ColumnMap:
                     raise DataError(f"column map: units.{quantity} names joints {unknown} that are not mapped; joints: {names}")
                 per_joint += [(str(j), quantity, u) for j, u in unit.items()]
                 del units[quantity]
+        object.__setattr__(self, "stated", tuple(sorted({("", q) for q in units} | {(j, q) for j, q, _ in per_joint})))
         checked = []
         for where, quantity, unit in [(f"units.{q}", q, u) for q, u in units.items()] + \
                 [(f"units.{q}.{j}", q, u) for j, q, u in per_joint]:
@@ -117,7 +121,7 @@ class ColumnMap:
                 raise DataError("column map: topics: the joints to read are the model's; pass them (load_log(..., joints=…))")
             names = tuple(joints or ())
             cmap = ColumnMap.from_dict({**topics.columns(names), "units": d.get("units") or {}})
-            return replace(cmap, topics=topics)
+            return cmap.with_fields(topics=topics)
         allowed = ["time", "joints", "units", "base", "wrenches", "topics"]
         unknown = sorted(set(d) - set(allowed))
         if unknown:
@@ -185,6 +189,14 @@ class ColumnMap:
             for i, name in enumerate(joints, start=1)
         )
         return ColumnMap(time=time, joints=cols, units=tuple((units or {}).items()))
+
+    def with_fields(self, **changes) -> "ColumnMap":
+        """A copy with some fields replaced, its derived fields (``stated``, the canonical units) kept as they are
+        (dataclasses.replace would run __post_init__ again on the canonical units)."""
+        out = copy.copy(self)
+        for key, value in changes.items():
+            object.__setattr__(out, key, value)
+        return out
 
     # -- queries -----------------------------------------------------------------------------------
     @property
@@ -295,7 +307,8 @@ def load_log(
                         "or a rosbag2 folder)")
     if cmap.topics is not None:
         data, available, frames = read_bag(path, cmap.topics, [cmap.topics.message_name(j.name) for j in jcols])
-        cmap = replace(cmap, wrenches=tuple(replace(w, frame=frames[w.name]) for w in cmap.wrenches))
+        cmap = cmap.with_fields(wrenches=tuple(WrenchColumns(w.name, frames[w.name], w.force, w.torque, w.reference)
+                                               for w in cmap.wrenches))
     elif path.suffix.lower() not in FORMATS:
         raise DataError(f"{path}: unknown log format {path.suffix!r}; expected one of {', '.join(FORMATS)}, or a ROS bag")
     else:

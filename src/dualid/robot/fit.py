@@ -25,6 +25,7 @@ import numpy as np
 
 from dualid.data.bag_inspect import bag_summary, default_topics
 from dualid.data.bags import is_bag
+from dualid.data.checks import check_efforts
 from dualid.data.files import read_mapping
 from dualid.data.lie import BASE_COORDINATES
 from dualid.data.io import ColumnMap, load_log, read_table
@@ -333,6 +334,7 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
     steps, steps_note = choose_preprocessing(config.preprocessing, config.train[0], cmap, joints)
     check_floating(config.model.floating_base, cmap)
     train = load_runs(config.train, cmap, joints, steps, rigid)
+    check_efforts(config.train, train, cmap)  # all efforts 0: a massless robot would be the exact fit
     test = load_runs(config.test, cmap, joints, steps, rigid)
     _say(progress, "building regressors")
     problem = with_bounds(build_problem(model, train), config.bounds)
