@@ -328,7 +328,6 @@ PRIVATE_IMPORTS = {
     ("dualid.estimators.quadratic_newton", "dualid.estimators.newton.objective", "_NotPositiveDefinite"),
     ("dualid.estimators.quadratic_newton", "dualid.estimators.newton.start", "_central_point"),
     ("dualid.estimators.uncertainty", "dualid.estimators.newton.objective", "_NotPositiveDefinite"),
-    ("dualid.model.drag", "dualid.model.rigid_body", "_with_implicit_world"),
     ("dualid.systems.crazyflie", "dualid.systems.crazyflie_control", "_random_reference"),
     ("dualid.systems.crazyflie", "dualid.systems.crazyflie_control", "_rotation"),
 }
