@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from dualid.cli.app import app
+from dualid.cli.app import FLAG, app
 
 
 def _summary_lines(summary) -> list[str]:
@@ -30,7 +30,7 @@ def _summary_lines(summary) -> list[str]:
 def inspect(
     bag: Path = typer.Argument(..., help="a ROS 1 .bag file or a rosbag2 folder (sqlite3 or MCAP)"),
     model: Optional[Path] = typer.Option(None, "--model", help="the robot's URDF, written into the starter config"),
-    list_topics: bool = typer.Option(False, "--list-topics", help="the topics only, no starter config"),
+    list_topics: bool = typer.Option(False, "--list-topics", metavar=FLAG, help="the topics only, no starter config"),
 ) -> None:
     """Print a bag's topics (message types, counts, rates, durations, joint names and frames) as YAML comments,
     then a starter fit config reading its joint states, base and wrenches:
