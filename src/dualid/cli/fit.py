@@ -47,7 +47,8 @@ def _solver_overrides(cfg, flags: List[str]):
 @app.command()
 def fit(
     model: Optional[Path] = typer.Option(None, "--model", help="the robot's URDF"),
-    data: List[Path] = typer.Option([], "--data", help="training log (csv/parquet/npz); repeatable"),
+    data: List[Path] = typer.Option([], "--data", help="training log (csv/parquet/npz, a ROS 1 .bag or a rosbag2 folder); "
+                                "repeatable"),
     test: List[Path] = typer.Option([], "--test", help="held-out log for validation; repeatable"),
     method: List[str] = typer.Option([], "--method", help="ols, wls, energy, logdet, pullback or dm; repeatable"),
     solver: List[str] = typer.Option([], "--solver", help="METHOD=SOLVER: dm=newton or dm=sdp, wls=CLARABEL or "
@@ -124,7 +125,7 @@ def fit(
 @app.command()
 def validate(
     model: Path = typer.Option(..., "--model", help="an (identified) URDF (friction from <dynamics>) or MJCF (.xml)"),
-    data: List[Path] = typer.Option(..., "--data", help="log to validate on; repeatable"),
+    data: List[Path] = typer.Option(..., "--data", help="log to validate on (csv/parquet/npz or a ROS bag); repeatable"),
     config: Optional[Path] = typer.Option(None, "--config", help="fit.yaml for columns, preprocessing, gravity"),
     out: Optional[Path] = typer.Option(None, "--out", help="write validation.json, report.md/.html and PNGs here"),
     force: bool = typer.Option(False, "--force", metavar=FLAG, help="write into an existing non-empty output directory"),

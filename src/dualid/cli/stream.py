@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Optional
 
 import typer
 
@@ -17,8 +18,11 @@ EXPLAINED = 0.5  # warn when the fit explains less than this share of the effort
 @app.command("fit-stream")
 def fit_stream(
     model: Path = typer.Option(..., "--model", help="URDF of the robot"),
-    data: Path = typer.Option(..., "--data", help="Parquet file (columns q_0.., v_/a_/tau_<joint>) or a directory "
-                                                  "of q.npy, v.npy, a.npy, tau.npy (memory-mapped)"),
+    data: Path = typer.Option(..., "--data", help="Parquet file (columns q_0.., v_/a_/tau_<joint>), a directory "
+                                                  "of q.npy, v.npy, a.npy, tau.npy (memory-mapped), or a log read as "
+                                                  "dualid fit reads it: a ROS bag, or any log with --config"),
+    config: Optional[Path] = typer.Option(None, "--config", help="fit.yaml whose columns (or columns.topics) and "
+                                          "preprocessing read --data as a log; the log is read whole"),
     method: str = typer.Option("ols", "--method", help="ols, ols_unconstrained, wls, energy, dm, dm-paper"),
     floating_base: bool = typer.Option(False, "--floating-base", metavar=FLAG, help="the URDF's root is free"),
     chunk: int = typer.Option(65536, "--chunk", help="samples per chunk (memory: chunk·n·p floats for Y)"),
@@ -29,8 +33,11 @@ def fit_stream(
     fly, so memory holds one chunk. Prints the identified parameters, the objective and the passes made."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    from dualid.data.bags import is_bag
     from dualid.estimators.methods import make_estimator
     from dualid.model.rigid_body import RigidBodyModel
+    from dualid.robot.config import FitConfig
+    from dualid.robot.stream_source import log_source
     from dualid.streaming import ArraySource, ChunkedProblem, ParquetSource
 
     if method in ("logdet", "pullback", "dm-bfp"):
@@ -39,7 +46,11 @@ def fit_stream(
     if chunk < 1:
         fail(f"--chunk: expected a positive number of samples, got {chunk}")
     rb = RigidBodyModel.from_urdf(model, floating_base=floating_base)
-    if data.is_dir():
+    if config is not None or is_bag(data):  # a log: columns (or bag topics) and preprocessing as dualid fit's
+        cfg = None if config is None else FitConfig.from_yaml(config)
+        source = log_source(rb, [data], None if cfg is None else cfg.columns, None if cfg is None else cfg.preprocessing,
+                            chunk=chunk)
+    elif data.is_dir():
         source = ArraySource.from_npy(data, chunk=chunk)
     else:
         source = ParquetSource(data, rb.coordinates, rb.nq, chunk=chunk)

@@ -1,4 +1,4 @@
-"""Loading robot logs (CSV, Parquet, NPZ) into Trajectories through an explicit column map.
+"""Loading robot logs (CSV, Parquet, NPZ, ROS bags) into Trajectories through an explicit column map.
 
 A ``ColumnMap`` says which column holds time and, per joint, position, velocity, acceleration and
 effort, and in which units; ``load_log`` checks the file against it and converts to SI
@@ -11,69 +11,32 @@ irregular stamps), meta["logged"] omits "v" and ``preprocessing.differentiate`` 
 velocity=None) replaces it by its own derivative. Accelerations are kept only if logged
 (else a=None; ``differentiate`` computes them).
 
+A ROS bag's map names topics (``columns.topics``, ``dualid.data.bag_topics``); ``dualid.data.bags`` reads
+them into channels on one time base, and from there a bag is read exactly as a table is.
+
 Rows are counted from 0 (the first data row, after any header) in error messages.
 """
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
+from dualid.data.bag_topics import TopicMap
+from dualid.data.bags import is_bag, read_bag
 from dualid.data.checks import check_magnitude, check_time, check_velocity
 from dualid.data.floating_columns import BaseColumns, WrenchColumns, read_wrenches, with_base
 from dualid.data.lie import BASE_COORDINATES
 from dualid.data.tables import FORMATS, read_table
 from dualid.data.trajectory import Trajectory
+from dualid.data.units import LINEAR_UNITS, SI_UNITS, UNITS, motor_factors, normalize_unit  # noqa: F401 (re-exported)
 from dualid.errors import DataError, MissingFileError
 
-# unit -> factor to SI, per quantity
-UNITS: dict[str, dict[str, float]] = {
-    "time": {"s": 1.0, "ms": 1e-3, "us": 1e-6},
-    "position": {"rad": 1.0, "deg": np.pi / 180, "m": 1.0, "mm": 1e-3},  # m, mm: prismatic joints
-    "velocity": {"rad/s": 1.0, "deg/s": np.pi / 180, "m/s": 1.0, "mm/s": 1e-3},
-    "acceleration": {"rad/s^2": 1.0, "deg/s^2": np.pi / 180, "m/s^2": 1.0, "mm/s^2": 1e-3},
-    "effort": {"N m": 1.0, "N mm": 1e-3, "N": 1.0},  # N: prismatic joints
-}
-SI_UNITS = {q: next(iter(u)) for q, u in UNITS.items()}  # the first unit of each quantity is SI
-LINEAR_UNITS = frozenset({"m", "mm", "m/s", "mm/s", "m/s^2", "mm/s^2", "N"})  # of prismatic joints
-
-
-def normalize_unit(unit) -> str:
-    """The spelling used in UNITS: "Nm", "N·m", "N*m", "N.m" → "N m"; "Nmm" → "N mm"; "s²" → "s^2"; "µs" → "us"."""
-    u = " ".join(str(unit).split()).replace("²", "^2").replace("µ", "u").replace("μ", "u")
-    for sep in ("·", "*", "."):
-        u = u.replace(f"N{sep}m", "N m")
-    if u in ("Nm", "Nmm"):
-        u = "N " + u[1:]
-    return u
 _JOINT_KEYS = ("position", "velocity", "acceleration", "effort")
-
-
-_MOTOR_KEYS = {"current": None, "torque_constant": None, "gear_ratio": 1.0, "efficiency": 1.0}
-
-
-def _motor(joint, spec: Mapping) -> tuple[tuple[str, float], ...]:
-    """(torque_constant, gear_ratio, efficiency) of an effort given as {current: COLUMN, torque_constant: kt
-    [N m/A], gear_ratio: N (default 1), efficiency: η in (0, 1] (default 1)}: τ = I·kt·N·η at the joint."""
-    where = f"column map: joint {joint!r} effort"
-    bad = sorted(set(spec) - set(_MOTOR_KEYS))
-    if bad:
-        raise DataError(f"{where}: unknown keys {bad}; allowed: {list(_MOTOR_KEYS)}")
-    missing = [k for k in ("current", "torque_constant") if spec.get(k) is None]
-    if missing:
-        raise DataError(f"{where}: a motor current needs {missing}")
-    out = []
-    for key in ("torque_constant", "gear_ratio", "efficiency"):
-        x = spec.get(key, _MOTOR_KEYS[key])
-        ok = isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) and x > 0
-        if not ok or (key == "efficiency" and x > 1):
-            expected = "a number in (0, 1]" if key == "efficiency" else "a finite number > 0"
-            raise DataError(f"{where}.{key}: expected {expected}, got {x!r}")
-        out.append((key, float(x)))
-    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -103,6 +66,7 @@ class ColumnMap:
     joint_units: tuple[tuple[str, str, str], ...] = ()  # (joint, quantity, unit): overrides ``units`` per joint
     base: BaseColumns | None = None  # a floating base's pose (and twist) columns (dualid.data.floating_columns)
     wrenches: tuple[WrenchColumns, ...] = ()  # external wrenches on named frames
+    topics: TopicMap | None = None  # a ROS bag's topics (dualid.data.bag_topics): the columns are its channels
     # (joint or "", quantity) of each unit the map was given (the others are SI by default): set by __post_init__
     stated: tuple[tuple[str, str], ...] = field(default=(), compare=False, repr=False)
 
@@ -143,12 +107,22 @@ class ColumnMap:
 
     # -- constructors ------------------------------------------------------------------------------
     @staticmethod
-    def from_dict(d: Mapping) -> "ColumnMap":
+    def from_dict(d: Mapping, joints: Sequence[str] | None = None) -> "ColumnMap":
         """From the YAML form {time: "time", joints: {Joint1: {position: pos_meas1, velocity: vel_meas1,
-        effort: tau_meas1}, ...}, units: {position: rad}}."""
+        effort: tau_meas1}, ...}, units: {position: rad}}, or a bag's {topics: {...}, units: {...}} for the
+        model's ``joints`` (names; the floating base's coordinates left out)."""
         if not isinstance(d, Mapping):
             raise DataError(f"column map must be a mapping with keys time, joints, units; got {type(d).__name__}")
-        allowed = ["time", "joints", "units", "base", "wrenches"]
+        if "topics" in d:
+            if set(d) - {"topics", "units"}:
+                raise DataError(f"column map: the topics form takes 'topics' and 'units' only, got {sorted(d)}")
+            topics = TopicMap.from_dict(d["topics"])
+            if joints is None and topics.joint_states is not None:
+                raise DataError("column map: topics: the joints to read are the model's; pass them (load_log(..., joints=…))")
+            names = tuple(joints or ())
+            cmap = ColumnMap.from_dict({**topics.columns(names), "units": d.get("units") or {}})
+            return cmap.with_fields(topics=topics)
+        allowed = ["time", "joints", "units", "base", "wrenches", "topics"]
         unknown = sorted(set(d) - set(allowed))
         if unknown:
             raise DataError(f"column map: unknown keys {unknown}; allowed: {allowed}")
@@ -176,7 +150,7 @@ class ColumnMap:
                     raise DataError(f"column map: joint {name!r} effort: expected a column name, a motor current or 0 "
                                     f"(a passive joint), got {cols['effort']!r}")
                 cols["effort"] = None
-            motor = _motor(name, cols["effort"]) if isinstance(cols["effort"], Mapping) else ()
+            motor = motor_factors(name, cols["effort"]) if isinstance(cols["effort"], Mapping) else ()
             if motor:
                 cols["effort"] = cols["effort"]["current"]
             joints.append(JointColumns(str(name), **{k: (None if v is None else str(v)) for k, v in cols.items()},
@@ -216,6 +190,14 @@ class ColumnMap:
         )
         return ColumnMap(time=time, joints=cols, units=tuple((units or {}).items()))
 
+    def with_fields(self, **changes) -> "ColumnMap":
+        """A copy with some fields replaced, its derived fields (``stated``, the canonical units) kept as they are
+        (dataclasses.replace would run __post_init__ again on the canonical units)."""
+        out = copy.copy(self)
+        for key, value in changes.items():
+            object.__setattr__(out, key, value)
+        return out
+
     # -- queries -----------------------------------------------------------------------------------
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -252,6 +234,8 @@ class ColumnMap:
                 units[q] = {n: units[q] for n in self.joint_names}
             units[q][j] = u
         out = {"time": self.time, "joints": joints, "units": units}
+        if self.topics is not None:
+            return {"topics": self.topics.to_dict(), "units": units}
         if self.base is not None:
             out["base"] = self.base.to_dict()
         if self.wrenches:
@@ -276,7 +260,8 @@ def load_log(
     velocity: "logged" (the map must name velocity columns) or "gradient" (see the module docstring).
     """
     path = Path(path)
-    cmap = columns if isinstance(columns, ColumnMap) else ColumnMap.from_dict(columns)
+    cmap = columns if isinstance(columns, ColumnMap) else ColumnMap.from_dict(
+        columns, None if joints is None else [j for j in joints if j not in BASE_COORDINATES])
     if velocity not in ("logged", "gradient"):
         raise DataError(f"load_log: velocity must be 'logged' or 'gradient', got {velocity!r}")
     if joints is None:
@@ -316,9 +301,18 @@ def load_log(
 
     if not path.exists():
         raise MissingFileError(f"log file not found: {path}")
-    if path.suffix.lower() not in FORMATS:
-        raise DataError(f"{path}: unknown log format {path.suffix!r}; expected one of {', '.join(FORMATS)}")
-    data, available = read_table(path)
+    if is_bag(path) != (cmap.topics is not None):
+        raise DataError(f"{path}: a ROS bag needs its topics named in the column map (columns.topics)" if is_bag(path)
+                        else f"{path}: columns.topics names ROS bag topics, but this is not a bag (.bag, .mcap, .db3, "
+                        "or a rosbag2 folder)")
+    if cmap.topics is not None:
+        data, available, frames = read_bag(path, cmap.topics, [cmap.topics.message_name(j.name) for j in jcols])
+        cmap = cmap.with_fields(wrenches=tuple(WrenchColumns(w.name, frames[w.name], w.force, w.torque, w.reference)
+                                               for w in cmap.wrenches))
+    elif path.suffix.lower() not in FORMATS:
+        raise DataError(f"{path}: unknown log format {path.suffix!r}; expected one of {', '.join(FORMATS)}, or a ROS bag")
+    else:
+        data, available = read_table(path)
     needed = [cmap.time]
     if cmap.base is not None:
         needed += [c for c in cmap.base.columns() if velocity == "logged" or c not in cmap.base.twist]

@@ -11,7 +11,7 @@ import warnings
 from dataclasses import replace
 
 import numpy as np
-from scipy import interpolate, signal
+from scipy import interpolate as interp, signal
 
 from dualid.data import lie
 from dualid.data.checks import check_gaps, check_upsampling
@@ -95,6 +95,13 @@ def _velocity_logged(traj: Trajectory) -> bool:
     return True if logged is None else "v" in logged
 
 
+def interpolate(t: np.ndarray, x: np.ndarray, t_new: np.ndarray, method: str = "linear") -> np.ndarray:
+    """The columns of x (T, k), sampled at t, at the times t_new: "linear" or "cubic" (not-a-knot spline)."""
+    if method == "linear":
+        return np.stack([np.interp(t_new, t, x[:, j]) for j in range(x.shape[1])], axis=1)
+    return interp.CubicSpline(t, x, axis=0)(t_new)
+
+
 def resample(traj: Trajectory, rate: float, method: str = "linear") -> Trajectory:
     """Interpolate every channel onto the uniform grid t0, t0 + 1/rate, ... ≤ t_end [Hz].
 
@@ -122,14 +129,8 @@ def resample(traj: Trajectory, rate: float, method: str = "linear") -> Trajector
     t_new = t[0] + np.arange(T_new) / rate
     t_new[-1] = min(t_new[-1], t[-1])  # guard round-off past the end
 
-    def interp(x):
-        if x is None:
-            return None
-        if method == "linear":
-            return np.stack([np.interp(t_new, t, x[:, j]) for j in range(x.shape[1])], axis=1)
-        return interpolate.CubicSpline(t, x, axis=0)(t_new)
-
-    changes = {key: interp(getattr(traj, key)) for key in _FIELDS if not (key == "q" and floating)}
+    changes = {key: None if getattr(traj, key) is None else interpolate(t, getattr(traj, key), t_new, method)
+               for key in _FIELDS if not (key == "q" and floating)}
     if floating:
         changes["q"] = lie.interpolate_on_group(t, traj.q, traj.n, t_new)
     step = {"resample": {"rate": float(rate), "method": method}}

@@ -34,20 +34,26 @@ def reading_once() -> Iterator[None]:
         _READ.reset(token)
 
 
-def read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
-    """All columns of the file as float arrays (name -> (T,)) and the column order."""
+def read_once(path: Path, how: tuple, read):
+    """read() -> (data: name -> array, ...) once per file (resolved path, sizes and modification times of the file or
+    of the files in the folder) and ``how`` inside ``reading_once``, its arrays made read-only; always read outside."""
     cache = _READ.get()
     if cache is None:
-        return _read_table(path)
-    st = path.stat()
-    key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+        return read()
+    files = sorted(path.iterdir()) if path.is_dir() else [path]
+    key = (str(path.resolve()), how, tuple((f.name, f.stat().st_size, f.stat().st_mtime_ns) for f in files))
     if key not in cache:
-        data, columns = _read_table(path)
-        for x in data.values():
+        out = read()
+        for x in out[0].values():
             x.flags.writeable = False
-        cache[key] = (data, columns)
-    data, columns = cache[key]
-    return dict(data), list(columns)
+        cache[key] = out
+    data, *rest = cache[key]
+    return (dict(data), *(r.copy() for r in rest))
+
+
+def read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
+    """All columns of the file as float arrays (name -> (T,)) and the column order."""
+    return read_once(path, (), lambda: _read_table(path))
 
 
 def _read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:

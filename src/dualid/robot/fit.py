@@ -23,8 +23,11 @@ from typing import Callable
 import cvxpy as cp
 import numpy as np
 
+from dualid.data.bag_inspect import bag_summary, default_topics
+from dualid.data.bags import is_bag
 from dualid.data.checks import check_efforts
 from dualid.data.files import read_mapping
+from dualid.data.lie import BASE_COORDINATES
 from dualid.data.io import ColumnMap, load_log, read_table
 from dualid.data.preprocessing import preprocess
 from dualid.data.tables import reading_once
@@ -55,22 +58,24 @@ Progress = Callable[[str], None]
 # --- data -------------------------------------------------------------------------------------
 def column_map(config_columns, joints: tuple[str, ...], first_log: Path) -> ColumnMap:
     """The configured map, or the DFKI pattern (time, pos_meas{i}, vel_meas{i}, tau_meas{i}) when none is
-    configured and the first log has exactly those columns; otherwise a DataError asking for a map."""
+    configured and the first log has exactly those columns (or the one joint-state topic of a bag);
+    otherwise a DataError asking for a map."""
+    model_joints = [j for j in joints if j not in BASE_COORDINATES]
     if config_columns is not None:
-        return ColumnMap.from_dict(config_columns)
-    cmap = ColumnMap.pattern(joints)
+        return ColumnMap.from_dict(config_columns, model_joints)
     if not Path(first_log).exists():
         raise MissingFileError(f"log file not found: {first_log}")
+    if is_bag(first_log):
+        return ColumnMap.from_dict({"topics": default_topics(bag_summary(first_log))}, model_joints)
+    cmap = ColumnMap.pattern(joints)
     _, available = read_table(Path(first_log))
     missing = [c for c in cmap.columns() if c not in available]
     arrays = array_column_map(joints, available)
     if missing and arrays is not None:
         return arrays
     if missing:
-        raise DataError(
-            f"no column map given and {first_log} lacks the default DFKI columns {missing} "
-            f"(available: {available}); give a 'columns' map in a --config file"
-        )
+        raise DataError(f"no column map given and {first_log} lacks the default DFKI columns {missing} "
+                        f"(available: {available}); give a 'columns' map in a --config file")
     return cmap
 
 
@@ -101,10 +106,8 @@ def load_runs(paths, cmap: ColumnMap, joints: tuple[str, ...], steps, rigid: Rig
     for p in paths:
         traj = preprocess(load_log(p, cmap, joints, velocity=velocity), [dict(s) for s in steps])
         if traj.a is None:
-            raise DataError(
-                f"{p}: no accelerations after preprocessing; add a 'differentiate' step (e.g. "
-                "{differentiate: {method: savgol, window: 0.05}})"
-            )
+            raise DataError(f"{p}: no accelerations after preprocessing; add a 'differentiate' step (e.g. "
+                            "{differentiate: {method: savgol, window: 0.05}})")
         if traj.wrench is not None:
             if rigid is None:
                 raise DataError(f"{p}: external wrench columns need the rigid-body model to apply them")
@@ -276,11 +279,8 @@ class FitOutcome(RunOutcome):
 
     def identifiability_text(self) -> str:
         ident = self.identifiability
-        lines = [
-            f"samples: {self.problem.N} (x {self.problem.n} joints) from {len(self.train)} training runs; "
-            f"parameters: {self.problem.p}",
-            ident.describe(),
-        ]
+        lines = [f"samples: {self.problem.N} (x {self.problem.n} joints) from {len(self.train)} training runs; "
+                 f"parameters: {self.problem.p}", ident.describe()]
         if not ident.full_rank:
             lines += [
                 "",

@@ -1,5 +1,6 @@
 """Checks and defaults for the inputs of a real-robot fit: the column map of a log of (T, n) arrays,
-units against the joint types, and training/held-out logs that are the same data."""
+units against the joint types, training/held-out logs that are the same data, and the starter config
+of a ROS bag."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dualid.data.bag_inspect import BagSummary, default_topics
 from dualid.data.io import LINEAR_UNITS, SI_UNITS, UNITS, ColumnMap
 from dualid.data.tables import read_table
 from dualid.errors import DataError, DualidError, DualidWarning
@@ -102,4 +104,9 @@ def _rows(path) -> set[bytes]:
     return {row.tobytes() for row in table}
 
 
-# --- model ------------------------------------------------------------------------------------
+def starter_config(summary: BagSummary, urdf: Path | None = None) -> dict:
+    """A fit config reading a bag (``data.bag_inspect.BagSummary``) that ``dualid fit`` accepts as it is: the
+    topics dualid knows (``default_topics``), absolute paths, the default methods and preprocessing."""
+    topics = default_topics(summary, everything=True)
+    model = {"urdf": str(Path(urdf).resolve()) if urdf is not None else "ROBOT.urdf", "floating_base": "base" in topics}
+    return {"model": model, "columns": {"topics": topics}, "train": [str(summary.path.resolve())], "methods": ["ols", "dm"]}

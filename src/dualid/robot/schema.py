@@ -75,7 +75,39 @@ class WrenchSection(_Section):
     torque: list[Column] = Field(min_length=3, max_length=3, description="[N m] columns (or 0)")
 
 
+class JointStatesTopic(_Section):
+    topic: str = Field(description="a sensor_msgs/JointState topic; joints matched by name")
+    velocity: bool | None = Field(None, description="null: the logged velocities when every source has one (the base "
+                                                    "too); false: v from dq/dt")
+    names: dict[str, str] | None = Field(None, description="model joint -> its name in the messages")
+    passive: list[str] | None = Field(None, description="unactuated model joints: τ = 0, their effort is not read")
+
+
+class BaseTopicSection(_Section):
+    topic: str = Field(description="nav_msgs/Odometry, geometry_msgs/PoseStamped (twist: false) or tf2_msgs/TFMessage")
+    parent: str | None = Field(None, description="a /tf topic: the parent frame of the transform (e.g. odom)")
+    child: str | None = Field(None, description="a /tf topic: the base frame (e.g. base_link)")
+    twist: bool = Field(True, description="read an odometry's twist (child frame: Pinocchio's LOCAL)")
+
+
+class WrenchTopicSection(_Section):
+    topic: str = Field(description="a geometry_msgs/WrenchStamped topic")
+    frame: str | None = Field(None, description="the model frame it acts on; default: the messages' header.frame_id")
+    reference: Literal["local", "local_world_aligned", "world"] = "local"
+
+
+class TopicsSection(_Section):
+    stamps: Literal["header", "receive"] = Field("header", description="header.stamp or the bag's record time")
+    time_base: str | None = Field(None, description="the topic whose stamps are the time base (default: the joint "
+                                                    "states, else the base); the others are interpolated onto it")
+    joint_states: str | JointStatesTopic | None = None
+    base: str | BaseTopicSection | None = Field(None, description="the floating base's pose (and twist)")
+    wrenches: dict[str, str | WrenchTopicSection] | None = Field(None, description="external wrenches by name")
+
+
 class ColumnsSection(_Section):
+    topics: TopicsSection | None = Field(None, description="a ROS bag's topics (instead of time, joints, base and "
+                                                           "wrenches)")
     time: str = "time"
     joints: dict[str, JointColumnsSection] = Field(default_factory=dict,
                                                    description="model joint name -> its columns; 'q[k]' is column k of an array q")
@@ -126,7 +158,7 @@ class FitConfigSchema(_Section):
 
     model: ModelSection | str
     columns: ColumnsSection | None = None
-    train: list[str] | str = Field(description="training logs (csv/parquet/npz)")
+    train: list[str] | str = Field(description="training logs (csv/parquet/npz, a ROS 1 .bag or a rosbag2 folder)")
     test: list[str] | str | None = None
     preprocessing: list[dict[str, dict[str, Any] | None]] | None = Field(
         None, description="steps {resample | filter_lowpass | differentiate | trim | downsample: parameters}; "
@@ -177,4 +209,4 @@ def _is_union_tag(part) -> bool:
     """Pydantic names the member of a union it tried ('str', 'ModelSection', 'list[...]') in error paths."""
     p = str(part)
     return not isinstance(part, int) and ("[" in p or p in ("str", "float", "int", "bool", "dict", "list", "none")
-                                          or p.endswith(("Section", "Effort")))
+                                          or p.endswith(("Section", "Effort", "Topic")))
