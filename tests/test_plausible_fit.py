@@ -46,10 +46,13 @@ def test_fit_writes_urdf_and_mjcf_with_the_plausible_parameters(tmp_path, plausi
         if plausible is True:  # the default: the confidence region, its constraint active, training RMSE ~kept
             assert rec["form"] == "confidence" and rec["level"] == 0.95 and rec["note"] == ""
             assert rec["statistic"] == pytest.approx(rec["radius2"], rel=1e-4) and rec["radius2"] == pytest.approx(3.8415, 1e-4)
-            # what it costs on the training data: 1.5 % τ RMSE here (the sandwich over segments sees the residuals'
-            # correlation, so the region is wider than white noise would make it), and the held-out runs are scored
-            assert 0 <= rec["training_rmse"] / rec["training_rmse_raw"] - 1 < 0.03
+            # what it costs on the training data: 3.9 % τ RMSE here (the sandwich over segments sees the residuals'
+            # correlation, so the region is wider than white noise would make it), while the held-out runs, scored,
+            # are predicted 8.6 % better than by θ̂ (at most 2 % worse is the requirement)
+            assert 0 <= rec["training_rmse"] / rec["training_rmse_raw"] - 1 < 0.05
             assert len(rec["held_out_tau_rmse"]) == 2
+            raw_held_out = np.mean(outcome.fits["ols"].validation.mean("tau_rmse"))
+            assert np.mean(rec["held_out_tau_rmse"]) <= 1.02 * raw_held_out
             assert record["model_files_theta"].startswith("θ_plausible (closest to the prior with base parameters in")
         else:
             assert rec["form"] == "exact" and rec["predictions_unchanged"] is True

@@ -267,8 +267,12 @@ def plausible_parameters(problem: IdentificationProblem, theta_hat, theta0, solv
     scale[scale == 0] = 1.0
     G = _prior_metric(P, blocks, scale)
     if N.shape[1]:
-        L = np.linalg.cholesky(N.T @ G @ N)
-        NG = np.linalg.solve(L, N.T).T  # the same null space, orthonormal in the prior's metric: z is O(1)
+        try:
+            L = np.linalg.cholesky(N.T @ G @ N)
+            NG = np.linalg.solve(L, N.T).T  # the same null space, orthonormal in the prior's metric: z is O(1)
+        except np.linalg.LinAlgError:  # a metric too ill-conditioned for Cholesky: its eigenvalues, floored
+            ev, EV = np.linalg.eigh(N.T @ G @ N)
+            NG = N @ (EV / np.sqrt(np.maximum(ev, 1e-12 * max(float(ev.max()), 1e-300))))
     else:
         NG = N
     # the G-orthogonal projector onto the null space, NG NGᵀ G, is ∂θ_p/∂θ₀ where no constraint is active
