@@ -43,8 +43,10 @@ U_TOL = 5e-6  # accept log ‖u‖ in [−U_TOL, 0]: the statistic within 1e-5 o
 MU_MAX = 1e14
 MAX_SOLVES = 40
 TOL = 1e-9
+MASSLESS_SHARE = 0.01  # a prior body without mass: this share of the other bodies' mean mass (rounded_prior)
 ROUNDING = 0.1  # each prior body's inertia about its centre of mass made up to this much rounder (rounded_body)
 UNSEEN_RTOL = 1e-9
+MASSLESS_SHARE = 0.01  # a prior body without mass: this share of the other bodies' mean mass (rounded_prior)
 ROUNDING = 0.1  # each prior body's inertia about its centre of mass made up to this much rounder (rounded_body)  # a regressor column this much below the median column norm is roundoff  # the interior point's relative gap
 
 
@@ -76,12 +78,26 @@ def rounded_body(theta_b: np.ndarray, alpha: float = ROUNDING) -> np.ndarray:
 
 
 def rounded_prior(P, theta0: np.ndarray) -> np.ndarray:
-    """θ₀ with every rigid body of positive mass rounded (``rounded_body``); other entries unchanged."""
+    """θ₀ with every rigid body of positive mass rounded (``rounded_body``), and every massless or singular one (a
+    URDF link without inertial, a point mass) replaced by a regularised body: MASSLESS_SHARE × the mean mass of the
+    prior's other bodies, at its frame's origin, an isotropic inertia of their mean radius of gyration. Other
+    entries unchanged."""
     theta0 = np.array(theta0, dtype=float)
-    for b in P.blocks:
+    good, bad = [], []
+    for b in (b for b in P.blocks if b.kind == "rigid_body"):
         idx = list(b.indices)
-        if b.kind == "rigid_body" and theta0[idx[0]] > 0:
+        if theta0[idx[0]] > 0:
             theta0[idx] = rounded_body(theta0[idx])
+        C = b.constraint_matrix(theta0)
+        (good if np.linalg.eigvalsh(C)[0] > 1e-12 * max(float(np.abs(C).max()), 1e-300) else bad).append(idx)
+    if bad and good:
+        masses = np.array([theta0[idx[0]] for idx in good])
+        gyration = np.mean([np.sqrt(np.trace(pin.Inertia.FromDynamicParameters(theta0[idx]).inertia) / (2 * theta0[idx[0]]))
+                            for idx in good])
+        m = MASSLESS_SHARE * float(masses.mean())
+        ball = pin.Inertia(m, np.zeros(3), m * gyration**2 * np.eye(3)).toDynamicParameters()
+        for idx in bad:
+            theta0[idx] = ball
     return theta0
 
 
