@@ -94,3 +94,29 @@ def test_without_uncertainty_the_exact_choice_is_used_and_said():
     assert p.form == "exact" and p.predictions_unchanged and p.fallback_used
     assert p.note == ("no uncertainty of the base parameters (not requested (uncertainty.method: none)): the "
                       "exact-prediction choice instead of the 0.95 confidence region")
+
+
+def test_a_failed_plausible_step_is_said_everywhere_and_exits_1(tmp_path):
+    """A prior the step cannot use (every link mass negative in a prior parameters file; one such body alone is
+    regularised, and a warning says so): the fit goes on, its files carry θ̂, and the console (an error line, no
+    traceback), the warnings in parameters.yaml and the exit code say so."""
+    from typer.testing import CliRunner
+
+    from dualid.cli import app
+    from dualid.model.rigid_body import RigidBodyModel
+
+    rigid = RigidBodyModel.from_urdf(small_config()["model"]["urdf"])
+    values = dict(zip(rigid.parameters.names, rigid.nominal.tolist()))
+    values["Joint1.m"] = values["Joint2.m"] = -0.5
+    prior = tmp_path / "prior.yaml"
+    prior.write_text(yaml.safe_dump({"parameters": [{"name": n, "value": v} for n, v in values.items()]}))
+    config = tmp_path / "fit.yaml"
+    config.write_text(yaml.safe_dump(small_config(methods=["ols"], references={}, prior={"source": str(prior)})))
+    result = CliRunner().invoke(app, ["fit", "--config", str(config), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 1, result.output
+    assert "Traceback" not in result.output and result.exception is not None  # typer.Exit(1)
+    assert "error: ols: plausible parameters failed: ConsistencyError" in " ".join(result.output.split())
+    record = yaml.safe_load((tmp_path / "out" / "parameters.yaml").read_text())
+    assert record["methods"]["ols"]["model_files_theta"].startswith("raw θ̂")
+    assert any(w.startswith("ols: no plausible parameters (ConsistencyError") for w in record["warnings"])
+    assert record["methods"]["ols"]["plausible"]["error"].startswith("ConsistencyError")

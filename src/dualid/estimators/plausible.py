@@ -67,7 +67,7 @@ class PlausibleParameters:
     solver: str  # "CLARABEL", "SCS" or "none"
     solver_chain: str  # what was tried, e.g. "logdet CLARABEL optimal" or "logdet CLARABEL failed (…) → …"
     fallback_used: bool
-    objective: str  # "logdet", or "pullback" when no strictly consistent θ has θ̂'s predictions
+    objective: str  # "logdet"; "pullback" when no strictly consistent θ has θ̂'s predictions; "prior": plausible_newton's R
     prediction_change: float  # ‖Y(θ_p − θ̂)‖ / ‖Y θ̂‖ on the training data
     predictions_unchanged: bool  # prediction_change ≤ PREDICTION_RTOL
     consistent: bool  # θ_p physically consistent (tolerance 1e-7, as IdentificationResult)

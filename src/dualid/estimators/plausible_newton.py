@@ -4,15 +4,14 @@
 confidence ellipsoid (β − β̂)ᵀΣ_β⁻¹(β − β̂) ≤ c², physically consistent, within the bounds. Here it is solved as
 a sequence of smooth penalised problems
 
-    x(μ) = argmin_x  μ‖u‖² + R(θ(x))   s.t. C_b(θ(x)) ⪰ 0, bounds,      θ(x) = c + √c² E L u + N_G z,  x = (u, z)
+    θ(μ) = argmin_θ  R(θ) + μ‖u(θ)‖²   s.t. C_b(θ) ⪰ 0, bounds,      u(θ) = Λ^-½ Uᵀ D (Cθ − β̂) / c,
 
-(L Lᵀ = Σ_β, its eigenvalues floored at SIGMA_RTOL × the largest in the column-scaled chart so that the map x → θ
-is square and invertible; N_G a basis of C's null space orthonormal in the prior metric G; c the point of β̂'s
-slice nearest θ₀ in G), so that every variable is O(1) whatever the units and the noise level, and
-(β − β̂)ᵀΣ_β⁻¹(β − β̂) = c²‖u‖². μ is found by a bracketing search in log μ (regula falsi) until ‖u‖ ∈ [1 − U_TOL, 1]: the penalised
-optimum is then the constrained one for the ellipsoid through it (KKT with multiplier μ/c²). Each solve is
-``newton.interior_point._interior_point`` (primal–dual steps on the consistency LMIs and bound rows, warm-started
-from the previous μ's solution); it starts at the prior, which is strictly consistent, so no phase one is needed.
+U Λ Uᵀ = D Σ_β D the covariance in the column-scaled chart (D = diag of the independent columns' norms), its
+eigenvalues floored at SIGMA_RTOL × the largest, so that ‖u‖² c² is the statistic and u is O(1) whatever the units
+and the noise level. μ is found by regula falsi in log μ until ‖u‖ ∈ [1 − U_TOL, 1]: the penalised optimum is
+then the constrained one (KKT with multiplier μ/c²). Each solve is ``newton.interior_point._interior_point``
+(primal–dual steps on the consistency LMIs and bound rows, affine-invariant, warm-started from the previous μ's
+solution); the first starts at the prior, which is strictly consistent, so no phase one is needed.
 
 The prior term R is scale-aware in every block:
 - rigid bodies: the log-det divergence of the pseudo-inertia to the prior's (invariant under units and body
@@ -40,14 +39,11 @@ from dualid.problem import IdentificationProblem
 
 SIGMA_RTOL = 1e-12  # Σ_β's eigenvalues floored at this × the largest (column-scaled chart)
 U_TOL = 5e-6  # accept log ‖u‖ in [−U_TOL, 0]: the statistic within 1e-5 of c² (the constraint active)
-MU_MAX = 1e14
+MU_MAX = 1e14  # the largest penalty tried before the point is kept outside the region
 MAX_SOLVES = 40
-TOL = 1e-9
+TOL = 1e-9  # the interior point's relative gap
 MASSLESS_SHARE = 0.01  # a prior body without mass: this share of the other bodies' mean mass (rounded_prior)
 ROUNDING = 0.1  # each prior body's inertia about its centre of mass made up to this much rounder (rounded_body)
-UNSEEN_RTOL = 1e-9
-MASSLESS_SHARE = 0.01  # a prior body without mass: this share of the other bodies' mean mass (rounded_prior)
-ROUNDING = 0.1  # each prior body's inertia about its centre of mass made up to this much rounder (rounded_body)  # a regressor column this much below the median column norm is roundoff  # the interior point's relative gap
 
 
 def torque_weights(problem: IdentificationProblem) -> np.ndarray:
@@ -196,7 +192,11 @@ def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: n
             H = H + 2.0 * mu * WtW
             return _Derivatives(f, g + 2.0 * mu * (W.T @ u), 0.5 * (H + H.T))
 
-        return _run(cons, start, TOL, 200, objective, 1.0)[0]
+        try:
+            return _run(cons, start, TOL, 200, objective, 1.0)[0]
+        except _NotPositiveDefinite:  # a start outside the prior's domain (a body not strictly consistent)
+            raise SolverError("plausible parameters: the start is not strictly consistent",
+                              status="no_start") from None
 
     def u_norm(th: np.ndarray) -> float:
         return float(np.linalg.norm(W @ th - b))

@@ -146,7 +146,7 @@ def plausible_in_region(problem: IdentificationProblem, theta_hat, theta0, uncer
     return PlausibleParameters(
         theta_p, theta_hat=theta_hat, theta0=theta0, names=P.names, prior_share=share, determined_by=determined,
         null_space=_null_space(base.C, scale, s_ind), rank=r, status="optimal" if not out["note"] else "outside_region",
-        solver="newton", solver_chain=" → ".join(chain), fallback_used=bool(out["note"]), objective="logdet",
+        solver="newton", solver_chain=" → ".join(chain), fallback_used=bool(out["note"]), objective="prior",
         prediction_change=change, predictions_unchanged=change <= PREDICTION_RTOL,
         consistent=P.is_consistent(theta_p, tol=1e-7),
         divergence_hat=prior_divergence(problem, theta_hat, theta0),
