@@ -58,6 +58,7 @@ from dualid.problem import IdentificationProblem
 
 LEVEL = 0.95  # default confidence level of the region (chosen in benchmarks/plausible_arm.md)
 EXACT, CONFIDENCE = "exact", "confidence"
+EXACT_RTOL = 1e-9  # a training τ RMSE below this × the τ RMS: noise-free data (the exact-prediction choice)
 SIGMA_RTOL = 1e-12  # eigenvalues of the scaled Σ_β below this × its largest: directions the data fix exactly
 
 
@@ -118,6 +119,13 @@ def plausible_in_region(problem: IdentificationProblem, theta_hat, theta0, uncer
         exact = plausible_parameters(problem, theta_hat, theta0, solver, solver_options)
         return dataclasses.replace(exact, form=EXACT, training_rmse_hat=rmse_hat,
                                    training_rmse=training_rmse(problem, exact.theta))
+    tau_rms = float(np.sqrt(np.mean(problem.tau**2)))
+    if rmse_hat <= EXACT_RTOL * tau_rms:  # noise-free data: Σ_β is roundoff, the region is θ̂'s slice
+        exact = plausible_parameters(problem, theta_hat, theta0, solver, solver_options)
+        return dataclasses.replace(exact, form=EXACT, training_rmse_hat=rmse_hat,
+                                   training_rmse=training_rmse(problem, exact.theta), note=(
+                                       f"the training residual is roundoff ({rmse_hat / tau_rms:.1e} of the torque): "
+                                       "the data fix the identifiable combinations exactly, the region is θ̂'s slice"))
     theta0 = checked_prior(P, theta0, solver, "plausible_in_region")
     r = base.rank
     radius2 = float(scipy.stats.chi2.ppf(level, r if joint else 1)) if r else 0.0
