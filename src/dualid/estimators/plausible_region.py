@@ -5,21 +5,18 @@ that is too strict: directions the rank rule counts as determined may be determi
 the noise, and the fit's absurd values along them (a 60× link mass) cannot be touched. Here the slice
 is widened to the fit's confidence region of the base parameters β = C θ (dualid.identifiability):
 
-    θ_p = argmin_θ  Σ_b D(C_b(θ) ‖ C_b(θ₀))   subject to   (Cθ − β̂)ᵀ Σ_β⁻¹ (Cθ − β̂) ≤ c²,
-                                                          C_b(θ) ⪰ 0, bounds,
+    θ_p = argmin_θ  R(θ)   subject to   (Cθ − β̂)ᵀ Σ_β⁻¹ (Cθ − β̂) ≤ c²,   C_b(θ) ⪰ 0, bounds,
 
-with Σ_β the method's covariance of β̂ (estimators.uncertainty: the sandwich, or a bootstrap's) and
-D the log-det divergence of the constraint matrices, as in ``plausible_parameters``. The radius:
+with Σ_β the method's covariance of β̂ (estimators.uncertainty: the sandwich, or a bootstrap's) and R the
+scale-aware prior term of ``estimators.plausible_newton`` (the log-det divergence of the pseudo-inertias,
+torque-weighted squares on joint terms), which also solves it. The radius:
 c² = χ²₁(level) by default — the ellipsoid is then exactly the set of β for which *every* linear
 combination aᵀβ (each base parameter, each predicted torque) stays within its own ``level`` interval
 aᵀβ̂ ± z·√(aᵀΣa); ``joint=True``: c² = χ²_r(level), the joint confidence region of all r base
-parameters (much wider for r ≈ 60: it lets single combinations move by ~8σ, and on the simulated arms
-the held-out error then grows on some seeds; benchmarks/plausible_arm.md). Both the ellipsoid and D are
-invariant under a change of units or body frame, so θ_p is too. The problem is convex (a second-order
-cone and log-det cones); θ = c + √c² E Σ^½ u + N z with ‖u‖ ≤ 1, N a basis of C's null space
-orthonormal in the prior's metric G and c the point of β̂'s slice nearest θ₀ in G, so the variables are
-O(1) at any level. level → 0 shrinks the ellipsoid onto θ̂'s slice; level = 0 *is* the
-exact-prediction choice (``plausible_parameters`` is called).
+parameters (much wider for r ≈ 60: it lets single combinations move by ~8σ; benchmarks/plausible_arm.md).
+Both the ellipsoid and R are invariant under a change of units or body frame, so θ_p is too. level → 0
+shrinks the ellipsoid onto θ̂'s slice; level = 0 *is* the exact-prediction choice (``plausible_parameters``
+is called), and so is noise-free data (a training residual below EXACT_RTOL of the torque: Σ_β is roundoff).
 
 Which parameters the prior determined: with μ the multiplier of the ellipsoid (from stationarity) and
 F = CᵀΣ_β⁻¹C, the quadratic model of the problem at θ₀ gives ∂θ_p/∂θ₀ = (G + λF)⁻¹G, λ = 2μ (μ for
