@@ -190,21 +190,25 @@ def _solve(cvx, z, solver: str, solver_options, chain: list[str], what: str, usa
     An "optimal_inaccurate" point is kept when usable(z) (physically consistent), and labelled so."""
     for name in dict.fromkeys((solver, *SOLVERS)):
         options = {**OPTIONS[name], **dict(solver_options or {})} if name == solver else OPTIONS[name]
-        with captured_warnings():
+        failure = None
+        with captured_warnings() as notes:  # what the solver said (its printed lines too) goes into the chain
             try:
                 solved = solve_cvxpy(cvx, z, name, options, f"plausible parameters ({what})")
             except SolverError as exc:
-                chain.append(f"{what} {name} failed ({exc.status})")
-                if is_problem_property(exc):
-                    return None
-                continue
+                failure = exc
+        said = f" [{'; '.join(notes)}]" if notes else ""
+        if failure is not None:
+            chain.append(f"{what} {name} failed ({failure.status}){said}")
+            if is_problem_property(failure):
+                return None
+            continue
         if solved.status != "optimal":
             ok = usable(solved.value)
-            chain.append(f"{what} {name} {solved.status}" + (" (kept: consistent)" if ok else ""))
+            chain.append(f"{what} {name} {solved.status}" + (" (kept: consistent)" if ok else "") + said)
             if ok:
                 return solved
             continue
-        chain.append(f"{what} {name} optimal")
+        chain.append(f"{what} {name} optimal{said}")
         return solved
     return None
 
