@@ -25,7 +25,7 @@ pytest.importorskip("mujoco")
 from dualid.bench.urdf_arm import arm_runs, arm_urdf, example_robot_urdf, log_arrays, prior_urdf, urdf_arm  # noqa: E402
 from dualid.cli import app  # noqa: E402
 
-SECONDS = 5.0  # per run: two training runs and one held-out run
+SECONDS = 3.0  # per run: two training runs and one held-out run
 
 
 @pytest.fixture(scope="module")
