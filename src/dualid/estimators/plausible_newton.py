@@ -28,6 +28,8 @@ kept and ``note`` says how far outside the region it lies.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pinocchio as pin
 
@@ -179,6 +181,8 @@ def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: n
     W = (U.T @ (C * s_ind[:, None])) / np.sqrt(w)[:, None] / rad  # (r, p): u = W θ − b
     b = (U.T @ (s_ind * beta_hat)) / np.sqrt(w) / rad
     WtW = W.T @ W
+    if P.margin_reference is not None:  # chosen without the fit's margin C_b(θ) ⪰ ε·C_b(θ_ref) (docs/margin.md)
+        P = dataclasses.replace(P, margin_reference=None, margin_epsilon=0.0, margin_label="")
     cons = feasible_set(P)
     theta = _inside(np.asarray(theta0, dtype=float), cons)
 
