@@ -2,7 +2,8 @@
 
 System: ``dualid.bench.arms.random_arm(rng, 7)`` (random axes and boxes, friction and armature). Prior:
 every body's 10 parameters scaled by one factor 1 ± U(0.2, 0.3) (a density error: a CAD-like prior that
-is consistent but wrong); joint terms from the fit (as ``dualid fit`` does). Two data cases per seed:
+is consistent but wrong); joint terms from the fit, floored and rounded as ``dualid fit`` does
+(``robot.prior.prior_theta``, ``estimators.plausible_newton.rounded_prior``). Two data cases per seed:
 - exact: 4 s at the commanded states, noise-free τ, every 8th sample (100 samples): the data fix the
   identifiable combinations exactly; the null space is all that is unknown;
 - noisy: 8 s as logged (16-bit encoder, Savitzky–Golay v and a, 2 % torque noise), every 2nd sample,
@@ -33,6 +34,7 @@ from dualid.data.trajectory import Trajectory
 from dualid.errors import DualidError
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.plausible import PRIOR
+from dualid.estimators.plausible_newton import rounded_prior, torque_weights
 from dualid.estimators.plausible_region import plausible_in_region, training_rmse
 from dualid.estimators.uncertainty import base_uncertainty
 from dualid.problem import build_problem
@@ -44,7 +46,7 @@ CHOICES = {"exact": (0.0, False), "conf95": (0.95, False), "joint68": (0.68, Tru
 def choice(problem, test, raw, prior, unc, arm, level, joint, p0) -> dict:
     t0 = time.perf_counter()
     try:
-        p = plausible_in_region(problem, raw, prior, unc, level, joint)
+        p = plausible_in_region(problem, raw, rounded_prior(problem.parameters, prior), unc, level, joint)  # as dualid fit
     except DualidError as exc:
         return {"error": f"plausible: {exc}"}
     masses = np.arange(0, p0, 10)
@@ -102,7 +104,7 @@ def one(seed: int, case: str) -> dict:
         unc = base_uncertainty(problem, result, est, base, blocks=training_blocks([problem.N], base.rank))
     except DualidError as exc:
         return {**out, "error": f"fit: {exc}"}
-    prior[p0:] = np.maximum(raw[p0:], 1e-3 * raw[p0:].max())
+    prior[p0:] = np.maximum(raw[p0:], 1e-3 / np.sqrt(torque_weights(problem)[p0:]))  # as dualid fit (robot.prior)
     out["mass_ratio_raw"] = (raw[np.arange(0, p0, 10)] / prior[np.arange(0, p0, 10)]).round(3).tolist()
     out["mass_ratio_true"] = (arm.theta_true[np.arange(0, p0, 10)] / prior[np.arange(0, p0, 10)]).round(3).tolist()
     for name, (level, joint) in CHOICES.items():

@@ -489,7 +489,8 @@ def _(tmp):
     return fit(tmp, None, [p, p])
 
 
-@case("good-fit-exits-0", 0, "wrote parameters, URDF and MJCF files, report.md and report.html to")
+@case("good-fit-exits-0", 0, "wrote parameters.yaml, parameters.json, ols.urdf, ols.xml, identifiability.txt, "
+                             "report.md, report.html and ")
 def _(tmp):
     return fit(tmp, None, None, "--test", str(write_log(tmp, good_frame(seed=1), "test.csv")))
 

@@ -46,10 +46,13 @@ def test_fit_writes_urdf_and_mjcf_with_the_plausible_parameters(tmp_path, plausi
         if plausible is True:  # the default: the confidence region, its constraint active, training RMSE ~kept
             assert rec["form"] == "confidence" and rec["level"] == 0.95 and rec["note"] == ""
             assert rec["statistic"] == pytest.approx(rec["radius2"], rel=1e-4) and rec["radius2"] == pytest.approx(3.8415, 1e-4)
-            # what it costs on the training data: 1.5 % τ RMSE here (the sandwich over segments sees the residuals'
-            # correlation, so the region is wider than white noise would make it), and the held-out runs are scored
-            assert 0 <= rec["training_rmse"] / rec["training_rmse_raw"] - 1 < 0.03
+            # what it costs on the training data: 3.9 % τ RMSE here (the sandwich over segments sees the residuals'
+            # correlation, so the region is wider than white noise would make it), while the held-out runs, scored,
+            # are predicted 8.6 % better than by θ̂ (at most 2 % worse is the requirement)
+            assert 0 <= rec["training_rmse"] / rec["training_rmse_raw"] - 1 < 0.05
             assert len(rec["held_out_tau_rmse"]) == 2
+            raw_held_out = np.mean(outcome.fits["ols"].validation.mean("tau_rmse"))
+            assert np.mean(rec["held_out_tau_rmse"]) <= 1.02 * raw_held_out
             assert record["model_files_theta"].startswith("θ_plausible (closest to the prior with base parameters in")
         else:
             assert rec["form"] == "exact" and rec["predictions_unchanged"] is True
@@ -91,3 +94,29 @@ def test_without_uncertainty_the_exact_choice_is_used_and_said():
     assert p.form == "exact" and p.predictions_unchanged and p.fallback_used
     assert p.note == ("no uncertainty of the base parameters (not requested (uncertainty.method: none)): the "
                       "exact-prediction choice instead of the 0.95 confidence region")
+
+
+def test_a_failed_plausible_step_is_said_everywhere_and_exits_1(tmp_path):
+    """A prior the step cannot use (every link mass negative in a prior parameters file; one such body alone is
+    regularised, and a warning says so): the fit goes on, its files carry θ̂, and the console (an error line, no
+    traceback), the warnings in parameters.yaml and the exit code say so."""
+    from typer.testing import CliRunner
+
+    from dualid.cli import app
+    from dualid.model.rigid_body import RigidBodyModel
+
+    rigid = RigidBodyModel.from_urdf(small_config()["model"]["urdf"])
+    values = dict(zip(rigid.parameters.names, rigid.nominal.tolist()))
+    values["Joint1.m"] = values["Joint2.m"] = -0.5
+    prior = tmp_path / "prior.yaml"
+    prior.write_text(yaml.safe_dump({"parameters": [{"name": n, "value": v} for n, v in values.items()]}))
+    config = tmp_path / "fit.yaml"
+    config.write_text(yaml.safe_dump(small_config(methods=["ols"], references={}, prior={"source": str(prior)})))
+    result = CliRunner().invoke(app, ["fit", "--config", str(config), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 1, result.output
+    assert "Traceback" not in result.output and result.exception is not None  # typer.Exit(1)
+    assert "error: ols: plausible parameters failed: ConsistencyError" in " ".join(result.output.split())
+    record = yaml.safe_load((tmp_path / "out" / "parameters.yaml").read_text())
+    assert record["methods"]["ols"]["model_files_theta"].startswith("raw θ̂")
+    assert any(w.startswith("ols: no plausible parameters (ConsistencyError") for w in record["warnings"])
+    assert record["methods"]["ols"]["plausible"]["error"].startswith("ConsistencyError")

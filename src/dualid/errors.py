@@ -63,3 +63,13 @@ class DualidWarning(UserWarning):
 class OptimumAtInfinityWarning(DualidWarning):
     """The objective's infimum is approached as θ grows without bound: the returned θ̂ is where the solver
     stopped on that ray, not a minimiser (``result.info["optimum_at_infinity"]``)."""
+
+
+class PlausibleWarning(DualidWarning):
+    """The plausible-parameter step of a fit failed (the model files then carry the raw fit θ̂) or found no point
+    inside the fit's confidence region; the run goes on, and the report, parameters.yaml and the exit code say so."""
+
+
+class SolverOutputWarning(UserWarning):
+    """A line a compiled solver printed to standard output (``estimators.base.solver_stdout``), re-issued as a
+    warning so that the estimator records it (``solver_warnings``) instead of the terminal showing it raw."""

@@ -127,13 +127,16 @@ def random_arm(rng: np.random.Generator, dof: int) -> Arm:
 
 
 # --- motion and measurement -------------------------------------------------------------------
-def excitation(rng: np.random.Generator, n: int, seconds: float) -> tuple[np.ndarray, ...]:
-    """(t, q, v, a) of a sum of HARMONICS sinusoids per joint (period PERIOD), sampled at FS."""
+def excitation(rng: np.random.Generator, n: int, seconds: float, centre=None) -> tuple[np.ndarray, ...]:
+    """(t, q, v, a) of a sum of HARMONICS sinusoids per joint (period PERIOD), sampled at FS, about a random
+    q0 in ±0.6 rad (or about ``centre`` (n,) when given)."""
     t = np.arange(int(round(seconds * FS))) / FS
     w = 2 * np.pi * np.arange(1, HARMONICS + 1) / PERIOD  # (K,)
     amp = rng.uniform(0.1, 0.3, (n, HARMONICS)) / np.sqrt(np.arange(1, HARMONICS + 1))  # [rad]
     phase = rng.uniform(0, 2 * np.pi, (n, HARMONICS))
     q0 = rng.uniform(-0.6, 0.6, n)
+    if centre is not None:
+        q0 = np.asarray(centre, dtype=float)
     arg = t[:, None, None] * w[None, None, :] + phase[None]  # (T, n, K)
     q = q0 + np.sum(amp * np.sin(arg), axis=2)
     v = np.sum(amp * w * np.cos(arg), axis=2)
@@ -194,14 +197,15 @@ def _model_error(arm: Arm, case: str | None, case_seed: int, q, v, a, payload: b
 
 
 def make_run(arm: Arm, rng: np.random.Generator, seconds: float, noise: float, case: str | None = None,
-             payload: bool = False, name: str = "", case_seed: int = 0) -> Run:
+             payload: bool = False, name: str = "", case_seed: int = 0, centre=None) -> Run:
     """Simulate one run (see ``Run``). noise: torque noise std as a fraction of each joint's clean τ rms;
     case: one of MODEL_ERROR_CASES or None; payload: whether the run carries the unmodelled payload
-    (payload and combined cases); case_seed: the seed of the case's constants (keep it per arm)."""
+    (payload and combined cases); case_seed: the seed of the case's constants (keep it per arm); centre: the
+    joints' mean position (``excitation``)."""
     if case is not None and case not in MODEL_ERROR_CASES:
         raise ConfigError(f"make_run: case must be None or one of {MODEL_ERROR_CASES}, got {case!r}")
     margin = SAVGOL_WINDOW  # trimmed at each end (Savitzky–Golay edge effects)
-    t, q, v, a = excitation(rng, arm.n, seconds + 2 * margin)
+    t, q, v, a = excitation(rng, arm.n, seconds + 2 * margin, centre)
     tau_model = arm.torque(q, v, a)
     extra, gain, offset = _model_error(arm, case, case_seed, q, v, a, payload)
     tau_phys = tau_model + extra

@@ -94,7 +94,7 @@ def dfki(preprocessing, runs=(0, 1, 2, 3), tile: int = 10):
 
 def _urdf_prior(problem, rigid):
     """The URDF's inertials, joint terms from the unconstrained OLS fit floored at 1e-3 × the largest of their
-    block (as ``robot.fit.prior_theta`` does for prior source "urdf": a log-det prior needs them > 0)."""
+    block (as ``robot.prior.prior_theta`` does for prior source "urdf": a log-det prior needs them > 0)."""
     from dualid.estimators.least_squares import OLS
 
     p0 = rigid.parameters.p

@@ -9,6 +9,7 @@ import typer
 
 from dualid.cli.app import FLAG, app
 from dualid.cli.common import EXIT_FAILED, console, fail, output_dir, print_error, show_warnings
+from dualid.cli.fit_summary import files_line, print_plausible
 
 
 def _command_line() -> str:
@@ -99,7 +100,7 @@ def fit(
             try:
                 outcome = fit_robot(cfg, progress=lambda msg: bar.update(task, description=msg))
                 bar.update(task, description=f"writing {cfg.out}")
-                write_fit(outcome, cfg.out, force, command=_command_line(), config_file=config)
+                written = write_fit(outcome, cfg.out, force, command=_command_line(), config_file=config)
             finally:  # also when an error follows: a warning may explain it
                 bar.stop()
                 show_warnings(caught)
@@ -114,10 +115,11 @@ def fit(
     if validations:
         typer.echo(score_table(validations))
     failed = [m for m, f in outcome.fits.items() if not f.ok]
-    console.print(f"wrote parameters, URDF and MJCF files, report.md and report.html to {cfg.out}"
-                  + (" (incomplete: see report.html)" if failed else ""), markup=False)
     for m in failed:
         print_error(f"{m}: failed: {outcome.fits[m].error}")
+    failed += print_plausible(outcome)
+    console.print(files_line(written, cfg.out, outcome) + (" (incomplete: see report.html)" if failed else ""),
+                  markup=False, highlight=False)
     if failed:
         raise typer.Exit(EXIT_FAILED)
 

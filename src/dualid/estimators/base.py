@@ -6,6 +6,7 @@ state between fits and return an immutable ``IdentificationResult``.
 
 from __future__ import annotations
 
+import os
 import time
 import warnings
 from collections.abc import Iterator, Mapping
@@ -15,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from dualid.errors import ConfigError, ConsistencyError, IdentifiabilityError, SolverError
+from dualid.errors import ConfigError, ConsistencyError, IdentifiabilityError, SolverError, SolverOutputWarning
 from dualid.model.parameters import ParameterSpace
 from dualid.problem import IdentificationProblem
 
@@ -130,6 +131,37 @@ class Solved:
     iterations: int | None
 
 
+@contextmanager
+def solver_stdout() -> Iterator[list[str]]:
+    """What compiled solvers print to the process's standard output (file descriptor 1: SCS's "WARNING - large
+    complementary slackness residual", "ERROR: could not determine problem status") inside the block, captured
+    instead of reaching the terminal; the yielded list holds its non-empty lines once the block ends."""
+    import ctypes
+    import sys
+    import tempfile
+
+    lines: list[str] = []
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # no real stdout (e.g. a notebook): nothing to capture
+        yield lines
+        return
+    libc = ctypes.CDLL(None)
+    sys.stdout.flush()
+    libc.fflush(None)
+    saved = os.dup(fd)
+    with tempfile.TemporaryFile() as scratch:  # a scratch buffer, not an output file
+        os.dup2(scratch.fileno(), fd)
+        try:
+            yield lines
+        finally:
+            libc.fflush(None)
+            os.dup2(saved, fd)
+            os.close(saved)
+            scratch.seek(0)
+            lines.extend(x.strip() for x in scratch.read().decode(errors="replace").splitlines() if x.strip())
+
+
 def solve_cvxpy(problem, variable, solver: str, solver_options: dict | None, what: str) -> Solved:
     """Solve a cvxpy problem; raise SolverError with the status unless it is optimal."""
     import cvxpy as cp
@@ -142,9 +174,12 @@ def solve_cvxpy(problem, variable, solver: str, solver_options: dict | None, wha
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*dimension greater than 2.*")
         try:
-            problem.solve(solver=solver, **options)
+            with solver_stdout() as printed:
+                problem.solve(solver=solver, **options)
         except cp.error.SolverError as exc:
             raise SolverError(f"{what}: {solver} failed: {exc}", status="solver_error") from exc
+    for line in dict.fromkeys(printed):  # recorded by the caller's captured_warnings (solver_warnings)
+        warnings.warn(f"{solver}: {line}", SolverOutputWarning, stacklevel=2)
     elapsed = time.perf_counter() - t0
     status = problem.status
     if status in (cp.INFEASIBLE, cp.INFEASIBLE_INACCURATE):

@@ -67,7 +67,7 @@ class PlausibleParameters:
     solver: str  # "CLARABEL", "SCS" or "none"
     solver_chain: str  # what was tried, e.g. "logdet CLARABEL optimal" or "logdet CLARABEL failed (…) → …"
     fallback_used: bool
-    objective: str  # "logdet", or "pullback" when no strictly consistent θ has θ̂'s predictions
+    objective: str  # "logdet"; "pullback" when no strictly consistent θ has θ̂'s predictions; "prior": plausible_newton's R
     prediction_change: float  # ‖Y(θ_p − θ̂)‖ / ‖Y θ̂‖ on the training data
     predictions_unchanged: bool  # prediction_change ≤ PREDICTION_RTOL
     consistent: bool  # θ_p physically consistent (tolerance 1e-7, as IdentificationResult)
@@ -190,21 +190,25 @@ def _solve(cvx, z, solver: str, solver_options, chain: list[str], what: str, usa
     An "optimal_inaccurate" point is kept when usable(z) (physically consistent), and labelled so."""
     for name in dict.fromkeys((solver, *SOLVERS)):
         options = {**OPTIONS[name], **dict(solver_options or {})} if name == solver else OPTIONS[name]
-        with captured_warnings():
+        failure = None
+        with captured_warnings() as notes:  # what the solver said (its printed lines too) goes into the chain
             try:
                 solved = solve_cvxpy(cvx, z, name, options, f"plausible parameters ({what})")
             except SolverError as exc:
-                chain.append(f"{what} {name} failed ({exc.status})")
-                if is_problem_property(exc):
-                    return None
-                continue
+                failure = exc
+        said = f" [{'; '.join(notes)}]" if notes else ""
+        if failure is not None:
+            chain.append(f"{what} {name} failed ({failure.status}){said}")
+            if is_problem_property(failure):
+                return None
+            continue
         if solved.status != "optimal":
             ok = usable(solved.value)
-            chain.append(f"{what} {name} {solved.status}" + (" (kept: consistent)" if ok else ""))
+            chain.append(f"{what} {name} {solved.status}" + (" (kept: consistent)" if ok else "") + said)
             if ok:
                 return solved
             continue
-        chain.append(f"{what} {name} optimal")
+        chain.append(f"{what} {name} optimal{said}")
         return solved
     return None
 
@@ -267,8 +271,12 @@ def plausible_parameters(problem: IdentificationProblem, theta_hat, theta0, solv
     scale[scale == 0] = 1.0
     G = _prior_metric(P, blocks, scale)
     if N.shape[1]:
-        L = np.linalg.cholesky(N.T @ G @ N)
-        NG = np.linalg.solve(L, N.T).T  # the same null space, orthonormal in the prior's metric: z is O(1)
+        try:
+            L = np.linalg.cholesky(N.T @ G @ N)
+            NG = np.linalg.solve(L, N.T).T  # the same null space, orthonormal in the prior's metric: z is O(1)
+        except np.linalg.LinAlgError:  # a metric too ill-conditioned for Cholesky: its eigenvalues, floored
+            ev, EV = np.linalg.eigh(N.T @ G @ N)
+            NG = N @ (EV / np.sqrt(np.maximum(ev, 1e-12 * max(float(ev.max()), 1e-300))))
     else:
         NG = N
     # the G-orthogonal projector onto the null space, NG NGᵀ G, is ∂θ_p/∂θ₀ where no constraint is active

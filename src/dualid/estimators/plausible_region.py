@@ -5,21 +5,18 @@ that is too strict: directions the rank rule counts as determined may be determi
 the noise, and the fit's absurd values along them (a 60× link mass) cannot be touched. Here the slice
 is widened to the fit's confidence region of the base parameters β = C θ (dualid.identifiability):
 
-    θ_p = argmin_θ  Σ_b D(C_b(θ) ‖ C_b(θ₀))   subject to   (Cθ − β̂)ᵀ Σ_β⁻¹ (Cθ − β̂) ≤ c²,
-                                                          C_b(θ) ⪰ 0, bounds,
+    θ_p = argmin_θ  R(θ)   subject to   (Cθ − β̂)ᵀ Σ_β⁻¹ (Cθ − β̂) ≤ c²,   C_b(θ) ⪰ 0, bounds,
 
-with Σ_β the method's covariance of β̂ (estimators.uncertainty: the sandwich, or a bootstrap's) and
-D the log-det divergence of the constraint matrices, as in ``plausible_parameters``. The radius:
+with Σ_β the method's covariance of β̂ (estimators.uncertainty: the sandwich, or a bootstrap's) and R the
+scale-aware prior term of ``estimators.plausible_newton`` (the log-det divergence of the pseudo-inertias,
+torque-weighted squares on joint terms), which also solves it. The radius:
 c² = χ²₁(level) by default — the ellipsoid is then exactly the set of β for which *every* linear
 combination aᵀβ (each base parameter, each predicted torque) stays within its own ``level`` interval
 aᵀβ̂ ± z·√(aᵀΣa); ``joint=True``: c² = χ²_r(level), the joint confidence region of all r base
-parameters (much wider for r ≈ 60: it lets single combinations move by ~8σ, and on the simulated arms
-the held-out error then grows on some seeds; benchmarks/plausible_arm.md). Both the ellipsoid and D are
-invariant under a change of units or body frame, so θ_p is too. The problem is convex (a second-order
-cone and log-det cones); θ = c + √c² E Σ^½ u + N z with ‖u‖ ≤ 1, N a basis of C's null space
-orthonormal in the prior's metric G and c the point of β̂'s slice nearest θ₀ in G, so the variables are
-O(1) at any level. level → 0 shrinks the ellipsoid onto θ̂'s slice; level = 0 *is* the
-exact-prediction choice (``plausible_parameters`` is called).
+parameters (much wider for r ≈ 60: it lets single combinations move by ~8σ; benchmarks/plausible_arm.md).
+Both the ellipsoid and R are invariant under a change of units or body frame, so θ_p is too. level → 0
+shrinks the ellipsoid onto θ̂'s slice; level = 0 *is* the exact-prediction choice (``plausible_parameters``
+is called), and so is noise-free data (a training residual below EXACT_RTOL of the torque: Σ_β is roundoff).
 
 Which parameters the prior determined: with μ the multiplier of the ellipsoid (from stationarity) and
 F = CᵀΣ_β⁻¹C, the quadratic model of the problem at θ₀ gives ∂θ_p/∂θ₀ = (G + λF)⁻¹G, λ = 2μ (μ for
@@ -48,20 +45,17 @@ from dualid.estimators.plausible import (
     PRIOR,
     PRIOR_SHARE,
     PlausibleParameters,
-    _bounds,
     _clear_boundary,
-    _prior_metric,
-    _scaled_block,
     checked_prior,
     plausible_parameters,
-    solve_divergence,
 )
+from dualid.estimators.plausible_newton import prior_divergence, solve_region
 from dualid.estimators.uncertainty import BaseUncertainty
-from dualid.model.consistency import prior_blocks, pullback_metric, regularizer_value
 from dualid.problem import IdentificationProblem
 
 LEVEL = 0.95  # default confidence level of the region (chosen in benchmarks/plausible_arm.md)
 EXACT, CONFIDENCE = "exact", "confidence"
+EXACT_RTOL = 1e-9  # a training τ RMSE below this × the τ RMS: noise-free data (the exact-prediction choice)
 SIGMA_RTOL = 1e-12  # eigenvalues of the scaled Σ_β below this × its largest: directions the data fix exactly
 
 
@@ -90,18 +84,6 @@ def _whitening(unc: BaseUncertainty, s_ind: np.ndarray) -> tuple[np.ndarray, np.
     return R, pinv
 
 
-def _gradient(blocks, theta: np.ndarray, theta0: np.ndarray, objective: str) -> np.ndarray:
-    """∇ of the objective at θ: Σ_b tr((C_b0⁻¹ − C_b(θ)⁻¹) V_k) (log-det) or 2 g_b (θ − θ₀) (pullback)."""
-    grad = np.zeros(theta.shape[0])
-    for idx, V, C0 in blocks:
-        if objective == "logdet":
-            D = np.linalg.inv(C0) - np.linalg.inv(np.tensordot(theta[idx], V, axes=1))
-            grad[idx] += np.einsum("kab,ba->k", V, D)
-        else:
-            grad[idx] += 2.0 * pullback_metric(V, C0) @ (theta[idx] - theta0[idx])
-    return grad
-
-
 def _prior_share(G, C, Sigma, lam: float, scale, s_ind) -> np.ndarray:
     """diag((G + λCᵀΣ⁻¹C)⁻¹G) (p,) written as I − G⁻¹Cᵀ(Σ/λ + CG⁻¹Cᵀ)⁻¹C (Woodbury): no Σ⁻¹, so a tiny Σ (exact
     data) gives the G-orthogonal projector onto C's null space instead of roundoff; in the column-scaled chart
@@ -118,9 +100,8 @@ def _prior_share(G, C, Sigma, lam: float, scale, s_ind) -> np.ndarray:
 def plausible_in_region(problem: IdentificationProblem, theta_hat, theta0, uncertainty: BaseUncertainty,
                         level: float = LEVEL, joint: bool = False, solver: str = "CLARABEL",
                         solver_options: dict | None = None) -> PlausibleParameters:
-    """θ_p closest to θ₀ with β(θ_p) in the fit's ``level`` confidence ellipsoid (module docstring)."""
-    import cvxpy as cp
-
+    """θ_p closest to θ₀ with β(θ_p) in the fit's ``level`` confidence ellipsoid (module docstring), solved by
+    dualid's interior point (``estimators.plausible_newton``); ``solver``/``solver_options`` serve level 0 only."""
     level = check_level(level)
     P = problem.parameters
     theta_hat = np.asarray(theta_hat, dtype=float)
@@ -135,64 +116,54 @@ def plausible_in_region(problem: IdentificationProblem, theta_hat, theta0, uncer
         exact = plausible_parameters(problem, theta_hat, theta0, solver, solver_options)
         return dataclasses.replace(exact, form=EXACT, training_rmse_hat=rmse_hat,
                                    training_rmse=training_rmse(problem, exact.theta))
+    tau_rms = float(np.sqrt(np.mean(problem.tau**2)))
+    if rmse_hat <= EXACT_RTOL * tau_rms:  # noise-free data: Σ_β is roundoff, the region is θ̂'s slice
+        exact = plausible_parameters(problem, theta_hat, theta0, solver, solver_options)
+        return dataclasses.replace(exact, form=EXACT, training_rmse_hat=rmse_hat,
+                                   training_rmse=training_rmse(problem, exact.theta), note=(
+                                       f"the training residual is roundoff ({rmse_hat / tau_rms:.1e} of the torque): "
+                                       "the data fix the identifiable combinations exactly, the region is θ̂'s slice"))
     theta0 = checked_prior(P, theta0, solver, "plausible_in_region")
     r = base.rank
     radius2 = float(scipy.stats.chi2.ppf(level, r if joint else 1)) if r else 0.0
     scale = np.linalg.norm(problem.Y.reshape(-1, P.p), axis=0)
     scale[scale == 0] = 1.0
     s_ind = scale[list(base.independent)]
-    # C's null space in the scaled chart (exactly: Cθ does not move along it), back in θ units
-    Ns = scipy.linalg.null_space(base.C / scale[None, :] * s_ind[:, None]) if r < P.p else np.zeros((P.p, 0))
-    N = Ns / scale[:, None]
-    blocks = prior_blocks("logdet", P, theta0)
-    G = _prior_metric(P, blocks, scale)
-    NG = np.linalg.solve(np.linalg.cholesky(N.T @ G @ N), N.T).T if N.shape[1] else N
-    R, Sinv = _whitening(uncertainty, s_ind)
-    ER = base.embed() @ R * np.sqrt(radius2)  # (p, k): Cθ − β̂ = √radius2 R u, ‖u‖ ≤ 1 (O(1) at any level)
+    Sigma = np.asarray(uncertainty.covariance, dtype=float)
     beta_hat = base.values(theta_hat)
-    centre = theta_hat - NG @ (NG.T @ (G @ (theta_hat - theta0)))
-    k, m = R.shape[1], N.shape[1]
-    x = cp.Variable(k + m)
-    u, z = x[:k], x[k:]
-    theta = centre + (ER @ u if k else 0) + (NG @ z if m else 0)
-    scaled = [_scaled_block(theta, idx, V, C0) for idx, V, C0 in blocks]
-    region = cp.sum_squares(u) <= 1.0 if k else None
-    constraints = [C >> 0 for C, _ in scaled] + _bounds(theta, P) + ([region] if k else [])
-    chain: list[str] = []
-
-    def point(x_value) -> np.ndarray:  # an inaccurate solution's ‖u‖ slightly above 1 is pulled onto the ellipsoid
-        u_value = x_value[:k] / max(1.0, float(np.linalg.norm(x_value[:k])))
-        return centre + ER @ u_value + NG @ x_value[k:]
-
-    solved, objective = solve_divergence(theta, z, x, point, scaled, blocks, theta0, constraints, P, solver,
-                                         solver_options, chain)
-    if solved is None:
-        raise SolverError(f"plausible_in_region: no physically consistent θ with base parameters in the {level:g} "
-                          f"confidence region was found: {' → '.join(chain)}", status="all_solvers_failed")
+    out = solve_region(problem, theta0, beta_hat, base.C, Sigma, radius2, scale, s_ind)
+    chain = [out["chain"]]
     try:
-        theta_p, pulled = _clear_boundary(point(solved.value), theta_hat, P)  # the segment stays in the region
+        theta_p, pulled = _clear_boundary(out["theta"], theta_hat, P)  # the segment stays in the region
     except SolverError as exc:
         raise SolverError(f"{exc} ({' → '.join(chain)})", status=exc.status) from None
     if pulled:
         chain.append(f"moved {pulled:.1e} of the way back to θ̂ to clear a rounding-size violation of consistency")
-    # prior share from the quadratic model: ∂θ_p/∂θ₀ = (G + λF)⁻¹ G, λ = 2μ/h, h = 1 (log-det) or 2 (pullback); μ of
-    # (β − β̂)ᵀΣ⁻¹(β − β̂) ≤ radius2 is μ' of ‖u‖² ≤ 1 over radius2, and stationarity in u, ∇_u f = −2μ'u with
-    # ‖u‖ = 1 when active (∇_u f = 0 when not), gives μ' = ‖∇_u f‖/2: from the analytic gradient, as the solver's
-    # dual (and its u, when the ellipsoid is tiny) is only accurate to its tolerance
-    mu = float(np.linalg.norm(ER.T @ _gradient(blocks, theta_p, theta0, objective))) / (2.0 * radius2) if k else 0.0
-    lam = 2.0 * mu / (1.0 if objective == "logdet" else 2.0)
-    share = _prior_share(G, base.C, np.asarray(uncertainty.covariance, dtype=float), lam, scale, s_ind)
+    # prior share from the quadratic model: ∂θ_p/∂θ₀ = (G + λF)⁻¹G, F = CᵀΣ⁻¹C; the penalty μ‖u‖² = (μ/c²)·statistic
+    # has Hessian (2μ/c²)F, so λ = 2μ/c²
+    lam = 2.0 * out["mu"] / radius2 if radius2 > 0 else 0.0
+    share = _prior_share(out["G"], base.C, Sigma, lam, scale, s_ind)
     determined = tuple(PRIOR if x_ >= PRIOR_SHARE else DATA for x_ in share)
+    _, Sinv = _whitening(uncertainty, s_ind)
     d = base.values(theta_p) - beta_hat
     A = problem.Y.reshape(-1, P.p)
     change = float(np.linalg.norm(A @ (theta_p - theta_hat)) / max(np.linalg.norm(A @ theta_hat), 1e-300))
     return PlausibleParameters(
         theta_p, theta_hat=theta_hat, theta0=theta0, names=P.names, prior_share=share, determined_by=determined,
-        null_space=N, rank=r, status=solved.status, solver=solved.solver, solver_chain=" → ".join(chain),
-        fallback_used=len(chain) > 1, objective=objective, prediction_change=change,
-        predictions_unchanged=change <= PREDICTION_RTOL,
+        null_space=_null_space(base.C, scale, s_ind), rank=r, status="optimal" if not out["note"] else "outside_region",
+        solver="newton", solver_chain=" → ".join(chain), fallback_used=bool(out["note"]), objective="prior",
+        prediction_change=change, predictions_unchanged=change <= PREDICTION_RTOL,
         consistent=P.is_consistent(theta_p, tol=1e-7),
-        divergence_hat=regularizer_value("logdet", P, theta_hat, theta0),
-        divergence=regularizer_value("logdet", P, theta_p, theta0), form=CONFIDENCE, level=level, radius2=radius2,
+        divergence_hat=prior_divergence(problem, theta_hat, theta0),
+        divergence=prior_divergence(problem, theta_p, theta0), form=CONFIDENCE, level=level, radius2=radius2,
         statistic=float(d @ Sinv @ d), training_rmse_hat=rmse_hat, training_rmse=training_rmse(problem, theta_p),
+        note=out["note"],
     )
+
+
+def _null_space(C: np.ndarray, scale: np.ndarray, s_ind: np.ndarray) -> np.ndarray:
+    """A basis (p, p − r) of C's null space in θ units (computed in the column-scaled chart)."""
+    r, p = C.shape
+    if r >= p:
+        return np.zeros((p, 0))
+    return scipy.linalg.null_space(C / scale[None, :] * s_ind[:, None]) / scale[:, None]

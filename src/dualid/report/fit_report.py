@@ -193,21 +193,33 @@ def fit_notes(m: str, r) -> list[str]:
     return notes + ([margin_note(m, r.info)] if "margin_epsilon" in r.info else [])
 
 
+def plausible_cell(f) -> str:
+    """The fit table's word on the plausible-parameter step: what the model files carry."""
+    if f.plausible_error:
+        return "failed (files carry θ̂; see Plausible parameters)"
+    if f.plausible is None:
+        return "—"
+    p = f.plausible
+    return (f"{p.solver}, {p.form}" + (f", {p.level:g}" if p.form == "confidence" else "")
+            + (" (outside the region: see Plausible parameters)" if p.status == "outside_region" else ""))
+
+
 def _fits(d: FitReportData) -> Section:
     rows, notes = [], []
     for m, f in d.outcome.fits.items():
         if not f.ok:
-            rows.append((m, "failed", "—", "—", "—", "—", "—", "—", "—"))
+            rows.append((m, "failed", "—", "—", "—", "—", "—", "—", "—", "—", "—"))
             notes.append(f"{m}: failed: {f.error}")
             continue
         r = f.result
         chain = str(r.info.get("solver_chain", r.solver))
+        said = [w for w in str(r.info.get("solver_warnings", "")).split(" | ") if w]
         rows.append((m, r.status, r.solver, chain if r.info.get("fallback_used") else "no",
                      f"{r.solve_time:.2f}", fmt(r.iterations), str(r.is_consistent), guard_cell(r.info),
-                     d.urdfs.get(m, "")))
+                     "; ".join(said) if said else "none", plausible_cell(f), d.urdfs.get(m, "")))
         notes += fit_notes(m, r)
     table = Table(("method", "status", "solver", "fallback", "time [s]", "iterations", "consistent",
-                   "metric vs URDF", "URDF"), tuple(rows),
+                   "metric vs URDF", "solver warnings", "plausible parameters", "URDF"), tuple(rows),
                   note="fallback: when used, the solvers tried in order and the one that produced θ̂. "
                        "metric vs URDF: range of the generalized eigenvalues of the identified mass matrix against "
                        "the URDF's over the training samples ('degenerate' outside [1/100, 100]).")
@@ -251,7 +263,9 @@ def _figures(d: FitReportData) -> Section:
 
 
 def parameter_tables(d: FitReportData) -> list[Table]:
-    """One table per body/joint (parameter-name prefix): rows parameters, columns methods and references."""
+    """One table per body/joint (parameter-name prefix): rows parameters, columns methods and references. A method with
+    plausible parameters has two columns: the values its model files carry ("files", "(prior)" where the data do not
+    determine them) and its raw θ̂ beside them."""
     o = d.outcome
     ok = [m for m, f in o.fits.items() if f.ok]
     P = o.problem.parameters
@@ -259,27 +273,44 @@ def parameter_tables(d: FitReportData) -> list[Table]:
     groups: dict[str, list[int]] = {}
     for k, n in enumerate(P.names):
         groups.setdefault(n.split(".", 1)[0] if "." in n else "other", []).append(k)
-    columns = [o.fits[m].result.theta for m in ok] + [th for th, _ in o.references.values()]
+    heads, columns, marks = [], [], []  # per column: header, θ, {k: mark}
+    for m in ok:
+        f = o.fits[m]
+        nd = f.result.not_determined()  # completed parameters, marked "(n.d.)"
+        raw_marks = {k: " (n.d.)" for k, n in enumerate(P.names) if n in nd}
+        if f.plausible is not None:
+            heads.append(f"{m} (files)")
+            columns.append(f.plausible.theta)
+            marks.append({k: " (prior)" for k, x in enumerate(f.plausible.determined_by) if x == "prior"})
+            heads.append(f"{m} θ̂")
+        else:
+            heads.append(m)
+        columns.append(f.result.theta)
+        marks.append(raw_marks)
+    heads += list(o.references)
+    columns += [th for th, _ in o.references.values()]
+    marks += [{} for _ in o.references]
     tiny = [1e-10 * float(np.max(np.abs(th))) for th in columns]  # solver round-off, shown as 0
-    nd = {m: o.fits[m].result.not_determined() for m in ok}  # completed parameters, marked "(n.d.)"
+    se_of = {h: o.fits[m].uncertainty for m in ok for h in (m, f"{m} θ̂")}
     tables = []
     for group, idx in groups.items():
         rows = []
         for k in idx:
             cells = [P.names[k] + (" (n.i.)" if P.names[k] in unident else ""), P.units[k]]
-            values = ["0" if abs(th[k]) <= eps else f"{th[k]:.5g}" for th, eps in zip(columns, tiny)]
-            for i, m in enumerate(ok):
-                se = o.fits[m].uncertainty[k] if o.fits[m].uncertainty else None
-                values[i] += f" ± {se:.2g}" if isinstance(se, float) else ""
-                values[i] += " (n.d.)" if P.names[k] in nd[m] else ""
-            cells += values
+            for h, th, eps, mk in zip(heads, columns, tiny, marks):
+                value = "0" if abs(th[k]) <= eps else f"{th[k]:.5g}"
+                se = se_of[h][k] if se_of.get(h) else None
+                value += f" ± {se:.2g}" if isinstance(se, float) else ""
+                cells.append(value + mk.get(k, ""))
             rows.append(tuple(cells))
-        tables.append(Table(("parameter", "unit", *ok, *o.references), tuple(rows), title=group))
+        tables.append(Table(("parameter", "unit", *heads), tuple(rows), title=group))
     return tables
 
 
 def _parameters(d: FitReportData) -> Section:
-    return Section("Parameters", (Text("n.i.: not identifiable on its own; ± standard error (see the uncertainty note "
+    return Section("Parameters", (Text("METHOD (files): the values the URDF/MJCF carry (the plausible parameters; "
+                                       "(prior): not determined by the data, from the prior), METHOD θ̂: the fit's raw "
+                                       "values; n.i.: not identifiable on its own; ± standard error (see the uncertainty note "
                                        "in parameters.yaml); 0: below 1e-10 × the largest value of its column "
                                        "(solver round-off; exact values in parameters.yaml); n.d.: not determined by "
                                        "the data, the smallest value consistent with the other parameters (its size "

@@ -134,6 +134,7 @@ def plausible_record(fit: MethodFit) -> dict | None:
     return {
         **p.as_dict(),
         "held_out_tau_rmse": None if held_out is None else [float(x) for x in held_out.mean("tau_rmse")],
+        "not_determined_by_data": list(p.by_prior()),  # their values come from the prior
         "parameters": [
             {"name": n, "value": float(x), "prior": float(x0), "determined_by": d, "prior_share": float(s)}
             for n, x, x0, d, s in zip(p.names, p.theta, p.theta0, p.determined_by, p.prior_share)
@@ -164,7 +165,9 @@ def plausible_lines(outcome: FitOutcome) -> list[str]:
         lines.append(f"- {m}: {form}{'; ' + p.note if p.note else ''}; {p.objective} divergence {p.divergence_hat:.4g} "
                      f"→ {p.divergence:.4g}, training predictions changed by {p.prediction_change:.1e} (relative)"
                      f"{', ' + rmse if rmse else ''}, {p.solver_chain}; "
-                     f"masses [kg] raw → plausible (prior, determined by): {cells}")
+                     f"masses [kg] raw → plausible (prior, determined by): {cells}; "
+                     f"not determined by the data, from the prior ({len(p.by_prior())}): "
+                     f"{', '.join(p.by_prior()) or 'none'}")
     return lines
 
 

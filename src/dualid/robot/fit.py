@@ -32,7 +32,7 @@ from dualid.data.io import ColumnMap, load_log, read_table
 from dualid.data.preprocessing import preprocess
 from dualid.data.tables import reading_once
 from dualid.data.trajectory import Trajectory
-from dualid.errors import DataError, DualidError, DualidWarning, MissingFileError
+from dualid.errors import DataError, DualidError, DualidWarning, MissingFileError, PlausibleWarning
 from dualid.estimators import IdentificationResult
 from dualid.estimators.guards import guard_info
 from dualid.estimators.methods import make_estimator
@@ -50,6 +50,7 @@ from dualid.robot.defaults import adaptive_preprocessing, warn_far_from_data
 from dualid.robot.inputs import array_column_map, check_floating, check_runs_differ, check_units
 from dualid.robot.margin_config import apply_margin
 from dualid.robot.plausible_step import choose_plausible
+from dualid.robot.prior import prior_theta
 from dualid.robot.uncertainty import method_uncertainty, parameter_errors
 
 Progress = Callable[[str], None]
@@ -164,49 +165,6 @@ def _guarded(result: IdentificationResult, problem: IdentificationProblem, rigid
     except DualidError as exc:  # e.g. a URDF whose own mass matrix is singular: recorded, not hidden
         guard = {"metric_guard_error": str(exc)}
     return dataclasses.replace(result, info={**result.info, **guard})
-
-
-def prior_theta(config: FitConfig, rigid: RigidBodyModel, model, ols_theta: np.ndarray | None) -> tuple[np.ndarray, str]:
-    """θ₀ for the regularized methods, and a sentence saying where it came from.
-
-    "urdf": the URDF's inertials; joint terms (absent from a URDF's inertials) take the unregularized
-    OLS estimate floored at 1e-3 × the largest value of their group (a log-det prior needs θ₀ > 0).
-    A file: a parameters.json/yaml written by a previous fit ("file#method" picks the method, default
-    its first fitted one), or any file with a 'parameters' list of {name, value}; matched by name.
-    """
-    p0 = rigid.parameters.p
-    theta0 = np.full(model.parameters.p, np.nan)
-    if config.prior.source == "urdf":
-        theta0[:p0] = rigid.nominal
-        what = f"the inertials of {config.model.urdf.name}"
-    else:
-        source, _, pick = config.prior.source.partition("#")
-        path = Path(source)
-        d = read_mapping(path, "prior.source parameters file")
-        if "methods" in d:  # a parameters.yaml/json of a previous fit: "file#method" or its first fitted method
-            fitted = [m for m, e in d["methods"].items() if "parameters" in e]
-            if not fitted or (pick and pick not in fitted):
-                raise DataError(f"prior.source {path}: no fitted method {pick or ''!r}; fitted methods: {fitted}")
-            d = d["methods"][pick or fitted[0]]
-        try:
-            values = {str(e["name"]): float(e["value"]) for e in d.get("parameters", [])}
-        except (KeyError, TypeError, ValueError) as exc:
-            raise DataError(f"prior.source {path}: 'parameters' must be a list of {{name, value}} with numeric "
-                            f"values; {type(exc).__name__}: {exc}") from None
-        missing = [n for n in rigid.parameters.names if n not in values]
-        if missing:
-            raise DataError(f"prior.source {path}: no values for parameters {missing}")
-        theta0 = np.array([values.get(n, np.nan) for n in model.parameters.names])
-        what = f"the parameters in {path}"
-    if model is not rigid:
-        for b in model.parameters.blocks:
-            idx = np.array(b.indices)
-            if idx[0] < p0:
-                continue
-            src = np.where(np.isnan(theta0[idx]), ols_theta[idx] if ols_theta is not None else 1.0, theta0[idx])
-            theta0[idx] = np.maximum(src, max(1e-3 * float(np.max(np.abs(src))), 1e-9))
-        what += "; joint terms it lacks (a URDF has none) from the OLS estimate; all floored at 1e-3 × their group's largest"
-    return theta0, what
 
 
 # --- estimators -------------------------------------------------------------------------------
@@ -341,7 +299,7 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
     if config.margin is not None:  # every method under C_b(θ) ⪰ ε·C_b(θ_ref) (robot/margin_config.py)
         _say(progress, f"margin ε = {config.margin.epsilon:g} against the {config.margin.reference} reference")
         problem = apply_margin(problem, config.margin, lambda: prior_theta(
-            config, rigid, model, None if model is rigid else estimator("ols").fit(problem).theta)[0])
+            config, rigid, model, None if model is rigid else estimator("ols").fit(problem).theta, problem)[0])
     ident = problem.identifiability()
 
     fits: dict[str, MethodFit] = {}
@@ -353,7 +311,7 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
             if method in ("logdet", "pullback") and theta0 is None:
                 if ols_theta is None and model is not rigid:
                     ols_theta = estimator("ols").fit(problem).theta
-                theta0, prior_text = prior_theta(config, rigid, model, ols_theta)
+                theta0, prior_text = prior_theta(config, rigid, model, ols_theta, problem)
             est = estimator(method, theta0, config.prior.gamma, config.prior.per_equation,
                             dict(dict(config.solver).get(method, ())))
             result = est.fit(problem)
@@ -376,11 +334,16 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
         if config.prior.plausible:
             _say(progress, f"choosing {method}'s plausible parameters (closest to the prior, in the confidence region)")
             try:
-                plausible = choose_plausible(problem, result.theta, prior_theta(config, rigid, model, result.theta)[0],
+                plausible = choose_plausible(problem, result.theta, prior_theta(config, rigid, model, result.theta, problem)[0],
                                              base_unc, base_error, config.prior.plausible_level,
                                              config.prior.plausible_joint)
-            except DualidError as exc:  # recorded: the files then carry θ̂, and the report says why
+            except (DualidError, ValueError, ArithmeticError) as exc:  # recorded (numpy's LinAlgError is a
+                # ValueError): the files then carry θ̂, the report, parameters.yaml and the exit code say why
                 plausible_error = f"{type(exc).__name__}: {exc}"
+                warnings.warn(PlausibleWarning(f"{method}: no plausible parameters ({plausible_error}); its model "
+                                               "files carry the raw fit θ̂"), stacklevel=1)
+            if plausible is not None and plausible.note and not plausible.note.startswith("prior.plausible.level: 0"):
+                warnings.warn(PlausibleWarning(f"{method}: plausible parameters: {plausible.note}"), stacklevel=1)
         plausible_validation = validation  # the exact form keeps θ̂'s predictions
         if test and plausible is not None and plausible.form != "exact":
             plausible_validation = validate(model, plausible.theta, test, method, config.xcorr_window)

@@ -11,12 +11,14 @@ exact-prediction choice (``estimators.plausible``), and the result's ``note`` sa
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Mapping
 
 import numpy as np
 
-from dualid.errors import ConfigError
+from dualid.errors import ConfigError, PlausibleWarning
 from dualid.estimators.plausible import PlausibleParameters, plausible_parameters
+from dualid.estimators.plausible_newton import MASSLESS_SHARE, rounded_prior
 from dualid.estimators.plausible_region import LEVEL, check_level, plausible_in_region, training_rmse
 from dualid.estimators.uncertainty import BaseUncertainty
 from dualid.problem import IdentificationProblem
@@ -50,7 +52,19 @@ def plausible_dict(prior) -> bool | dict:
 def choose_plausible(problem: IdentificationProblem, theta_hat: np.ndarray, theta0: np.ndarray,
                      base: BaseUncertainty | None, base_error: str, level: float,
                      joint: bool) -> PlausibleParameters:
-    """θ_plausible of one method (module docstring); raises what the estimators raise."""
+    """θ_plausible of one method (module docstring); raises what the estimators raise. The prior's rigid bodies are
+    made at most 10 % rounder first (``estimators.plausible_newton.rounded_prior``: a thin CAD link would make the
+    divergence 1/λ² stiff along one direction and push the fit's disagreement into that link's mass)."""
+    rounded = rounded_prior(problem.parameters, theta0)
+    P = problem.parameters
+    replaced = [b.name for b in P.blocks if b.kind == "rigid_body"  # rounding keeps the mass, replacing does not
+                and not np.isclose(rounded[b.indices[0]], theta0[b.indices[0]], rtol=1e-9, atol=0.0)]
+    if replaced:  # a fallback that is used is said (console, report, parameters.yaml)
+        warnings.warn(PlausibleWarning(
+            f"the prior has no consistent body for {', '.join(replaced)} (no mass or a singular inertia): its plausible "
+            f"parameters are drawn toward a regularised body instead ({MASSLESS_SHARE:g} × the other bodies' mean mass, "
+            "at the joint frame, their mean radius of gyration)"), stacklevel=2)
+    theta0 = rounded
     if level > 0 and base is not None:
         return plausible_in_region(problem, theta_hat, theta0, base, level, joint)
     p = plausible_parameters(problem, theta_hat, theta0)

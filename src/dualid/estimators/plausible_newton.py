@@ -1,0 +1,253 @@
+"""The confidence-region choice of plausible parameters by dualid's own interior point (no conic compiler).
+
+``plausible_region`` states the problem: θ closest to the prior θ₀ whose base parameters β = Cθ lie in the fit's
+confidence ellipsoid (β − β̂)ᵀΣ_β⁻¹(β − β̂) ≤ c², physically consistent, within the bounds. Here it is solved as
+a sequence of smooth penalised problems
+
+    θ(μ) = argmin_θ  R(θ) + μ‖u(θ)‖²   s.t. C_b(θ) ⪰ 0, bounds,      u(θ) = Λ^-½ Uᵀ D (Cθ − β̂) / c,
+
+U Λ Uᵀ = D Σ_β D the covariance in the column-scaled chart (D = diag of the independent columns' norms), its
+eigenvalues floored at SIGMA_RTOL × the largest, so that ‖u‖² c² is the statistic and u is O(1) whatever the units
+and the noise level. μ is found by regula falsi in log μ until ‖u‖ ∈ [1 − U_TOL, 1]: the penalised optimum is
+then the constrained one (KKT with multiplier μ/c²). Each solve is ``newton.interior_point._interior_point``
+(primal–dual steps on the consistency LMIs and bound rows, affine-invariant, warm-started from the previous μ's
+solution); the first starts at the prior, which is strictly consistent, so no phase one is needed.
+
+The prior term R is scale-aware in every block:
+- rigid bodies: the log-det divergence of the pseudo-inertia to the prior's (invariant under units and body
+  frame; itself a barrier of the consistency cone). ``dualid fit`` rounds the prior's bodies first
+  (``rounded_prior``: a thin CAD link would otherwise make one direction 1/λ² stiff and push the fit's
+  disagreement into its mass);
+- joint terms (friction, armature: a URDF carries none) and free parameters: ½ w_k (θ_k − θ₀_k)² with
+  w_k = ‖Y_k‖² / ‖τ_j‖² (``torque_weights``): a change that would explain the joint's whole measured torque costs
+  ½, so a prior at (or near) the bound 0 costs nothing extra and no 1/x² curvature appears.
+
+When no μ up to MU_MAX brings ‖u‖ to 1 (the data pin a body onto the consistency boundary), the last point is
+kept and ``note`` says how far outside the region it lies.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pinocchio as pin
+
+from dualid.errors import SolverError
+from dualid.estimators.newton.objective import _Derivatives, _NotPositiveDefinite
+from dualid.estimators.quadratic_newton import _run
+from dualid.model.consistency import FeasibleSet, feasible_set, pullback_metric
+from dualid.problem import IdentificationProblem
+
+SIGMA_RTOL = 1e-12  # Σ_β's eigenvalues floored at this × the largest (column-scaled chart)
+U_TOL = 5e-6  # accept log ‖u‖ in [−U_TOL, 0]: the statistic within 1e-5 of c² (the constraint active)
+MU_MAX = 1e14  # the largest penalty tried before the point is kept outside the region
+MAX_SOLVES = 40
+TOL = 1e-9  # the interior point's relative gap
+MASSLESS_SHARE = 0.01  # a prior body without mass: this share of the other bodies' mean mass (rounded_prior)
+ROUNDING = 0.1  # each prior body's inertia about its centre of mass made up to this much rounder (rounded_body)
+
+
+def torque_weights(problem: IdentificationProblem) -> np.ndarray:
+    """w (p,): ‖Y_k‖² / ‖τ over the rows Y_k acts on‖² (1/w: the squared value of θ_k that would explain those rows'
+    whole torque). Invariant under units of θ_k and of τ. A column with no effect gets its block's mean weight."""
+    A = problem.Y.reshape(-1, problem.p)
+    tau = problem.tau.reshape(-1)
+    col2 = np.einsum("ik,ik->k", A, A)
+    seen = np.abs(A) > 0
+    tau2 = (seen * (tau**2)[:, None]).sum(axis=0)
+    w = np.where((col2 > 0) & (tau2 > 0), col2 / np.where(tau2 > 0, tau2, 1.0), np.nan)
+    for b in problem.parameters.blocks:
+        idx = list(b.indices)
+        fill = np.nanmean(w[idx]) if np.isfinite(w[idx]).any() else np.nanmean(w) if np.isfinite(w).any() else 1.0
+        w[idx] = np.where(np.isfinite(w[idx]), w[idx], fill)
+    return w
+
+
+def rounded_body(theta_b: np.ndarray, alpha: float = ROUNDING) -> np.ndarray:
+    """The 10 parameters of the body with θ_b's mass and centre of mass and the inertia (1 − α) I_c + α tr(I_c)/3 · 1
+    about the centre of mass: a thin CAD body (a pseudo-inertia with a tiny eigenvalue, whose divergence would be
+    stiff as 1/λ² along it) made at most α rounder; the smallest eigenvalue of its second moment is ≥ α/3 × the
+    largest."""
+    inertia = pin.Inertia.FromDynamicParameters(np.asarray(theta_b, dtype=float))
+    Ic = np.array(inertia.inertia)
+    Ic = (1.0 - alpha) * Ic + alpha * np.trace(Ic) / 3.0 * np.eye(3)
+    return np.array(pin.Inertia(inertia.mass, np.array(inertia.lever), Ic).toDynamicParameters())
+
+
+def rounded_prior(P, theta0: np.ndarray) -> np.ndarray:
+    """θ₀ with every rigid body of positive mass rounded (``rounded_body``), and every massless or singular one (a
+    URDF link without inertial, a point mass) replaced by a regularised body: MASSLESS_SHARE × the mean mass of the
+    prior's other bodies, at its frame's origin, an isotropic inertia of their mean radius of gyration. Other
+    entries unchanged."""
+    theta0 = np.array(theta0, dtype=float)
+    good, bad = [], []
+    for b in (b for b in P.blocks if b.kind == "rigid_body"):
+        idx = list(b.indices)
+        if theta0[idx[0]] > 0:
+            theta0[idx] = rounded_body(theta0[idx])
+        C = b.constraint_matrix(theta0)
+        (good if np.linalg.eigvalsh(C)[0] > 1e-12 * max(float(np.abs(C).max()), 1e-300) else bad).append(idx)
+    if bad and good:
+        masses = np.array([theta0[idx[0]] for idx in good])
+        gyration = np.mean([np.sqrt(np.trace(pin.Inertia.FromDynamicParameters(theta0[idx]).inertia) / (2 * theta0[idx[0]]))
+                            for idx in good])
+        m = MASSLESS_SHARE * float(masses.mean())
+        ball = pin.Inertia(m, np.zeros(3), m * gyration**2 * np.eye(3)).toDynamicParameters()
+        for idx in bad:
+            theta0[idx] = ball
+    return theta0
+
+
+def prior_terms(problem: IdentificationProblem, theta0: np.ndarray):
+    """(rigid [(idx, V, C0, C0⁻¹)], quad_idx, quad_w, G (p, p)): the log-det blocks, the quadratic (torque-weighted)
+    parameters and the prior metric G (R's Hessian at θ₀)."""
+    P = problem.parameters
+    w = torque_weights(problem)
+    G = np.zeros((P.p, P.p))
+    rigid, quad = [], []
+    for b in P.blocks:
+        idx = np.asarray(b.indices)
+        if b.kind == "rigid_body":
+            V = np.asarray(b.constraint_basis, dtype=float)
+            C0 = b.constraint_matrix(theta0)
+            rigid.append((idx, V, C0, np.linalg.inv(C0)))
+            G[np.ix_(idx, idx)] = pullback_metric(V, C0)
+        else:
+            quad.extend(idx.tolist())
+    quad_idx = np.array(quad, dtype=int)
+    G[quad_idx, quad_idx] = w[quad_idx]
+    return rigid, quad_idx, w[quad_idx], 0.5 * (G + G.T)
+
+
+def prior_value(rigid, quad_idx, quad_w, theta, theta0, order: int = 0):
+    """R(θ) (and its θ-gradient and Hessian when order): Σ log-det divergences + ½ Σ w (θ − θ₀)²."""
+    p = theta.shape[0]
+    e = theta[quad_idx] - theta0[quad_idx]
+    f = 0.5 * float(np.sum(quad_w * e * e))
+    grad = np.zeros(p) if order else None
+    hess = np.zeros((p, p)) if order else None
+    if order:
+        grad[quad_idx] = quad_w * e
+        hess[quad_idx, quad_idx] = quad_w
+    for idx, V, C0, C0inv in rigid:
+        C = np.tensordot(theta[idx], V, axes=1)
+        try:
+            L = np.linalg.cholesky(0.5 * (C + C.T))
+        except np.linalg.LinAlgError:
+            raise _NotPositiveDefinite from None
+        f += -2.0 * float(np.sum(np.log(np.diag(L)))) + np.linalg.slogdet(C0)[1] + float(np.sum(C0inv * C)) - C.shape[0]
+        if order:
+            Cinv = np.linalg.inv(C)
+            grad[idx] += np.einsum("kab,ba->k", V, C0inv - Cinv)
+            CV = np.einsum("ab,kbc->kac", Cinv, V)
+            hess[np.ix_(idx, idx)] += np.einsum("kab,lba->kl", CV, CV)
+    return f, grad, hess
+
+
+def prior_divergence(problem: IdentificationProblem, theta: np.ndarray, theta0: np.ndarray) -> float:
+    """R(θ) of the module docstring (inf where a rigid body is not strictly consistent)."""
+    rigid, quad_idx, quad_w, _ = prior_terms(problem, theta0)
+    try:
+        return prior_value(rigid, quad_idx, quad_w, np.asarray(theta, dtype=float), theta0)[0]
+    except _NotPositiveDefinite:
+        return float("inf")
+
+
+def _inside(theta0: np.ndarray, cons: FeasibleSet) -> np.ndarray:
+    """θ₀ moved strictly inside the bound rows (each row has one non-zero; rigid bodies: θ₀ is strictly consistent)."""
+    theta = theta0.copy()
+    for j in range(len(cons.h)):
+        i = int(np.flatnonzero(cons.G[j])[0])
+        s = cons.G[j, i] * theta[i] + cons.h[j]
+        gap = 1e-3 * max(abs(theta[i]), abs(cons.h[j]), 1e-300)
+        if s < gap:
+            theta[i] += (gap - s) / cons.G[j, i]
+    return theta
+
+
+def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: np.ndarray, C: np.ndarray,
+                 covariance: np.ndarray, radius2: float, scale: np.ndarray, s_ind: np.ndarray) -> dict:
+    """The module's problem. Returns {theta, mu, statistic, G, chain, solves, note}; raises SolverError when the
+    interior point fails at the first μ."""
+    P = problem.parameters
+    rigid, quad_idx, quad_w, G = prior_terms(problem, theta0)
+    # u(θ) = Λ^-½ Uᵀ (Cs φ − s_ind ⊙ β̂) / √c², φ = scale ⊙ θ, Cs = diag(s_ind) C diag(1/scale), Σ̃ = U Λ Uᵀ the
+    # column-scaled Σ_β (eigenvalues floored): (β − β̂)ᵀΣ_β⁻¹(β − β̂) = c²‖u‖²
+    S = covariance * np.outer(s_ind, s_ind)
+    w, U = np.linalg.eigh(0.5 * (S + S.T))
+    w = np.maximum(w, SIGMA_RTOL * max(float(w.max(initial=0.0)), 1e-300))
+    rad = np.sqrt(radius2)
+    W = (U.T @ (C * s_ind[:, None])) / np.sqrt(w)[:, None] / rad  # (r, p): u = W θ − b
+    b = (U.T @ (s_ind * beta_hat)) / np.sqrt(w) / rad
+    WtW = W.T @ W
+    if P.margin_reference is not None:  # chosen without the fit's margin C_b(θ) ⪰ ε·C_b(θ_ref) (docs/margin.md)
+        P = dataclasses.replace(P, margin_reference=None, margin_epsilon=0.0, margin_label="")
+    cons = feasible_set(P)
+    theta = _inside(np.asarray(theta0, dtype=float), cons)
+
+    def solve(mu: float, start: np.ndarray) -> np.ndarray:
+        def objective(th: np.ndarray, order: int) -> _Derivatives:
+            f, g, H = prior_value(rigid, quad_idx, quad_w, th, theta0, order)
+            u = W @ th - b
+            f += mu * float(u @ u)
+            if not order:
+                return _Derivatives(f)
+            H = H + 2.0 * mu * WtW
+            return _Derivatives(f, g + 2.0 * mu * (W.T @ u), 0.5 * (H + H.T))
+
+        try:
+            return _run(cons, start, TOL, 200, objective, 1.0)[0]
+        except _NotPositiveDefinite:  # a start outside the prior's domain (a body not strictly consistent)
+            raise SolverError("plausible parameters: the start is not strictly consistent",
+                              status="no_start") from None
+
+    def u_norm(th: np.ndarray) -> float:
+        return float(np.linalg.norm(W @ th - b))
+
+    chain: list[str] = []
+    if u_norm(theta) <= 1.0:  # the prior itself is in the region
+        return {"theta": theta, "mu": 0.0, "statistic": u_norm(theta) ** 2 * radius2, "G": G,
+                "chain": "the prior is in the region", "solves": 0, "note": ""}
+    # g(t) = log ‖u‖ at μ = e^t falls with t: bracket its root by ×10 steps, then regula falsi (Illinois)
+    bracket: dict[str, tuple[float, float]] = {}  # "lo": (t, g > 0), "hi": (t, g ≤ 0)
+    t, solves, best, last, side = 0.0, 0, None, theta, ""
+    while solves < MAX_SOLVES:
+        try:
+            th = solve(float(np.exp(t)), last)
+        except SolverError as exc:
+            chain.append(f"μ {np.exp(t):.3g}: {exc.status}")
+            if solves == 0:
+                raise SolverError(f"plausible parameters: the interior point failed ({'; '.join(chain)})",
+                                  status=exc.status) from None
+            break
+        solves += 1
+        last, un = th, u_norm(th)
+        g = float(np.log(max(un, 1e-300)))
+        if g <= 0:
+            best = (th, float(np.exp(t)), un)
+            if g >= -U_TOL:
+                break
+        new = "hi" if g <= 0 else "lo"
+        if new == side and len(bracket) == 2:  # Illinois: halve the stale end's value
+            other = "lo" if new == "hi" else "hi"
+            bracket[other] = (bracket[other][0], 0.5 * bracket[other][1])
+        bracket[new], side = (t, g), new
+        if len(bracket) < 2:
+            t += np.log(10.0) if new == "lo" else -np.log(10.0)
+            if t > np.log(MU_MAX):
+                break
+            continue
+        (t_lo, g_lo), (t_hi, g_hi) = bracket["lo"], bracket["hi"]
+        if abs(t_hi - t_lo) < 1e-9:
+            break
+        t = t_lo - g_lo * (t_hi - t_lo) / (g_hi - g_lo)
+    note = ""
+    if best is None:  # no μ ≤ MU_MAX reached the region: keep the last point and say so
+        best = (last, mu, u_norm(last))
+        note = (f"no strictly consistent θ inside the region was found (the data pin a body onto the consistency "
+                f"boundary): the written θ lies at {best[2] ** 2 * radius2:.3g} against the radius {radius2:.3g}")
+    th, mu_best, un = best
+    chain.append(f"interior point, {solves} solves, μ {mu_best:.3g}, statistic {un ** 2 * radius2:.3g}")
+    return {"theta": th, "mu": float(mu_best), "statistic": un ** 2 * radius2, "G": G, "chain": "; ".join(chain),
+            "solves": solves, "note": note}
