@@ -166,20 +166,26 @@ def _inside(theta0: np.ndarray, cons: FeasibleSet) -> np.ndarray:
     return theta
 
 
+def _region_map(beta_hat: np.ndarray, C: np.ndarray, covariance: np.ndarray, radius2: float,
+                s_ind: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(W, b) with u(θ) = W θ − b and (β − β̂)ᵀΣ_β⁻¹(β − β̂) = c²‖u‖²: u = Λ^-½ Uᵀ (Cs θ − s_ind ⊙ β̂) / √c², Cs =
+    diag(s_ind) C, Σ̃ = U Λ Uᵀ the column-scaled Σ_β (eigenvalues floored)."""
+    S = covariance * np.outer(s_ind, s_ind)
+    w, U = np.linalg.eigh(0.5 * (S + S.T))
+    w = np.maximum(w, SIGMA_RTOL * max(float(w.max(initial=0.0)), 1e-300))
+    rad = np.sqrt(radius2)
+    W = (U.T @ (C * s_ind[:, None])) / np.sqrt(w)[:, None] / rad  # (r, p)
+    b = (U.T @ (s_ind * beta_hat)) / np.sqrt(w) / rad
+    return W, b
+
+
 def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: np.ndarray, C: np.ndarray,
                  covariance: np.ndarray, radius2: float, scale: np.ndarray, s_ind: np.ndarray) -> dict:
     """The module's problem. Returns {theta, mu, statistic, G, chain, solves, note}; raises SolverError when the
     interior point fails at the first μ."""
     P = problem.parameters
     rigid, quad_idx, quad_w, G = prior_terms(problem, theta0)
-    # u(θ) = Λ^-½ Uᵀ (Cs φ − s_ind ⊙ β̂) / √c², φ = scale ⊙ θ, Cs = diag(s_ind) C diag(1/scale), Σ̃ = U Λ Uᵀ the
-    # column-scaled Σ_β (eigenvalues floored): (β − β̂)ᵀΣ_β⁻¹(β − β̂) = c²‖u‖²
-    S = covariance * np.outer(s_ind, s_ind)
-    w, U = np.linalg.eigh(0.5 * (S + S.T))
-    w = np.maximum(w, SIGMA_RTOL * max(float(w.max(initial=0.0)), 1e-300))
-    rad = np.sqrt(radius2)
-    W = (U.T @ (C * s_ind[:, None])) / np.sqrt(w)[:, None] / rad  # (r, p): u = W θ − b
-    b = (U.T @ (s_ind * beta_hat)) / np.sqrt(w) / rad
+    W, b = _region_map(beta_hat, C, covariance, radius2, s_ind)
     WtW = W.T @ W
     if P.margin_reference is not None:  # chosen without the fit's margin C_b(θ) ⪰ ε·C_b(θ_ref) (docs/margin.md)
         P = dataclasses.replace(P, margin_reference=None, margin_epsilon=0.0, margin_label="")
@@ -244,7 +250,7 @@ def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: n
         t = t_lo - g_lo * (t_hi - t_lo) / (g_hi - g_lo)
     note = ""
     if best is None:  # no μ ≤ MU_MAX reached the region: keep the last point and say so
-        best = (last, mu, u_norm(last))
+        best = (last, float(np.exp(t)), u_norm(last))
         note = (f"no strictly consistent θ inside the region was found (the data pin a body onto the consistency "
                 f"boundary): the written θ lies at {best[2] ** 2 * radius2:.3g} against the radius {radius2:.3g}")
     th, mu_best, un = best

@@ -277,6 +277,22 @@ def fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome
     return run_workflow(_fit_robot, config, progress)
 
 
+def _plausible(config: FitConfig, rigid, model, problem, method: str, theta: np.ndarray, base_unc, base_error):
+    """(plausible parameters or None, the error that stopped them or ""): a failure is recorded (numpy's LinAlgError
+    is a ValueError) and warned, so the files carry θ̂ and the report, parameters.yaml and the exit code say why."""
+    try:
+        plausible = choose_plausible(problem, theta, prior_theta(config, rigid, model, theta, problem)[0], base_unc,
+                                     base_error, config.prior.plausible_level, config.prior.plausible_joint)
+    except (DualidError, ValueError, ArithmeticError) as exc:
+        error = f"{type(exc).__name__}: {exc}"
+        warnings.warn(PlausibleWarning(f"{method}: no plausible parameters ({error}); its model files carry the raw "
+                                       "fit θ̂"), stacklevel=1)
+        return None, error
+    if plausible.note and not plausible.note.startswith("prior.plausible.level: 0"):
+        warnings.warn(PlausibleWarning(f"{method}: plausible parameters: {plausible.note}"), stacklevel=1)
+    return plausible, ""
+
+
 def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome:
     from dualid.robot.dfki import reference_theta
 
@@ -333,17 +349,8 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
         plausible, plausible_error = None, ""
         if config.prior.plausible:
             _say(progress, f"choosing {method}'s plausible parameters (closest to the prior, in the confidence region)")
-            try:
-                plausible = choose_plausible(problem, result.theta, prior_theta(config, rigid, model, result.theta, problem)[0],
-                                             base_unc, base_error, config.prior.plausible_level,
-                                             config.prior.plausible_joint)
-            except (DualidError, ValueError, ArithmeticError) as exc:  # recorded (numpy's LinAlgError is a
-                # ValueError): the files then carry θ̂, the report, parameters.yaml and the exit code say why
-                plausible_error = f"{type(exc).__name__}: {exc}"
-                warnings.warn(PlausibleWarning(f"{method}: no plausible parameters ({plausible_error}); its model "
-                                               "files carry the raw fit θ̂"), stacklevel=1)
-            if plausible is not None and plausible.note and not plausible.note.startswith("prior.plausible.level: 0"):
-                warnings.warn(PlausibleWarning(f"{method}: plausible parameters: {plausible.note}"), stacklevel=1)
+            plausible, plausible_error = _plausible(config, rigid, model, problem, method, result.theta, base_unc,
+                                                    base_error)
         plausible_validation = validation  # the exact form keeps θ̂'s predictions
         if test and plausible is not None and plausible.form != "exact":
             plausible_validation = validate(model, plausible.theta, test, method, config.xcorr_window)
