@@ -8,7 +8,31 @@ from typing import List, Optional
 import typer
 
 from dualid.cli.app import FLAG, app
-from dualid.cli.common import EXIT_FAILED, console, fail, output_dir, print_error, show_warnings
+from dualid.cli.common import (
+    EXIT_FAILED,
+    StageClock,
+    console,
+    fail,
+    output_dir,
+    print_error,
+    progress_status,
+    show_warnings,
+)
+
+_STAGES = {"loading": "logs", "margin": "margin", "uncertainty": "uncertainty", "validating": "validation",
+           "choosing": "plausible", "scoring": "training scores", "writing": "report"}
+
+
+def _stage(message: str) -> str:
+    """The stage a progress message of ``robot.fit`` opens (the --verbose timing line's names)."""
+    words = message.split()
+    if not words:
+        return ""
+    if words[0] == "fitting":
+        return f"fit {words[1]}"
+    if words[0] == "building":
+        return "regressors" if "regressors" in message else "model"
+    return _STAGES.get(words[0], words[0])
 
 
 def _command_line() -> str:
@@ -57,13 +81,13 @@ def fit(
     force: bool = typer.Option(False, "--force", metavar=FLAG, help="write into an existing non-empty output directory"),
     margin: Optional[float] = typer.Option(None, "--margin", metavar="EPS", help="every method under M(θ) ⪰ EPS·M(θ_ref), "
                                            "θ_ref a WLS pilot (or the config's margin.reference); 0 ≤ EPS < 1"),
+    verbose: bool = typer.Option(False, "--verbose", metavar=FLAG, help="print the CPU time of every stage"),
 ) -> None:
     """Identify a robot's inertial parameters, joint friction and armature from a URDF and logs (or a drag
     model's drag and damping: model.kind: drag in the config)."""
+    clock = StageClock(_stage)
     import warnings
     from dataclasses import replace
-
-    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
     from dualid.report.robot import score_table, write_fit
     from dualid.robot.fit import fit_robot
@@ -86,17 +110,20 @@ def fit(
         from dualid.cli.drag import fit_drag_command
 
         return fit_drag_command(cfg, force, config_file=config, command=_command_line())
-    with Progress(SpinnerColumn(), TextColumn("{task.description}", markup=False), TimeElapsedColumn(), console=console) as bar:
-        task = bar.add_task("starting", total=None)
-        with warnings.catch_warnings(record=True) as caught:  # recorded in the outcome by fit_robot
-            warnings.simplefilter("always")
-            try:
-                outcome = fit_robot(cfg, progress=lambda msg: bar.update(task, description=msg))
-                bar.update(task, description=f"writing {cfg.out}")
+
+    def say(message: str) -> None:
+        clock.tick(message)
+        status(message)
+
+    with warnings.catch_warnings(record=True) as caught:  # recorded in the outcome by fit_robot
+        warnings.simplefilter("always")
+        try:
+            with progress_status() as status:
+                outcome = fit_robot(cfg, progress=say)
+                say(f"writing {cfg.out}")
                 write_fit(outcome, cfg.out, force, command=_command_line(), config_file=config)
-            finally:  # also when an error follows: a warning may explain it
-                bar.stop()
-                show_warnings(caught)
+        finally:  # also when an error follows: a warning may explain it
+            show_warnings(caught)
     console.print(outcome.identifiability.describe(max_items=0), markup=False)
     for m, f in outcome.fits.items():
         if f.ok:
@@ -112,6 +139,8 @@ def fit(
                   + (" (incomplete: see report.html)" if failed else ""), markup=False)
     for m in failed:
         print_error(f"{m}: failed: {outcome.fits[m].error}")
+    if verbose:
+        console.print(clock.line(), markup=False)
     if failed:
         raise typer.Exit(EXIT_FAILED)
 
