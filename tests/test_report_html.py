@@ -345,3 +345,10 @@ def test_the_data_commit_is_the_input_files_repository(tmp_path):
     rows = dict(metadata_items(run_metadata({"train": [log]}, "dualid fit")))
     assert rows["data commit"] == f"{head}-dirty ({repo.resolve()})"
     assert dict(metadata_items(run_metadata({"train": [outside]}, "x")))["data commit"].startswith("(the input files")
+
+
+def test_a_note_several_methods_share_is_shown_once():
+    from dualid.report.fit_report import notes_once
+
+    notes = ["wls: first fitted with: ols", "dm: weight: gls", "dm: first fitted with: ols", "no method here"]
+    assert notes_once(notes) == ["wls, dm: first fitted with: ols", "dm: weight: gls", "no method here"]

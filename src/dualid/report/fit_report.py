@@ -56,7 +56,6 @@ NOTE_LABELS = {  # SOLVER_NOTES keys in a reader's words
     "covariance_model": "torque-noise covariance estimated from",
     "sigma_structure": "torque-noise covariance structure",
     "pilot": "first fitted with",
-    "projected_parameters": "completed by the constraints",
     "diverging_direction": "the objective keeps improving along",
 }
 PROJECTED = ("set to the smallest value consistent with the other parameters: the data do not determine it, no "
@@ -212,8 +211,11 @@ def fit_notes(m: str, r) -> list[str]:
     chain = str(r.info.get("solver_chain", r.solver))
     notes = [f"{m}: solver chain: {chain}"] if "→" in chain and not r.info.get("fallback_used") else []
     for k in SOLVER_NOTES:
-        if k == "projected_note" and k in r.info:
-            notes.append(f"{m}: {PROJECTED}")
+        if k == "projected_note":
+            continue  # said by PROJECTED with the values
+        if k == "projected_parameters" and k in r.info:
+            values = re.sub(r" \(not determined by the data[^)]*\)", "", str(r.info[k]))
+            notes.append(f"{m}: {values}: {PROJECTED}")
         elif k in r.info:
             notes.append(f"{m}: {NOTE_LABELS.get(k, k.replace('_', ' '))}: {fmt_value(r.info[k])}")
     notes += [weight_note(m, r.info)] if "weight_choice" in r.info else []
