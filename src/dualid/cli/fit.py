@@ -171,7 +171,8 @@ def validate(
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            with console.status(f"validating {model.name} on {len(data)} runs"):
+            with progress_status(f"validating {model.name} on {len(data)} runs") as say:
+                say(f"validating {model.name} on {len(data)} runs")
                 _, _, val = validate_urdf(model, data, **kw)
             if out is not None:
                 meta = {"model": str(model), "data": [str(p) for p in data],

@@ -134,6 +134,7 @@ def signal_plot(validations: dict[str, Validation], run: int, signal: str = "tau
         for a in (ax, res):
             a.grid(alpha=0.3)
             a.tick_params(labelsize=7)
+            a.locator_params(nbins=4)  # fewer tick labels: text is most of a figure's drawing time
         res.legend([ln for ln, _ in lines], [text for _, text in lines], fontsize=7, loc="upper left",
                    bbox_to_anchor=(1.01, 1.0), frameon=False, title=coords[j], title_fontsize=7)
     axes[0, 0].set_title(f"{SIGNALS[signal][0]}: measured (black) and predicted", fontsize=8)
