@@ -10,7 +10,7 @@ import typer
 from dualid.cli.app import FLAG, app
 from dualid.cli.common import console, fail, output_dir
 
-QUICK = {"data_seeds": 2, "seeds": 3}  # the default: about a minute on two cores
+QUICK = {"data_seeds": 2, "seeds": 3}  # the default: about a quarter of the full study's fits
 FULL = {"data_seeds": 5, "seeds": 5}  # --full: the study of docs/results.md
 
 
@@ -28,7 +28,7 @@ def reproduce(
     full: bool = typer.Option(False, "--full", metavar=FLAG,
                               help=f"the full study of docs/results.md: {FULL['data_seeds']} data sets × "
                                    f"{FULL['seeds']} low-data subsets (default: {QUICK['data_seeds']} × "
-                                   f"{QUICK['seeds']}, about a minute)"),
+                                   f"{QUICK['seeds']})"),
     seeds: Optional[int] = typer.Option(None, "--seeds", help="random low-data subsets per data set "
                                         f"(default {QUICK['seeds']}; {FULL['seeds']} with --full)"),
     data_seeds: Optional[int] = typer.Option(None, "--data-seeds", help="simulated data sets (seeds 0..N-1), pooled "
