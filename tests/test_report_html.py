@@ -352,3 +352,14 @@ def test_a_note_several_methods_share_is_shown_once():
 
     notes = ["wls: first fitted with: ols", "dm: weight: gls", "dm: first fitted with: ols", "no method here"]
     assert notes_once(notes) == ["wls, dm: first fitted with: ols", "dm: weight: gls", "no method here"]
+
+
+def test_every_method_and_reference_has_its_own_colour():
+    from dualid.estimators.methods import METHODS, TRUTH
+    from dualid.report.signals import REFERENCE_COLORS, color, style
+
+    colours = [m.color.lower() for m in METHODS.values()] + [TRUTH.color.lower()]
+    assert len(set(colours)) == len(colours)
+    assert not {c.lower() for c in REFERENCE_COLORS} & set(colours)
+    assert color("lab model 2.0", 6) != color("lab model 2.1", 7) and style("lab model 2.0", 6)["ls"] == "--"
+    assert style("dm", 5) == {"color": METHODS["dm"].color, "ls": "-"}

@@ -28,7 +28,7 @@ LINEAR_BASE = ("vx", "vy", "vz")  # a free-flyer's translational coordinates (da
 WIDEN = 1.0  # predictions may widen the axes by this fraction of the measured span on either side
 MARGIN = 0.05  # blank margin, fraction of the axis span
 MAX_POINTS = 600  # points per drawn curve
-REFERENCE_COLORS = ("#555555", "#bcbd22", "#393b79", "#8c6d31")  # labels outside the method table (dashed)
+REFERENCE_COLORS = ("#555555", "#bcbd22", "#393b79", "#8c6d31")  # labels outside the method table (dashed); no method's
 
 
 def unit_of(signal: str, coordinate: str) -> str:
