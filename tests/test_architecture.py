@@ -355,3 +355,32 @@ def _private_imports(module: str, path: Path) -> set[tuple[str, str, str]]:
 def test_no_private_name_is_imported_across_modules():
     found = set().union(*(_private_imports(m, p) for m, p in MODULES.items()))
     _ratchet(found, PRIVATE_IMPORTS, "cross-module imports of private names")
+
+
+HEAVY = ("numpy", "scipy", "pinocchio", "matplotlib", "cvxpy", "mujoco", "pandas", "pydantic", "jinja2")
+
+
+@pytest.mark.parametrize("code", [
+    "import dualid",
+    "from dualid.cli import app\ntry:\n    app(['--help'], prog_name='dualid')\nexcept SystemExit:\n    pass",
+])
+def test_import_and_help_load_no_heavy_library(code):
+    """``import dualid`` and ``dualid --help`` import only what they use: the public names resolve on
+    first access (module ``__getattr__``) and every command imports its implementation when it runs."""
+    import subprocess
+    import sys
+
+    probe = code + f"\nimport sys\nprint(sorted({{m.split('.')[0] for m in sys.modules}} & set({HEAVY!r})))"
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == "[]"
+
+
+def test_public_names_resolve_to_their_defining_objects():
+    import importlib
+
+    import dualid
+
+    for name, module in dualid._LAZY.items():
+        assert getattr(dualid, name) is getattr(importlib.import_module(module), name), name
+    with pytest.raises(AttributeError):
+        dualid.no_such_name  # noqa: B018

@@ -43,3 +43,25 @@ def test_reproduce_smoke_run_writes_results_table_and_figures(tmp_path):
     assert doc["config"]["data_seeds"] == [0, 1] and {f["data_seed"] for f in doc["cases"]["high"]["fits"]} == {0, 1}
     bad = runner.invoke(app, ["reproduce", "pan-tilt", "--case", "medium"])
     assert bad.exit_code == 2 and "--case: expected one of low, high, both, got 'medium'" in bad.output
+
+
+def test_reproduce_writes_progress_lines_into_a_redirected_log(tmp_path):
+    """`dualid reproduce … > log.txt 2>&1`: one plain line per fit (from the worker processes too), no spinner."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    src = Path(__file__).resolve().parents[1] / "src"
+    log = tmp_path / "log.txt"
+    env = {**os.environ, "PYTHONPATH": f"{src}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+    with open(log, "w") as f:
+        code = subprocess.run([sys.executable, "-m", "dualid.cli", "reproduce", "pan-tilt", "--size", "small",
+                               "--case", "high", "--data-seeds", "2", "--workers", "2", "--out", str(tmp_path / "o")],
+                              stdout=f, stderr=subprocess.STDOUT, env=env, cwd=tmp_path).returncode
+    text = log.read_text()
+    assert code == 0, text
+    for line in ("0/8 data set 0: simulating", "0/8 data set 1: simulating", "8/8 data set 0: high: dm",
+                 "8/8 data set 1: high: dm", "done in"):
+        assert line in text, line
+    assert "⠋" not in text and "\r" not in text  # no spinner frames, no redrawn lines

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import yaml
@@ -43,6 +44,9 @@ def test_fit_and_validate_end_to_end(tmp_path):
     assert list(record["methods"]) == ["ols", "wls"]  # --method overrides the config's default methods
     assert (out / "ols.urdf").is_file() and (out / "scores.png").is_file()
     assert "held-out τ RMSE [N m], 1 run" in result.output and "± 0.000" not in result.output
+    # stderr is not a terminal here: one plain time-stamped line per stage, no spinner frames
+    assert re.search(r"^\[ *[0-9.]+ s\] fitting wls \(", result.output, re.M) and "⠋" not in result.output
+    assert "CPU time per stage" not in result.output  # only with --verbose
 
     val = tmp_path / "val"
     result = runner.invoke(app, ["validate", "--model", str(out / "ols.urdf"), "--data", str(DFKI / "trajectory_05.csv"),
@@ -107,3 +111,13 @@ def test_solver_flag_and_config_reach_the_estimator_and_the_report(tmp_path):
     assert bad.exit_code == 2 and "solver: expected one of ('newton', 'CLARABEL', 'SCS'), got 'gurobi'" in _out(bad)
     bad = runner.invoke(app, ["fit", "--config", str(EXAMPLE), "--solver", "dm", "--out", str(tmp_path / "y")])
     assert bad.exit_code == 2 and "--solver: expected METHOD=SOLVER (e.g. dm=sdp), got 'dm'" in _out(bad)
+
+
+def test_verbose_prints_the_cpu_time_of_every_stage(tmp_path):
+    result = runner.invoke(app, ["fit", "--config", str(_config(tmp_path)), "--method", "ols", "--verbose",
+                                 "--out", str(tmp_path / "out")])
+    assert result.exit_code == 0, _out(result)
+    line = next(x for x in result.output.splitlines() if x.startswith("CPU time per stage [s]: "))
+    stages = dict(s.rsplit(" ", 1) for s in line.split(": ", 1)[1].split("; ")[0].split(", "))
+    assert {"startup", "setup", "model", "logs", "regressors", "fit ols", "report"} <= set(stages)
+    assert abs(sum(map(float, stages.values())) - float(line.rsplit("total ", 1)[1])) < 0.05

@@ -113,7 +113,12 @@ def test_the_dfki_fit_writes_a_self_contained_html_report(dfki_fit):
         for stem in ("effort", "acceleration"):
             assert f"{stem}_{run}.png" in c.ids
             assert (dfki_fit / f"{stem}_{run}.png").is_file()  # the Markdown's copy
-    assert c.images == 5  # 2 runs × 2 signals + scores.png
+    assert c.images == 6  # 2 runs × 2 signals + scores.png + friction.png
+    # what the fit says physically: friction curves, each link against the URDF, the data's commit
+    assert "friction.png" in c.ids and "Joint friction" in text and "Links against the URDF" in text
+    for link in ("Joint1", "Joint2"):
+        assert f"<caption>{link}</caption>" in html
+    assert re.search(r"data commit</td><td>[0-9a-f]{40}(-dirty)? \(", html)
     # training and held-out scores, per method and reference, per joint
     assert "training τ RMSE [N m], mean ± std over 4 runs" in text
     assert "held-out τ RMSE [N m], mean ± std over 2 runs" in text
@@ -193,8 +198,9 @@ def test_each_joint_has_its_own_legend_with_its_rmse():
     vals = {"ols": _validation("ols", tau + [0.1, 0.02]), "dm": _validation("dm", tau + [0.3, 0.04])}
     sf = signal_plot(vals, 0, "tau")
     axes = sf.figure.axes
-    assert len(axes) == 2
-    for j, ax in enumerate(axes):
+    assert len(axes) == 4  # per joint: the signals and their residuals
+    for j, ax in enumerate(axes[1::2]):  # the residual panel carries the joint's legend
+        np.testing.assert_allclose(ax.lines[0].get_ydata(), [0.1, 0.02][j])  # ols's residual
         legend = ax.get_legend()
         assert legend is not None, f"joint {j} has no legend"
         texts = [t.get_text() for t in legend.get_texts()]
@@ -309,3 +315,51 @@ def test_floating_base_translations_are_labelled_in_newtons_and_metres():
 
     assert [unit_of("tau", c) for c in ("vx", "wz", "Joint1")] == ["N", "N m", "N m"]
     assert [unit_of("a", c) for c in ("vz", "wx", "Joint1")] == ["m/s²", "rad/s²", "rad/s²"]
+
+
+def test_the_data_commit_is_the_input_files_repository(tmp_path):
+    """Installed dualid has no source commit; the run records the commit of the repository holding the logs,
+    '-dirty' when an input file changed or is untracked, and nothing outside a repository."""
+    import subprocess
+
+    from dualid.report.metadata import data_commit, metadata_items, run_metadata
+
+    repo = tmp_path / "robot"
+    (repo / "logs").mkdir(parents=True)
+    log = repo / "logs" / "run.csv"
+    log.write_text("t\n0\n")
+    git = ["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t"]
+    subprocess.run([*git, "init", "-q"], check=True)
+    assert data_commit([log]) is None  # no commit yet
+    subprocess.run([*git, "add", "."], check=True)
+    subprocess.run([*git, "commit", "-q", "-m", "x"], check=True)
+    head = subprocess.run([*git, "rev-parse", "HEAD"], capture_output=True, text=True, check=True).stdout.strip()
+    assert data_commit([tmp_path / "missing.csv", log]) == {"commit": head, "repository": str(repo.resolve())}
+    (repo / "other.txt").write_text("not an input")
+    assert data_commit([log])["commit"] == head  # only the input files decide "-dirty"
+    log.write_text("t\n1\n")
+    assert data_commit([log])["commit"] == head + "-dirty"
+    outside = tmp_path / "loose.csv"
+    outside.write_text("t\n0\n")
+    assert data_commit([outside]) is None
+    rows = dict(metadata_items(run_metadata({"train": [log]}, "dualid fit")))
+    assert rows["data commit"] == f"{head}-dirty ({repo.resolve()})"
+    assert dict(metadata_items(run_metadata({"train": [outside]}, "x")))["data commit"].startswith("(the input files")
+
+
+def test_a_note_several_methods_share_is_shown_once():
+    from dualid.report.fit_report import notes_once
+
+    notes = ["wls: first fitted with: ols", "dm: weight: gls", "dm: first fitted with: ols", "no method here"]
+    assert notes_once(notes) == ["wls, dm: first fitted with: ols", "dm: weight: gls", "no method here"]
+
+
+def test_every_method_and_reference_has_its_own_colour():
+    from dualid.estimators.methods import METHODS, TRUTH
+    from dualid.report.signals import REFERENCE_COLORS, color, style
+
+    colours = [m.color.lower() for m in METHODS.values()] + [TRUTH.color.lower()]
+    assert len(set(colours)) == len(colours)
+    assert not {c.lower() for c in REFERENCE_COLORS} & set(colours)
+    assert color("lab model 2.0", 6) != color("lab model 2.1", 7) and style("lab model 2.0", 6)["ls"] == "--"
+    assert style("dm", 5) == {"color": METHODS["dm"].color, "ls": "-"}

@@ -181,3 +181,28 @@ def test_pooled_data_sets_and_paired_differences(system):
     # every fit carries the metric guard against the prior, and the tables count the flagged fits
     assert all({"metric_ratio_min", "metric_ratio_max", "degenerate"} <= set(r.info) for r in pooled.records if r.ok)
     assert "| failed | degenerate metric |" in study_markdown(pooled)
+
+
+def _lines(log: list, done: int, total: int, description: str) -> None:
+    log.append((done, total, description))
+
+
+def test_data_sets_in_worker_processes_pool_to_the_same_study():
+    """workers=2 simulates and studies the data sets in two processes: the pooled fits are one process's, in the
+    same order, and the progress callback runs in the workers (a sequential run calls it here)."""
+    from functools import partial
+
+    from dualid.paper.seeds import run_data_seeds
+
+    kw = dict(data_seeds=2, case="high", seeds=1, size="small", methods=("ols", "wls"))
+    calls: list = []
+    one = run_data_seeds("pan-tilt", **kw, progress=partial(_lines, calls))
+    two = run_data_seeds("pan-tilt", **kw, workers=2, progress=partial(_lines, []))
+    assert [(r.data_seed, r.case, r.method) for r in one.records] == [(r.data_seed, r.case, r.method)
+                                                                      for r in two.records]
+    for a, b in zip(one.records, two.records):
+        np.testing.assert_array_equal(a.theta, b.theta)
+        np.testing.assert_array_equal(a.scores, b.scores)
+    assert calls[0] == (0, 2, "data set 0: simulating") and calls[-1] == (2, 2, "data set 1: high: wls")
+    with pytest.raises(ConfigError, match="workers: expected a positive number of processes, got 0"):
+        run_data_seeds("pan-tilt", **kw, workers=0)

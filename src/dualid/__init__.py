@@ -7,10 +7,17 @@ The user's whole path, without private imports::
     build_problem(model, runs) → IdentificationProblem
     OLS / WLS / EnergyLS / RegularizedWLS / DualMetric (or make_estimator(key) from METHODS) .fit
     predict / forward_dynamics / validate / scores → write_urdf
+
+The public names are imported when first used (module ``__getattr__``), so ``import dualid`` and the
+command line's ``--help`` do not pay for scipy, Pinocchio or matplotlib; ``from dualid import OLS``
+works as before.
 """
 
-from dualid.data import ColumnMap, JointColumns, Trajectory, load_dataset, load_log, load_logs
-from dualid.data.preprocessing import differentiate, filter_lowpass, preprocess, resample, trim
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
 from dualid.errors import (
     ConfigError,
     ConsistencyError,
@@ -21,41 +28,39 @@ from dualid.errors import (
     OutputError,
     SolverError,
 )
-from dualid.estimators import (
-    OLS,
-    WLS,
-    DualMetric,
-    EnergyLS,
-    FeasibleGLS,
-    Guarded,
-    IdentificationResult,
-    RegularizedWLS,
-    guard_info,
-)
-from dualid.estimators.methods import METHODS, Method, make_estimator
-from dualid.estimators.uncertainty import BaseUncertainty, base_uncertainty, bootstrap
-from dualid.evaluation.prediction import forward_dynamics, predict
-from dualid.evaluation.scores import max_normalized_xcorr, metric_rmse, rmse, score_run
-from dualid.evaluation.validation import Validation, validate
-from dualid.identifiability import BaseParameter, BaseParameters
-from dualid.model import (
-    AffineMetric,
-    MetricTerm,
-    Model,
-    ParameterBlock,
-    ParameterSpace,
-    RigidBodyModel,
-    with_joint_terms,
-)
-from dualid.model.drag import DragModel
-from dualid.model.drag_spec import DragSpec
-from dualid.model.extra_terms import with_base_drag
-from dualid.model.joint_terms import JointTermsModel
-from dualid.model.landsalp import LandSalpModel
-from dualid.problem import Identifiability, IdentificationProblem, build_problem
-from dualid.report.urdf import write_urdf
 
 __version__ = "0.1.0"
+
+# public name → the module that defines it (imported on first access)
+_LAZY = {
+    **dict.fromkeys(("ColumnMap", "JointColumns", "load_log", "load_logs"), "dualid.data.io"),
+    "Trajectory": "dualid.data.trajectory",
+    "load_dataset": "dualid.data.dataset",
+    **dict.fromkeys(("differentiate", "filter_lowpass", "preprocess", "resample", "trim"),
+                    "dualid.data.preprocessing"),
+    "Model": "dualid.model.base",
+    "RigidBodyModel": "dualid.model.rigid_body",
+    **dict.fromkeys(("JointTermsModel", "with_joint_terms"), "dualid.model.joint_terms"),
+    "with_base_drag": "dualid.model.extra_terms",
+    "LandSalpModel": "dualid.model.landsalp",
+    "DragModel": "dualid.model.drag",
+    "DragSpec": "dualid.model.drag_spec",
+    **dict.fromkeys(("AffineMetric", "MetricTerm"), "dualid.model.metric"),
+    **dict.fromkeys(("ParameterBlock", "ParameterSpace"), "dualid.model.parameters"),
+    **dict.fromkeys(("IdentificationProblem", "Identifiability", "build_problem"), "dualid.problem"),
+    **dict.fromkeys(("BaseParameters", "BaseParameter"), "dualid.identifiability"),
+    **dict.fromkeys(("OLS", "WLS", "EnergyLS", "RegularizedWLS"), "dualid.estimators.least_squares"),
+    "DualMetric": "dualid.estimators.dual_metric",
+    "FeasibleGLS": "dualid.estimators.gls",
+    **dict.fromkeys(("Guarded", "guard_info"), "dualid.estimators.guards"),
+    "IdentificationResult": "dualid.estimators.result",
+    **dict.fromkeys(("BaseUncertainty", "base_uncertainty", "bootstrap"), "dualid.estimators.uncertainty"),
+    **dict.fromkeys(("METHODS", "Method", "make_estimator"), "dualid.estimators.methods"),
+    **dict.fromkeys(("predict", "forward_dynamics"), "dualid.evaluation.prediction"),
+    **dict.fromkeys(("max_normalized_xcorr", "metric_rmse", "rmse", "score_run"), "dualid.evaluation.scores"),
+    **dict.fromkeys(("validate", "Validation"), "dualid.evaluation.validation"),
+    "write_urdf": "dualid.report.urdf",
+}
 
 __all__ = [
     # data
@@ -80,3 +85,45 @@ __all__ = [
     "DualidError", "DataError", "ConfigError", "ConsistencyError", "IdentifiabilityError", "MetricError",
     "OutputError", "SolverError",
 ]
+
+
+def __getattr__(name: str):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'dualid' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # later accesses skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+if TYPE_CHECKING:  # static checkers and editors see the names without the runtime import
+    from dualid.data.dataset import load_dataset
+    from dualid.data.io import ColumnMap, JointColumns, load_log, load_logs
+    from dualid.data.preprocessing import differentiate, filter_lowpass, preprocess, resample, trim
+    from dualid.data.trajectory import Trajectory
+    from dualid.estimators.dual_metric import DualMetric
+    from dualid.estimators.gls import FeasibleGLS
+    from dualid.estimators.guards import Guarded, guard_info
+    from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS
+    from dualid.estimators.methods import METHODS, Method, make_estimator
+    from dualid.estimators.result import IdentificationResult
+    from dualid.estimators.uncertainty import BaseUncertainty, base_uncertainty, bootstrap
+    from dualid.evaluation.prediction import forward_dynamics, predict
+    from dualid.evaluation.scores import max_normalized_xcorr, metric_rmse, rmse, score_run
+    from dualid.evaluation.validation import Validation, validate
+    from dualid.identifiability import BaseParameter, BaseParameters
+    from dualid.model.base import Model
+    from dualid.model.drag import DragModel
+    from dualid.model.drag_spec import DragSpec
+    from dualid.model.extra_terms import with_base_drag
+    from dualid.model.joint_terms import JointTermsModel, with_joint_terms
+    from dualid.model.landsalp import LandSalpModel
+    from dualid.model.metric import AffineMetric, MetricTerm
+    from dualid.model.parameters import ParameterBlock, ParameterSpace
+    from dualid.model.rigid_body import RigidBodyModel
+    from dualid.problem import Identifiability, IdentificationProblem, build_problem
+    from dualid.report.urdf import write_urdf

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import sys
+import time
 import warnings
+from contextlib import contextmanager
 from pathlib import Path
 
 import typer
@@ -63,3 +66,52 @@ def output_dir(path: Path, force: bool) -> Path:
     from dualid.report.outdir import check_output_dir
 
     return check_output_dir(path, force)
+
+
+def progress_line(message: str, start: float | None = None) -> None:
+    """One plain progress line on stderr ('[  12.3 s] message'), flushed: what a redirected log keeps."""
+    elapsed = "" if start is None else f"[{time.perf_counter() - start:7.1f} s] "
+    print(f"{elapsed}{message}", file=sys.stderr, flush=True)
+
+
+def count_progress(start: float, done: int, total: int, description: str) -> None:
+    """A study's progress callback (done, total, description) as plain lines; module-level, so that worker
+    processes can be handed it (``functools.partial(count_progress, time.perf_counter())``)."""
+    progress_line(f"{done}/{total} {description}", start)
+
+
+@contextmanager
+def progress_status(first: str = "starting"):
+    """A ``say(message)`` for the stages of a long command: a live spinner line on a terminal, plain
+    time-stamped lines otherwise (a log file gets one line per stage, never spinner frames)."""
+    start = time.perf_counter()
+    if not console.is_terminal:
+        yield lambda message: progress_line(message, start)
+        return
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    with Progress(SpinnerColumn(), TextColumn("{task.description}", markup=False), TimeElapsedColumn(),
+                  console=console, transient=True) as bar:
+        task = bar.add_task(first, total=None)
+        yield lambda message: bar.update(task, description=message)
+
+
+class StageClock:
+    """CPU seconds per stage of a command, from the stage messages it announces (``dualid fit --verbose``):
+    a stage lasts from its message to the next one; stages are named by ``key(message)``."""
+
+    def __init__(self, key) -> None:
+        self.key, self.times, self.current, self.mark = key, {}, "startup", 0.0
+        self.tick("setup")
+
+    def tick(self, message: str) -> None:
+        now = time.process_time()
+        self.times[self.current] = self.times.get(self.current, 0.0) + now - self.mark
+        self.current, self.mark = self.key(message), now
+
+    def line(self) -> str:
+        self.tick("")
+        self.times.pop("", None)
+        total = sum(self.times.values())
+        parts = ", ".join(f"{k} {v:.2f}" for k, v in self.times.items())
+        return f"CPU time per stage [s]: {parts}; total {total:.2f}"

@@ -4,30 +4,25 @@ from __future__ import annotations
 
 import typer
 
-from dualid.cli.common import EXIT_FAILED, console, print_error, show_warnings
+from dualid.cli.common import EXIT_FAILED, console, print_error, progress_status, show_warnings
 
 
 def fit_drag_command(cfg, force: bool, config_file=None, command: str | None = None) -> None:
     """Run ``robot.drag_fit.fit_drag`` with a progress line and write ``report.drag`` into cfg.out."""
     import warnings
 
-    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
-
     from dualid.report.drag import score_table, write_drag_fit
     from dualid.robot.drag_fit import fit_drag
 
-    with Progress(SpinnerColumn(), TextColumn("{task.description}", markup=False), TimeElapsedColumn(),
-                  console=console) as bar:
-        task = bar.add_task("starting", total=None)
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            try:
-                outcome = fit_drag(cfg, progress=lambda msg: bar.update(task, description=msg))
-                bar.update(task, description=f"writing {cfg.out}")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            with progress_status() as say:
+                outcome = fit_drag(cfg, progress=say)
+                say(f"writing {cfg.out}")
                 write_drag_fit(outcome, cfg.out, force, command=command, config_file=config_file)
-            finally:
-                bar.stop()
-                show_warnings(caught)
+        finally:
+            show_warnings(caught)
     console.print(outcome.identifiability.describe(max_items=0), markup=False)
     for m, f in outcome.fits.items():
         if f.ok:

@@ -8,8 +8,32 @@ from typing import List, Optional
 import typer
 
 from dualid.cli.app import FLAG, app
-from dualid.cli.common import EXIT_FAILED, console, fail, output_dir, print_error, show_warnings
-from dualid.cli.fit_summary import files_line, print_plausible
+from dualid.cli.common import (
+    EXIT_FAILED,
+    StageClock,
+    console,
+    fail,
+    output_dir,
+    print_error,
+    progress_status,
+    show_warnings,
+)
+from dualid.cli.fit_summary import print_summary
+
+_STAGES = {"loading": "logs", "margin": "margin", "uncertainty": "uncertainty", "validating": "validation",
+           "choosing": "plausible", "scoring": "training scores", "writing": "report"}
+
+
+def _stage(message: str) -> str:
+    """The stage a progress message of ``robot.fit`` opens (the --verbose timing line's names)."""
+    words = message.split()
+    if not words:
+        return ""
+    if words[0] == "fitting":
+        return f"fit {words[1]}"
+    if words[0] == "building":
+        return "regressors" if "regressors" in message else "model"
+    return _STAGES.get(words[0], words[0])
 
 
 def _command_line() -> str:
@@ -62,15 +86,15 @@ def fit(
     package_path: List[Path] = typer.Option([], "--package-path", metavar="DIR", help="a folder holding the packages "
                                             "that the URDF's package:// mesh URIs name (searched before the config's "
                                             "model.package_path and ROS_PACKAGE_PATH); repeatable"),
+    verbose: bool = typer.Option(False, "--verbose", metavar=FLAG, help="print the CPU time of every stage"),
 ) -> None:
     """Identify a robot's inertial parameters, joint friction and armature from a URDF and logs (or a drag
     model's drag and damping: model.kind: drag in the config)."""
+    clock = StageClock(_stage)
     import warnings
     from dataclasses import replace
 
-    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
-
-    from dualid.report.robot import score_table, write_fit
+    from dualid.report.robot import write_fit
     from dualid.robot.fit import fit_robot
     from dualid.robot.margin_config import with_epsilon
 
@@ -93,33 +117,23 @@ def fit(
         from dualid.cli.drag import fit_drag_command
 
         return fit_drag_command(cfg, force, config_file=config, command=_command_line())
-    with Progress(SpinnerColumn(), TextColumn("{task.description}", markup=False), TimeElapsedColumn(), console=console) as bar:
-        task = bar.add_task("starting", total=None)
-        with warnings.catch_warnings(record=True) as caught:  # recorded in the outcome by fit_robot
-            warnings.simplefilter("always")
-            try:
-                outcome = fit_robot(cfg, progress=lambda msg: bar.update(task, description=msg))
-                bar.update(task, description=f"writing {cfg.out}")
+
+    def say(message: str) -> None:
+        clock.tick(message)
+        status(message)
+
+    with warnings.catch_warnings(record=True) as caught:  # recorded in the outcome by fit_robot
+        warnings.simplefilter("always")
+        try:
+            with progress_status() as status:
+                outcome = fit_robot(cfg, progress=say)
+                say(f"writing {cfg.out}")
                 written = write_fit(outcome, cfg.out, force, command=_command_line(), config_file=config)
-            finally:  # also when an error follows: a warning may explain it
-                bar.stop()
-                show_warnings(caught)
-    console.print(outcome.identifiability.describe(max_items=0), markup=False)
-    for m, f in outcome.fits.items():
-        if f.ok:
-            chain = f.result.info.get("solver_chain")
-            used = f" — fallback: {chain}" if f.result.info.get("fallback_used") else ""
-            console.print(f"{m}: {f.result.status} in {f.result.solve_time:.2f} s ({f.result.solver}){used}", markup=False)
-    validations = {m: f.validation for m, f in outcome.fits.items() if f.validation is not None}
-    validations.update({k: v for k, (_, v) in outcome.references.items() if v is not None})
-    if validations:
-        typer.echo(score_table(validations))
-    failed = [m for m, f in outcome.fits.items() if not f.ok]
-    for m in failed:
-        print_error(f"{m}: failed: {outcome.fits[m].error}")
-    failed += print_plausible(outcome)
-    console.print(files_line(written, cfg.out, outcome) + (" (incomplete: see report.html)" if failed else ""),
-                  markup=False, highlight=False)
+        finally:  # also when an error follows: a warning may explain it
+            show_warnings(caught)
+    failed = print_summary(outcome, written, cfg.out)
+    if verbose:
+        console.print(clock.line(), markup=False)
     if failed:
         raise typer.Exit(EXIT_FAILED)
 
@@ -150,7 +164,8 @@ def validate(
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            with console.status(f"validating {model.name} on {len(data)} runs"):
+            with progress_status(f"validating {model.name} on {len(data)} runs") as say:
+                say(f"validating {model.name} on {len(data)} runs")
                 _, _, val = validate_urdf(model, data, **kw)
             if out is not None:
                 meta = {"model": str(model), "data": [str(p) for p in data],

@@ -56,3 +56,29 @@ def files_line(written: dict[str, Path], out: Path, outcome) -> str:
                 why = str(record.get(m, {}).get(key) or "unknown").removeprefix("not written: ")
                 missing.append(f"{name} ({why})")
     return text + (f"; not written: {'; '.join(missing)}" if missing else "")
+
+
+def print_summary(outcome, written: dict[str, Path], out: Path) -> list[str]:
+    """What ``dualid fit`` prints after a rigid-body fit; returns the methods that failed (a fit or its plausible
+    step), which make the exit code 1."""
+    import typer
+
+    from dualid.report.robot import score_table
+
+    console.print(outcome.identifiability.describe(max_items=0), markup=False)
+    for m, f in outcome.fits.items():
+        if f.ok:
+            chain = f.result.info.get("solver_chain")
+            used = f" — fallback: {chain}" if f.result.info.get("fallback_used") else ""
+            console.print(f"{m}: {f.result.status} in {f.result.solve_time:.2f} s ({f.result.solver}){used}", markup=False)
+    validations = {m: f.validation for m, f in outcome.fits.items() if f.validation is not None}
+    validations.update({k: v for k, (_, v) in outcome.references.items() if v is not None})
+    if validations:
+        typer.echo(score_table(validations))
+    failed = [m for m, f in outcome.fits.items() if not f.ok]
+    for m in failed:
+        print_error(f"{m}: failed: {outcome.fits[m].error}")
+    failed += print_plausible(outcome)
+    console.print(files_line(written, out, outcome) + (" (incomplete: see report.html)" if failed else ""),
+                  markup=False, highlight=False)
+    return failed

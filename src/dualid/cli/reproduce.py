@@ -3,11 +3,21 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Optional
 
 import typer
 
 from dualid.cli.app import FLAG, app
 from dualid.cli.common import console, fail, output_dir
+
+QUICK = {"data_seeds": 2, "seeds": 3}  # the default: about a quarter of the full study's fits
+FULL = {"data_seeds": 5, "seeds": 5}  # --full: the study of docs/results.md
+
+
+def _cores() -> int:
+    import os
+
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 @app.command()
@@ -15,8 +25,16 @@ def reproduce(
     system: str = typer.Argument(..., help="crazyflie, landsalp or pan-tilt"),
     out: Path = typer.Option(None, "--out", help="output directory (default: results/SYSTEM)"),
     case: str = typer.Option("both", "--case", help="low, high or both"),
-    seeds: int = typer.Option(5, "--seeds", help="random low-data subsamples"),
-    data_seeds: int = typer.Option(5, "--data-seeds", help="simulated data sets (seeds 0..N-1), pooled"),
+    full: bool = typer.Option(False, "--full", metavar=FLAG,
+                              help=f"the full study of docs/results.md: {FULL['data_seeds']} data sets × "
+                                   f"{FULL['seeds']} low-data subsets (default: {QUICK['data_seeds']} × "
+                                   f"{QUICK['seeds']})"),
+    seeds: Optional[int] = typer.Option(None, "--seeds", help="random low-data subsets per data set "
+                                        f"(default {QUICK['seeds']}; {FULL['seeds']} with --full)"),
+    data_seeds: Optional[int] = typer.Option(None, "--data-seeds", help="simulated data sets (seeds 0..N-1), pooled "
+                                             f"(default {QUICK['data_seeds']}; {FULL['data_seeds']} with --full)"),
+    workers: Optional[int] = typer.Option(None, "--workers", help="processes, one data set each at a time "
+                                          "(default: the usable cores)"),
     base_drag: bool = typer.Option(False, "--base-drag", metavar=FLAG,
                                    help="crazyflie: identify the base's linear (rotor) drag too"),
     noise: str = typer.Option("realistic", "--noise", help="realistic, ideal (Gaussian force noise only) or none"),
@@ -27,19 +45,18 @@ def reproduce(
                                  "constrained WLS pilot per training set (docs/margin.md); 0 ≤ EPS < 1"),
 ) -> None:
     """Simulate SYSTEM, fit every estimator in the low- and high-data cases and write
-    results.json, results.md and the score and trajectory figures."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    results.json, results.md and the score and trajectory figures. Progress: one line per fit on stderr."""
+    import time
+    from functools import partial
+    from typing import get_args
 
+    from dualid.cli.common import count_progress, progress_line
     from dualid.report.study import reproduce as run
     from dualid.report.study import study_markdown
-    from dualid.systems.base import system_names
+    from dualid.systems.base import Noise, Size, system_names
 
     if system not in system_names():
         fail(f"unknown system {system!r}; expected one of {', '.join(system_names())}")
-    from typing import get_args
-
-    from dualid.systems.base import Noise, Size
-
     for flag, value, allowed in (("--case", case, ("low", "high", "both")), ("--noise", noise, get_args(Noise)),
                                  ("--size", size, get_args(Size))):
         if value not in allowed:
@@ -50,17 +67,26 @@ def reproduce(
         fail(f"--ablation: expected units, got {ablation!r}")
     if margin is not None and not 0.0 <= margin < 1.0:
         fail(f"--margin: expected a number in [0, 1), got {margin!r}")
-    if seeds < 1:
-        fail(f"--seeds: expected a positive number of seeds, got {seeds}")
+    plan = FULL if full else QUICK
+    seeds = plan["seeds"] if seeds is None else seeds
+    data_seeds = plan["data_seeds"] if data_seeds is None else data_seeds
+    for flag, value, what in (("--seeds", seeds, "seeds"), ("--data-seeds", data_seeds, "data sets"),
+                              ("--workers", workers, "processes")):
+        if value is not None and value < 1:
+            fail(f"{flag}: expected a positive number of {what}, got {value}")
+    workers = min(workers or _cores(), data_seeds)
     out = out or Path("results") / system
     output_dir(out, force)  # before the study, not after it
-    columns = (TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    start = time.perf_counter()
+    progress_line(f"{system}: {data_seeds} data set(s) × ({seeds} low-data subsets + all samples) × every method, "
+                  f"{workers} process(es){'' if full else '; the full study: --full'}", start)
     try:
-        with Progress(*columns, console=console) as progress:
-            result = run(system, out, case=case, seeds=seeds, noise=noise, size=size, ablation=ablation,
-                         overwrite=force, progress=progress, data_seeds=data_seeds,
-                         **({"base_drag": True} if base_drag else {}), **({} if margin is None else {"margin": margin}))
+        result = run(system, out, case=case, seeds=seeds, noise=noise, size=size, ablation=ablation,
+                     overwrite=force, progress=partial(count_progress, start), data_seeds=data_seeds,
+                     workers=workers, **({"base_drag": True} if base_drag else {}),
+                     **({} if margin is None else {"margin": margin}))
     except FileExistsError as exc:
         fail(f"{exc}; pass --force to overwrite it")
+    progress_line(f"done in {time.perf_counter() - start:.0f} s", start)
     console.print(study_markdown(result), markup=False)
     console.print(f"wrote {out}/results.json, results.md and figures", markup=False)

@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from dualid.cli.app import FLAG, app
-from dualid.cli.common import console, fail, output_dir
+from dualid.cli.common import console, fail, output_dir, progress_status
 
 
 @app.command()
@@ -21,8 +21,6 @@ def simulate(
     force: bool = typer.Option(False, "--force", metavar=FLAG, help="overwrite an existing output directory"),
 ) -> None:
     """Simulate a system's training and test runs and save them with a dataset.json manifest."""
-    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
-
     from dualid.report.dataset import save_dataset
     from dualid.systems.base import make_system, system_names
 
@@ -39,10 +37,10 @@ def simulate(
     if seed < 0:
         fail(f"--seed: expected an integer ≥ 0, got {seed}")
     output_dir(out, force)
-    with Progress(SpinnerColumn(), TextColumn("{task.description}", markup=False), TimeElapsedColumn(), console=console) as bar:
-        task = bar.add_task(f"simulating {system} (seed {seed}, noise {noise})", total=None)
+    with progress_status() as say:
+        say(f"simulating {system} (seed {seed}, noise {noise})")
         data = make_system(system, seed=seed, noise=noise, size=size)
-        bar.update(task, description=f"writing {out}")
+        say(f"writing {out}")
         info = {
             "system": data.name,
             "seed": seed,

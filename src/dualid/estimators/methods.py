@@ -55,10 +55,10 @@ _TABLE = (
     Method("dm", "dm", "DM", "#d62728",
            "dual-metric GLS: one weighted LS with residual covariance Σ + κ M(θ_pilot), no feedback (the default)",
            lambda **kw: FeasibleGLS(**_common(kw))),
-    Method("dm-paper", "dual_metric", "DM (paper)", "#e377c2",
+    Method("dm-paper", "dual_metric", "DM (paper)", "#17becf",
            "the paper's dual-metric objective Σ rᵀ M(θ)⁻¹ r (biased under torque noise; see docs/estimators.md)",
            lambda **kw: DualMetric(**_common(kw))),
-    Method("dm-bfp", "dm-bfp", "DM (bounded fixed point)", "#17becf",
+    Method("dm-bfp", "dm-bfp", "DM (bounded fixed point)", "#e377c2",
            "experimental: the fixed point of the dual-metric weight with its eigenvalues bounded around a pilot",
            lambda **kw: BoundedFixedPoint(**_common(kw))),
 )

@@ -10,13 +10,15 @@ is ahead) says how much of a difference is the method's.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 
 from dualid.errors import ConfigError
 from dualid.paper.results import FitRecord, StudyResult, Summary
-from dualid.paper.study import Case, run_study
+from dualid.paper.study import DEFAULT_METHODS, Case, run_study
 from dualid.systems.base import make_system
 
 
@@ -81,16 +83,43 @@ def run_data_seeds(
     methods=None,
     progress=None,
     margin: float | None = None,
+    workers: int = 1,
     **system_options,
 ) -> StudyResult:
-    """Simulate one data set per seed, run the study on each and pool them (see ``pool``)."""
+    """Simulate one data set per seed, run the study on each and pool them (see ``pool``).
+
+    workers > 1: the data sets are simulated and studied in that many processes at once (the pooled result
+    is the same as one process's); ``progress`` must then be a picklable callable (done, total, description)
+    (a module-level function or a ``functools.partial`` of one), called in the worker processes, with the
+    description prefixed by the data set."""
     data_list = list(range(data_seeds)) if isinstance(data_seeds, (int, np.integer)) else [int(s) for s in data_seeds]
     if not data_list:
         raise ConfigError(f"data_seeds: expected at least one data-set seed, got {data_seeds!r}")
-    studies = []
-    for seed in data_list:
-        system = make_system(system_name, seed=seed, noise=noise, size=size, **system_options)
-        kw = ({} if methods is None else {"methods": methods}) | ({} if margin is None else {"margin": margin})
-        study = run_study(system, case=case, seeds=seeds, progress=progress, ablation=ablation, **kw)
-        studies.append(replace(study, config={**study.config, "noise": noise, "size": size, "system_seed": seed}))
+    if workers < 1:
+        raise ConfigError(f"workers: expected a positive number of processes, got {workers!r}")
+    kw = ({} if methods is None else {"methods": methods}) | ({} if margin is None else {"margin": margin})
+    one = partial(_one_data_set, system_name, case=case, seeds=seeds, noise=noise, size=size, ablation=ablation,
+                  progress=progress, tag=len(data_list) > 1, study_options=kw, system_options=system_options)
+    if workers == 1 or len(data_list) == 1:
+        studies = [one(seed) for seed in data_list]
+    else:
+        with ProcessPoolExecutor(max_workers=min(workers, len(data_list))) as pool_:
+            studies = list(pool_.map(one, data_list))
     return pool(studies, data_list)
+
+
+def _one_data_set(system_name: str, seed: int, *, case, seeds, noise, size, ablation, progress, tag: bool,
+                  study_options: dict, system_options: dict) -> StudyResult:
+    callback = callable(progress) and not hasattr(progress, "add_task")  # a callback, not a rich Progress
+    if callback and tag:
+        progress = partial(_tagged, progress, f"data set {seed}")
+    if callback:
+        items = (seeds if case in ("both", "low") else 0) + (case in ("both", "high"))
+        progress(0, items * len(study_options.get("methods") or DEFAULT_METHODS), "simulating")
+    system = make_system(system_name, seed=seed, noise=noise, size=size, **system_options)
+    study = run_study(system, case=case, seeds=seeds, progress=progress, ablation=ablation, **study_options)
+    return replace(study, config={**study.config, "noise": noise, "size": size, "system_seed": seed})
+
+
+def _tagged(progress, prefix: str, done: int, total: int, description: str) -> None:
+    progress(done, total, f"{prefix}: {description}")

@@ -32,6 +32,7 @@ from dualid.report.document import (
     runs_phrase,
 )
 from dualid.report.metadata import metadata_items
+from dualid.report.model_figures import body_section, friction_section
 from dualid.report.model_files import ModelFiles, model_files_section, plausible_section
 from dualid.report.render import table_markdown
 from dualid.report.signals import score_bars, signal_plot
@@ -46,6 +47,28 @@ SCORE_NOTE = ("τ: inverse dynamics τ̂ = Y(q, v, a)θ̂ from measured q, v and
 SOLVER_NOTES = ("fallback_reason", "solver_warnings", "fallback", "sigma_kappa_fallback", "covariance_model",
                 "sigma_structure", "pilot", "projected_parameters", "projected_note", "diverging_direction")  # the last three: an
 # infimum approached only as parameters grow (estimators.newton.closure; dm-paper's optimum at infinity)
+
+
+NOTE_LABELS = {  # SOLVER_NOTES keys in a reader's words
+    "fallback_reason": "why the first solver was not used",
+    "solver_warnings": "solver warnings",
+    "sigma_kappa_fallback": "weight fallback",
+    "covariance_model": "torque-noise covariance estimated from",
+    "sigma_structure": "torque-noise covariance structure",
+    "pilot": "first fitted with",
+    "diverging_direction": "the objective keeps improving along",
+}
+PROJECTED = ("set to the smallest value consistent with the other parameters: the data do not determine it, no "
+             "prediction depends on it (details: parameters.yaml)")
+
+
+def notes_once(notes: list[str]) -> list[str]:
+    """'a: text', 'b: text' → 'a, b: text': a note several methods share is shown once."""
+    grouped: dict[str, list[str]] = {}
+    for note in notes:
+        who, sep, text = note.partition(": ")
+        grouped.setdefault(text if sep else note, []).append(who if sep else "")
+    return [f"{', '.join(w for w in who if w)}: {text}" if any(who) else text for text, who in grouped.items()]
 
 
 def weight_note(m: str, info: dict) -> str:
@@ -67,9 +90,10 @@ def slug(s: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", s)
 
 
-def png(fig: Figure, dpi: int = 110) -> bytes:
+def png(fig: Figure, dpi: int = 80) -> bytes:
+    """The figure as a PNG (Agg; the figures lay themselves out, so no second 'tight' drawing pass)."""
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    fig.savefig(buf, format="png", dpi=dpi)
     return buf.getvalue()
 
 
@@ -188,7 +212,14 @@ def fit_notes(m: str, r) -> list[str]:
     the SOLVER_NOTES keys it recorded, dm's weight choice, a margin."""
     chain = str(r.info.get("solver_chain", r.solver))
     notes = [f"{m}: solver chain: {chain}"] if "→" in chain and not r.info.get("fallback_used") else []
-    notes += [f"{m}: {k.replace('_', ' ')}: {fmt_value(r.info[k])}" for k in SOLVER_NOTES if k in r.info]
+    for k in SOLVER_NOTES:
+        if k == "projected_note":
+            continue  # said by PROJECTED with the values
+        if k == "projected_parameters" and k in r.info:
+            values = re.sub(r" \(not determined by the data[^)]*\)", "", str(r.info[k]))
+            notes.append(f"{m}: {values}: {PROJECTED}")
+        elif k in r.info:
+            notes.append(f"{m}: {NOTE_LABELS.get(k, k.replace('_', ' '))}: {fmt_value(r.info[k])}")
     notes += [weight_note(m, r.info)] if "weight_choice" in r.info else []
     return notes + ([margin_note(m, r.info)] if "margin_epsilon" in r.info else [])
 
@@ -223,7 +254,7 @@ def _fits(d: FitReportData) -> Section:
                   note="fallback: when used, the solvers tried in order and the one that produced θ̂. "
                        "metric vs URDF: range of the generalized eigenvalues of the identified mass matrix against "
                        "the URDF's over the training samples ('degenerate' outside [1/100, 100]).")
-    return Section("Fits", (table, *((Bullets(tuple(notes)),) if notes else ())))
+    return Section("Fits", (table, *((Bullets(tuple(notes_once(notes))),) if notes else ())))
 
 
 def _scores(d: FitReportData) -> Section:
@@ -318,6 +349,14 @@ def _parameters(d: FitReportData) -> Section:
                                        "see the projected note under Fits)."), *parameter_tables(d)))
 
 
+def _friction(d: FitReportData) -> Section:
+    return friction_section(d.outcome, png)
+
+
+def _bodies(d: FitReportData) -> Section:
+    return body_section(d.outcome)
+
+
 def _base(d: FitReportData) -> Section:
     return base_section(d.outcome)
 
@@ -331,7 +370,8 @@ def _model_files(d: FitReportData) -> Section:
 
 
 FIT_SECTIONS: list[Callable[[FitReportData], Section]] = [
-    _summary, _warnings, _identifiability, _fits, _scores, _figures, _base, _plausible, _model_files, _parameters,
+    _summary, _warnings, _identifiability, _fits, _scores, _figures, _friction, _bodies, _base, _plausible,
+    _model_files, _parameters,
 ]
 
 

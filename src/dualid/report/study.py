@@ -280,11 +280,11 @@ def write_report(result: StudyResult, out_dir: str | Path, overwrite: bool = Fal
 
 def reproduce(system_name: str, out_dir: str | Path, case: Case = "both", seeds: int = 5, noise: str = "realistic",
               size: str = "default", ablation: None | str | np.ndarray = None, overwrite: bool = False,
-              progress=None, data_seeds: int = 5, **system_options) -> StudyResult:
-    """Simulate the named system on ``data_seeds`` data sets, run the study on each, pool them and
-    write the report to out_dir."""
+              progress=None, data_seeds: int = 5, workers: int = 1, **system_options) -> StudyResult:
+    """Simulate the named system on ``data_seeds`` data sets (``workers`` processes at once), run the study on
+    each, pool them and write the report to out_dir."""
     check_output_dir(out_dir, overwrite)  # fail before the (long) study, not after
     result = run_data_seeds(system_name, data_seeds, case, seeds, noise, size, ablation, progress=progress,
-                            **system_options)
+                            workers=workers, **system_options)
     write_report(result, out_dir, overwrite=overwrite)
     return result
