@@ -37,6 +37,7 @@ from dualid.estimators.newton.noise_objective import (
 )
 from dualid.estimators.newton.objective import CHUNK, _NotPositiveDefinite
 from dualid.estimators.newton.start import _central_point
+from dualid.estimators.noise_check import NoiseCheck, check_noise_model
 from dualid.estimators.noise_level import PRIOR_SAMPLES, PRIOR_SHARE, NoiseLevels, estimate_noise
 from dualid.estimators.result import IdentificationResult, NoiseRecord
 from dualid.model.consistency import feasible_set
@@ -60,7 +61,8 @@ class NoiseModelDM:
     sigma_a: tuple | None = None
     prior_samples: float = PRIOR_SAMPLES
     prior_share: float = PRIOR_SHARE
-    structure: str = "highpass"  # "highpass" | "diagonal" | "full" (noise_level.estimate_noise)
+    check: bool = True  # the held-out check of the noise model against WLS (estimators.noise_check)
+    structure: str = "diagonal"  # "highpass" | "diagonal" | "full" (noise_level.estimate_noise)
     tol: float = 1e-9
     max_iter: int = 100
     chunk: int = field(default=CHUNK, kw_only=True)
@@ -102,12 +104,38 @@ class NoiseModelDM:
             iterations += info["iterations"]
             history.append((noise.torque_share, noise.acceleration_share, info["objective"]))
         f = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk)
+        wls = pilot if start.endswith("wls") else WLS(constrained=self.constrained, allow_unidentifiable=True).fit(sensor)
+        check, choice = None, "noise model"
+        if self.check:
+            check = self._check(sensor, cons, theta, noise, wls)
+            if check is not None and check.rejected:
+                theta, f = np.asarray(wls.theta), float(wls.objective)
+                choice = (f"wls: the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's "
+                          f"beyond the noise model's prediction, standard error {check.standard_error:.2g})")
         record = NoiseRecord(noise.sigma_tau, noise.sigma_a, noise.torque_share, noise.acceleration_share,
-                             "fixed" if fixed else "estimated", len(history), float(pilot.objective))
-        result = IdentificationResult(self.name, theta, problem.parameters, f, "optimal", "newton",
-                                      time.perf_counter() - t0, iterations, self.constrained,
-                                      {"rounds": len(history), "start": start}, noise=record)
-        return result
+                             "fixed" if fixed else "estimated", len(history), float(pilot.objective), choice,
+                             np.nan if check is None else check.excess,
+                             np.nan if check is None else check.measured_gap,
+                             np.nan if check is None else check.predicted_gap)
+        return IdentificationResult(self.name, theta, problem.parameters, f, "optimal", "newton",
+                                    time.perf_counter() - t0, iterations, self.constrained,
+                                    {"rounds": len(history), "start": start}, noise=record)
+
+    def _check(self, sensor, cons, theta, noise, wls) -> NoiseCheck | None:
+        Sigma = np.asarray(wls.info["covariance_matrix"])
+
+        def fit_wls(train):
+            return np.asarray(WLS(covariance=Sigma, constrained=self.constrained, allow_unidentifiable=True)
+                              .fit(train).theta)
+
+        def fit_dm(train, start):
+            return self._solve(train, cons, start, noise)[0]
+
+        try:
+            return check_noise_model(sensor, theta, noise.sigma_tau, noise.sigma_a, np.linalg.inv(Sigma),
+                                     fit_wls, fit_dm)
+        except (SolverError, MetricError, _NotPositiveDefinite):
+            return None
 
     def _pilot(self, problem) -> tuple[IdentificationResult, str]:
         """The paper's dual-metric optimum (the same θ in every chart, hand-made ones too); WLS where it fails."""

@@ -23,12 +23,18 @@ class NoiseRecord:
     acceleration_share: float  # … and the acceleration noise (mean tr(C⁻¹MΣ_aM)/n)
     source: str  # "estimated" | "fixed" (given by the user)
     rounds: int  # noise-level / θ alternations
-    pilot_objective: float  # the WLS pilot's objective
+    pilot_objective: float  # the pilot's objective
+    choice: str = "noise model"  # what θ̂ is: "noise model", or "wls: …" when the check rejected the noise model
+    check_excess: float = float("nan")  # held-out loss beyond the noise model's prediction, share of WLS's (noise_check)
+    check_measured_gap: float = float("nan")  # held-out loss dm − WLS, share of WLS's
+    check_predicted_gap: float = float("nan")  # … as the noise model predicts it
 
     def as_dict(self) -> dict:
         return {"sigma_tau": np.asarray(self.sigma_tau).tolist(), "sigma_a": np.asarray(self.sigma_a).tolist(),
                 "torque_share": self.torque_share, "acceleration_share": self.acceleration_share,
-                "source": self.source, "rounds": self.rounds, "pilot_objective": self.pilot_objective}
+                "source": self.source, "rounds": self.rounds, "pilot_objective": self.pilot_objective,
+                "choice": self.choice, "check_excess": self.check_excess,
+                "check_measured_gap": self.check_measured_gap, "check_predicted_gap": self.check_predicted_gap}
 
 
 @dataclass(frozen=True, eq=False)
