@@ -109,3 +109,17 @@ def test_fixed_noise_levels_are_used_and_recorded():
     res = NoiseModelDM(sigma_tau=np.eye(3) * 0.0025, sigma_a=np.eye(3) * 0.09).fit(problem)
     assert res.noise.source == "fixed" and res.noise.rounds == 1
     assert res.solve_time > 0 and res.is_consistent
+
+
+def test_a_residual_that_is_not_noise_is_recognised_and_wls_returned():
+    """Unmodelled Coulomb friction (2 N per joint, the regressor nearly clean): dm's held-out torque is worse than its
+    noise model predicts, so it returns WLS and says why; with the modelled noise only it keeps its own fit."""
+    problem, theta = eiv_problem(0, N=1000, torque=0.05, regressor=0.05)
+    friction = replace(problem, tau=problem.tau + 2.0 * np.sign(problem.v))
+    res = NoiseModelDM().fit(friction)
+    wls = make_estimator("wls").fit(friction.in_sensor_chart())
+    assert res.noise.choice.startswith("wls: the residual is not the modelled noise")
+    assert res.noise.check_excess > 0.01 and np.allclose(res.theta, wls.theta)
+    clean, _ = eiv_problem(0, N=1000, torque=0.05, regressor=0.3)
+    kept = NoiseModelDM().fit(clean)
+    assert kept.noise.choice == "noise model" and abs(kept.noise.check_excess) < 0.05
