@@ -86,17 +86,26 @@ def test_noise_levels_are_recovered_and_the_fit_is_consistent_under_regressor_no
     assert dm.noise is not None and dm.noise.source == "estimated" and dm.noise.acceleration_share > 0.5
 
 
+def by_hand(problem, B):
+    """The data as they would arrive in the chart B when logged so, with no record of the sensor chart."""
+    return replace(problem.in_coordinates(B), sensor_chart=None)
+
+
 def test_fit_is_the_same_in_every_recorded_chart_and_unit():
     problem, _ = eiv_problem(5, N=200)
     rng = np.random.default_rng(5)
     fit = NoiseModelDM().fit(problem)
-    units = np.diag([1e3, 1e-6, 1e6])
     charts = {
         "constant": problem.in_coordinates(random_chart(rng, problem.N, 3, per_sample=False)),
         "per_sample": problem.in_coordinates(random_chart(rng, problem.N, 3, per_sample=True)),
-        "units_recorded": problem.in_coordinates(units),
+        "units_recorded": problem.in_coordinates(np.diag([1e3, 1e-6, 1e6])),
         # units changed by hand, no record of the sensor chart: diagonal levels are equivariant under it
-        "units_by_hand": replace(problem.in_coordinates(units), sensor_chart=None),
+        "units_1e3": by_hand(problem, np.diag([1e3, 1e-3, 1.0])),
+        "units_1e6": by_hand(problem, np.diag([1e-6, 1.0, 1e6])),
+        "force_1e6": replace(problem, Y=problem.Y * 1e6, tau=problem.tau * 1e6,
+                             metric=problem.metric.pullback(np.eye(3) * 1e3)),  # N → µN: τ, Y, M (a = B⁻¹…) ×1e6
+        "force_1e-6": replace(problem, Y=problem.Y * 1e-6, tau=problem.tau * 1e-6,
+                              metric=problem.metric.pullback(np.eye(3) * 1e-3)),
     }
     for name, other in charts.items():
         res = NoiseModelDM().fit(other)
