@@ -92,6 +92,8 @@ def by_hand(problem, B):
 
 
 def test_fit_is_the_same_in_every_recorded_chart_and_unit():
+    """The default (one acceleration variance for all joints, in the sensor chart): every chart the problem records,
+    and unit and force scalings done by hand that change every coordinate alike."""
     problem, _ = eiv_problem(5, N=200)
     rng = np.random.default_rng(5)
     fit = NoiseModelDM().fit(problem)
@@ -99,11 +101,10 @@ def test_fit_is_the_same_in_every_recorded_chart_and_unit():
         "constant": problem.in_coordinates(random_chart(rng, problem.N, 3, per_sample=False)),
         "per_sample": problem.in_coordinates(random_chart(rng, problem.N, 3, per_sample=True)),
         "units_recorded": problem.in_coordinates(np.diag([1e3, 1e-6, 1e6])),
-        # units changed by hand, no record of the sensor chart: diagonal levels are equivariant under it
-        "units_1e3": by_hand(problem, np.diag([1e3, 1e-3, 1.0])),
-        "units_1e6": by_hand(problem, np.diag([1e-6, 1.0, 1e6])),
+        "units_1e3": by_hand(problem, np.eye(3) * 1e3),
+        "units_1e-6": by_hand(problem, np.eye(3) * 1e-6),
         "force_1e6": replace(problem, Y=problem.Y * 1e6, tau=problem.tau * 1e6,
-                             metric=problem.metric.pullback(np.eye(3) * 1e3)),  # N → µN: τ, Y, M (a = B⁻¹…) ×1e6
+                             metric=problem.metric.pullback(np.eye(3) * 1e3)),  # N → µN: τ, Y and M ×1e6
         "force_1e-6": replace(problem, Y=problem.Y * 1e-6, tau=problem.tau * 1e-6,
                               metric=problem.metric.pullback(np.eye(3) * 1e-3)),
     }
@@ -111,6 +112,18 @@ def test_fit_is_the_same_in_every_recorded_chart_and_unit():
         res = NoiseModelDM().fit(other)
         assert rel(res.objective, fit.objective) < 1e-8, name
         assert rel(other.Y @ res.theta, other.Y @ fit.theta) < 1e-8, name
+
+
+def test_per_joint_levels_are_the_same_under_per_coordinate_units_by_hand():
+    """structure="diagonal" (a variance per joint): also each coordinate in its own unit, ×1e±3 and ×1e±6."""
+    problem, _ = eiv_problem(5, N=200)
+    est = NoiseModelDM(structure="diagonal")
+    fit = est.fit(problem)
+    for B in (np.diag([1e3, 1e-3, 1.0]), np.diag([1e-6, 1.0, 1e6])):
+        other = by_hand(problem, B)
+        res = est.fit(other)
+        assert rel(res.objective, fit.objective) < 1e-8
+        assert rel(other.Y @ res.theta, other.Y @ fit.theta) < 1e-8
 
 
 def test_fixed_noise_levels_are_used_and_recorded():

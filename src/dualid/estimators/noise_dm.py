@@ -62,7 +62,7 @@ class NoiseModelDM:
     prior_samples: float = PRIOR_SAMPLES
     prior_share: float = PRIOR_SHARE
     check: bool = True  # the held-out check of the noise model against WLS (estimators.noise_check)
-    structure: str = "diagonal"  # "highpass" | "diagonal" | "full" (noise_level.estimate_noise)
+    structure: str = "pooled"  # "pooled" | "diagonal" | "highpass" | "full" (noise_level.estimate_noise)
     tol: float = 1e-9
     max_iter: int = 100
     chunk: int = field(default=CHUNK, kw_only=True)

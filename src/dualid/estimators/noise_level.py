@@ -1,5 +1,9 @@
 """The noise levels of ``dm``'s physical noise model, estimated from the residuals: Σ_τ (torque) and Σ_a (acceleration).
 
+Structures: "pooled" (Σ_τ diagonal, Σ_a = σ_a² I: the same encoders and differentiation filter on every joint),
+"diagonal" (both diagonal), "highpass" (diagonal, from first differences of consecutive residuals) — all solved by
+Fisher scoring in the log-variances with the floor term ν ψ/v (``_diagonal``) — and "full" (below).
+
 At a fixed θ the residuals r_i = Y_i θ − τ_i are modelled as independent, zero-mean, with covariance
 
     C_i = Σ_τ + M_i(θ) Σ_a M_i(θ)
@@ -86,6 +90,9 @@ def estimate_noise(problem, theta: np.ndarray, *, prior_samples: float = PRIOR_S
     if structure == "diagonal":
         psi = prior_share * np.concatenate([np.diag(Sr), np.diag(np.mean(Minv @ Sr @ Minv, axis=0))])
         return _diagonal(r, [M], psi, prior_samples, start)
+    if structure == "pooled":  # one acceleration variance for every joint (same encoders and filter)
+        psi = prior_share * np.concatenate([np.diag(Sr), [np.mean(np.diag(np.mean(Minv @ Sr @ Minv, axis=0)))]])
+        return _diagonal(r, [M], psi, prior_samples, start, pooled=True)
     if structure == "highpass":
         return _highpass(problem, theta, prior_samples, prior_share, max_samples, start)
     Mbar = M.mean(axis=0)
@@ -161,7 +168,7 @@ def _canonical(Sr: np.ndarray, Mbar: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return lam, V
 
 
-def _diagonal(r, Ms, psi, prior_samples, start, s_mult=1.0) -> NoiseLevels:
+def _diagonal(r, Ms, psi, prior_samples, start, s_mult=1.0, pooled=False) -> NoiseLevels:
     """Diagonal Σ_τ, Σ_a in the problem's chart (independent sensors per joint). The model of Cov(r_i) is
     s_mult Σ_τ + Σ_j M_ij Σ_a M_ij over the metrics Ms (one for raw residuals; two, and s_mult = 2, for differences):
     linear in the 2n variances v, C_i = Σ_t v_t a_it a_itᵀ over rank-one terms a_it (√s_mult e_j, and the columns of
@@ -175,8 +182,10 @@ def _diagonal(r, Ms, psi, prior_samples, start, s_mult=1.0) -> NoiseLevels:
     eye = np.broadcast_to(np.sqrt(s_mult) * np.eye(n), (N, n, n))
     # rank-one factors: (N, T, n) with T = n (torque) + n·len(Ms) (acceleration: column j of each M)
     a = np.concatenate([eye] + [np.swapaxes(M, 1, 2) for M in Ms], axis=1)
-    owner = np.concatenate([np.arange(n)] + [n + np.arange(n)] * len(Ms))  # variance index of each factor
-    E = np.zeros((len(owner), 2 * n))
+    acc = np.full(n, n) if pooled else n + np.arange(n)
+    m = n + (1 if pooled else n)  # number of variances
+    owner = np.concatenate([np.arange(n)] + [acc] * len(Ms))  # variance index of each factor
+    E = np.zeros((len(owner), m))
     E[np.arange(len(owner)), owner] = 1.0
 
     def evaluate(x, order):
@@ -199,10 +208,14 @@ def _diagonal(r, Ms, psi, prior_samples, start, s_mult=1.0) -> NoiseLevels:
         hess = np.outer(v, v) * F + np.diag(weight * psi / v)
         return val, grad, hess
 
-    x = np.log(np.concatenate([np.diag(start.sigma_tau), np.diag(start.sigma_a)]) if start is not None else psi * 50)
+    if start is not None:
+        va = np.diag(start.sigma_a)
+        x = np.log(np.concatenate([np.diag(start.sigma_tau), [va.mean()] if pooled else va]))
+    else:
+        x = np.log(psi * 50)
     val, grad, hess = evaluate(x, 1)
     for _ in range(100):
-        step = -np.linalg.solve(hess + 1e-12 * np.trace(hess) * np.eye(2 * n), grad)
+        step = -np.linalg.solve(hess + 1e-12 * np.trace(hess) * np.eye(m), grad)
         dec = -float(grad @ step)
         if dec < 1e-12:
             break
@@ -217,7 +230,7 @@ def _diagonal(r, Ms, psi, prior_samples, start, s_mult=1.0) -> NoiseLevels:
         x = x + t * step
         val, grad, hess = evaluate(x, 1)
     v = np.exp(x)
-    S, A = np.diag(v[:n]), np.diag(v[n:])
+    S, A = np.diag(v[:n]), np.diag(v[acc])
     t, ac = _shares(Ms[0], S, A)
     return NoiseLevels(S, A, t, ac, N)
 
