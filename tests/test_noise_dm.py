@@ -134,10 +134,10 @@ def test_fixed_noise_levels_are_used_and_recorded():
 
 
 def test_a_residual_that_is_not_noise_is_recognised_and_wls_returned():
-    """Unmodelled Coulomb friction (2 N per joint, the regressor nearly clean): dm's held-out torque is worse than its
-    noise model predicts, so it returns WLS and says why; with the modelled noise only it keeps its own fit."""
+    """Unmodelled quadratic drag (the regressor nearly clean): dm's held-out torque is worse than its noise model
+    predicts, so it returns WLS and says why; with the modelled noise only it keeps its own fit."""
     problem, theta = eiv_problem(0, N=1000, torque=0.05, regressor=0.05)
-    friction = replace(problem, tau=problem.tau + 2.0 * np.sign(problem.v))
+    friction = replace(problem, tau=problem.tau + 0.8 * problem.v * np.abs(problem.v) * np.array([1.0, 2.0, 0.5]))
     res = NoiseModelDM().fit(friction)
     wls = make_estimator("wls").fit(friction.in_sensor_chart())
     assert res.noise.choice.startswith("wls: the residual is not the modelled noise")

@@ -7,7 +7,8 @@ other samples and a held-out sample with measured Y_i = Y*_i + ΔY_i (ΔY_i θ =
     E[r_iᵀ W r_i] = ‖Y*_i (θ − θ*)‖²_W + tr(W Σ_τ) + tr(W M_i(θ) Σ_a M_i(θ))
     ‖Y*_i Δ‖²_W ≈ ‖Y_i Δ‖²_W − tr(W M̄_i(Δ) Σ_a M̄_i(Δ))       (M̄(Δ) = M(Δ) − M(0), the linear part)
 
-with θ* ≈ the full-data fit θ̂. The check fits WLS (weight W = Σ̂⁻¹, the full fit's) and dm (noise levels fixed) on
+with θ* ≈ the full-data fit θ̂; for the consistent fit the first term is its estimation variance, about p/(n N_train)
+of the noise (a half fit that moved far from θ̂ in directions the data barely see is what the check is for). The check fits WLS (weight W = Σ̂⁻¹, the full fit's) and dm (noise levels fixed) on
 each of two contiguous halves of the samples, and scores both on the other half in W. ``excess`` is the measured
 held-out gap dm − WLS minus the gap the noise model predicts, over WLS's held-out loss: near 0 (± sampling) when
 the residual is the modelled noise, positive when dm predicts held-out torque worse than its own noise model
@@ -46,14 +47,20 @@ def _loss(problem, theta, W) -> np.ndarray:
     return np.einsum("ia,ab,ib->i", r, W, r)
 
 
-def _predicted(problem, theta, theta_ref, W, S, A) -> np.ndarray:
+def _predicted(problem, theta, theta_ref, W, S, A, train_size: int | None = None) -> np.ndarray:
+    """Per held-out sample, the loss the noise model predicts for θ. With train_size (the consistent fit): the noise
+    terms plus its estimation variance, p/train_size of the noise per sample (not its measured distance to θ̂, which
+    is what the check tests); without (WLS): the noise terms plus its measured distance to θ̂, noise removed."""
     C = noise_model_covariance(problem.metric.evaluate(theta), S, A)
+    noise = np.einsum("ab,iba->i", W, C)
+    if train_size is not None:
+        return noise * (1.0 + problem.p / (problem.n * train_size))
     d = np.asarray(theta) - np.asarray(theta_ref)
     Ml = problem.metric.evaluate(d) - problem.metric.evaluate(np.zeros_like(d))
     Yd = problem.Y @ d
     seen = np.einsum("ia,ab,ib->i", Yd, W, Yd)
     noise_in_seen = np.einsum("ab,iba->i", W, Ml @ A @ Ml)
-    return np.einsum("ab,iba->i", W, C) + seen - noise_in_seen
+    return noise + seen - noise_in_seen
 
 
 def check_noise_model(problem: IdentificationProblem, theta: np.ndarray, S: np.ndarray, A: np.ndarray,
@@ -70,7 +77,7 @@ def check_noise_model(problem: IdentificationProblem, theta: np.ndarray, S: np.n
         th_w, th_d = fit_wls(train), fit_dm(train, theta)
         lw = _loss(test, th_w, W)
         measured.append(_loss(test, th_d, W) - lw)
-        predicted.append(_predicted(test, th_d, theta, W, S, A) - _predicted(test, th_w, theta, W, S, A))
+        predicted.append(_predicted(test, th_d, theta, W, S, A, train.N) - _predicted(test, th_w, theta, W, S, A))
         base += float(lw.sum())
     e = np.concatenate(measured) - np.concatenate(predicted)  # per held-out sample
     excess = float(e.sum()) / base

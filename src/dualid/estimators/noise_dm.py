@@ -28,6 +28,7 @@ import warnings
 from dualid.errors import ConfigError, MetricError, OptimumAtInfinityWarning, SolverError
 from dualid.estimators.base import check_identifiable
 from dualid.estimators.least_squares import WLS
+from dualid.estimators.metric_guard import reference_guard
 from dualid.estimators.newton.fit import fit_dual_metric_newton
 from dualid.estimators.newton.interior_point import _interior_point
 from dualid.estimators.newton.noise_objective import (
@@ -117,9 +118,10 @@ class NoiseModelDM:
                              np.nan if check is None else check.excess,
                              np.nan if check is None else check.measured_gap,
                              np.nan if check is None else check.predicted_gap)
+        guard = reference_guard(sensor, theta, np.asarray(pilot.theta), f"pilot ({start})")
         return IdentificationResult(self.name, theta, problem.parameters, f, "optimal", "newton",
                                     time.perf_counter() - t0, iterations, self.constrained,
-                                    {"rounds": len(history), "start": start}, noise=record)
+                                    {"rounds": len(history), "start": start, **guard}, noise=record)
 
     def _check(self, sensor, cons, theta, noise, wls) -> NoiseCheck | None:
         Sigma = np.asarray(wls.info["covariance_matrix"])
