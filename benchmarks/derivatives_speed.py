@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from dualid.bench.runner import base_samples, build_problem
-from dualid.estimators.newton.objective import _cholesky, _tri_inverse, dual_metric_derivatives
+from dualid.estimators.newton.objective import cholesky_batch, tri_inverse, dual_metric_derivatives
 from dualid.problem import sample_blocks
 
 
@@ -41,8 +41,8 @@ def before(problem, theta, chunk=4096):
         Y = block.Y[rows]
         c = Y.shape[0]
         r = (Y.reshape(c * n, p) @ theta).reshape(c, n) - block.tau[rows]
-        L = _cholesky(block.metric.evaluate(theta, rows))
-        Li = _tri_inverse(L)
+        L = cholesky_batch(block.metric.evaluate(theta, rows))
+        Li = tri_inverse(L)
         z = np.einsum("cab,cb->ca", Li, r)
         f += float(np.sum(z * z))
         w = np.einsum("cba,cb->ca", Li, z)

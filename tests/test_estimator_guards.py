@@ -14,6 +14,7 @@ from tests.factories import drag_problem, random_chart
 REFERENCES = {
     "ols": None, "ols_unconstrained": None, "energy": None, "wls": "pilot (ols)", "logdet": "prior θ₀",
     "pullback": "prior θ₀", "dm": "pilot (wls)", "dm-paper": "wls fit", "dm-bfp": "pilot",
+    "dm-noise": "pilot (dm-paper)",
 }
 
 

@@ -26,7 +26,7 @@ def test_factory_result_name_matches_the_table(key, problem_and_prior):
 
 def test_unknown_method_lists_the_table():
     with pytest.raises(ConfigError, match=r"^unknown method 'lasso'; known methods: ols, ols_unconstrained, wls, energy, "
-                                          r"logdet, pullback, dm, dm-paper, dm-bfp$"):
+                                          r"logdet, pullback, dm, dm-paper, dm-noise, dm-bfp$"):
         make_estimator("lasso")
     assert label("my_estimator") == "my_estimator" and label("dual_metric") == "DM (paper)" and label("dm") == "DM"
 

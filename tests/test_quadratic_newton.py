@@ -100,8 +100,8 @@ def test_a_duality_gap_of_exactly_zero_is_not_a_division_by_zero(arm3):
     """The dual iterates can underflow to 0 (seen on LandSalp's log-det fit with the OLS prior: the gap halves
     ×20 per iteration to 0 after ~250 of them); μ = gap/ν = 0 then leaves nothing to centre (σ = 0), instead of
     dividing by it. Started here with Z = 0, z = 0 (gap 0 at iteration 0), away from an interior minimiser a."""
-    from dualid.estimators.newton.interior_point import _interior_point
-    from dualid.estimators.newton.start import _central_point
+    from dualid.estimators.newton.interior_point import run_interior_point
+    from dualid.estimators.newton.start import central_point
     from dualid.estimators.quadratic_newton import quadratic_objective
     from dualid.model.consistency import feasible_set
 
@@ -110,10 +110,10 @@ def test_a_duality_gap_of_exactly_zero_is_not_a_division_by_zero(arm3):
     a = np.asarray(model.nominal, dtype=float)
     assert cons.margin(a) > 0
     objective, _ = quadratic_objective(np.eye(len(a)), a, float(a @ a), problem.parameters)
-    theta0 = 0.5 * (a + _central_point(a, cons))  # strictly feasible (convex combination), ≠ a
+    theta0 = 0.5 * (a + central_point(a, cons))  # strictly feasible (convex combination), ≠ a
     assert cons.margin(theta0) > 0 and np.abs(theta0 - a).max() > 1e-3 * np.abs(a).max()
     Z = [np.zeros_like(c.C(theta0)) for c in cons.lmis]
-    theta, _, _, info = _interior_point(None, cons, theta0, Z, np.zeros(len(cons.h)), 1e-9, 50, 0, False,
+    theta, _, _, info = run_interior_point(None, cons, theta0, Z, np.zeros(len(cons.h)), 1e-9, 50, 0, False,
                                         objective=objective, f_scale=1.0)
     assert info["duality_gap"] < 1e-300  # the dual stays at 0 (up to _repair_psd's denormals)
     np.testing.assert_allclose(theta, a, rtol=0, atol=1e-9 * np.abs(a).max())

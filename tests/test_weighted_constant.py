@@ -137,7 +137,7 @@ def test_weighted_info_names_the_diverging_direction(monkeypatch):
     rng = np.random.default_rng(7)
     problem, _ = drag_problem(rng, N=100, n=3, noise=0.3)
     names = problem.parameters.names
-    real = weighted._interior_point
+    real = weighted.run_interior_point
 
     def with_candidate(*args, **kwargs):
         theta, Z, z, info = real(*args, **kwargs)
@@ -146,7 +146,7 @@ def test_weighted_info_names_the_diverging_direction(monkeypatch):
         info.update(diverging_candidate=d, optimum_at_infinity=True, diverging_direction=d)
         return theta, Z, z, info
 
-    monkeypatch.setattr(weighted, "_interior_point", with_candidate)
+    monkeypatch.setattr(weighted, "run_interior_point", with_candidate)
     result = fit_weighted_newton(problem, lambda block, rows: np.eye(3)[None])
     assert result.info["diverging_candidate"] == [names[5], names[2]]
     assert result.info["diverging_direction"] == f"-0.800·{names[5]} +0.600·{names[2]}"

@@ -44,7 +44,7 @@ ROUNDING = 1e-12  # a least-squares f(θ) ≤ this × f(0) (exact data) is optim
 
 def certified_objective(stats, parameters, regularizer):
     """f(θ) of quadratic_newton (∞ outside log det's domain): the value both solutions are compared in."""
-    from dualid.estimators.newton.objective import _NotPositiveDefinite
+    from dualid.estimators.newton.objective import NotPositiveDefinite
     from dualid.estimators.quadratic_newton import quadratic_objective
 
     objective, _ = quadratic_objective(stats.H, stats.g, stats.c, parameters, regularizer)
@@ -52,7 +52,7 @@ def certified_objective(stats, parameters, regularizer):
     def f(theta):
         try:
             return objective(np.asarray(theta, dtype=float), 0).f
-        except _NotPositiveDefinite:
+        except NotPositiveDefinite:
             return np.inf
     return f
 

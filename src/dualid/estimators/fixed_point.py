@@ -31,7 +31,7 @@ from dualid.errors import ConfigError, DataError, MetricError, SolverError
 from dualid.estimators.base import freeze_options
 from dualid.estimators.gls import PILOTS, FeasibleGLS
 from dualid.estimators.metric_guard import DEFAULT_BOUND, guard_from_ratios
-from dualid.estimators.newton.objective import _tri_inverse
+from dualid.estimators.newton.objective import tri_inverse
 from dualid.estimators.quadratic_fit import fit_weighted
 from dualid.problem import IdentificationProblem
 
@@ -43,7 +43,7 @@ WARM_SAMPLES = 20_000  # default warm-start subsample: used when N > 4× this (s
 def _pencil(M_ref: np.ndarray, M: np.ndarray):
     """(L, λ, U): M_ref = L Lᵀ, L⁻¹ M L⁻ᵀ = U diag(λ) Uᵀ."""
     L = np.linalg.cholesky(M_ref)
-    Li = _tri_inverse(L)  # batched L⁻¹ (np.linalg.solve ran a general LU per sample)
+    Li = tri_inverse(L)  # batched L⁻¹ (np.linalg.solve ran a general LU per sample)
     A = Li @ M @ np.swapaxes(Li, 1, 2)
     lam, U = np.linalg.eigh(0.5 * (A + np.swapaxes(A, 1, 2)))
     return L, lam, U
@@ -165,12 +165,12 @@ def _outer(est, sensor, theta_ref, theta_start, common, c):
         try:
             M_ref = sensor.metric.evaluate(theta_ref, rows)
             if theta_start is None:
-                Winv[rows] = _tri_inverse(np.linalg.cholesky(M_ref))
+                Winv[rows] = tri_inverse(np.linalg.cholesky(M_ref))
                 continue
             L, lam, U = _pencil(M_ref, sensor.metric.evaluate(theta_start, rows))
         except np.linalg.LinAlgError as exc:
             raise MetricError(f"{est.name}: the pilot's metric M_i(θ_ref) is not positive definite") from exc
-        log_lam[rows], Winv[rows] = np.log(np.clip(lam, 1.0 / c, c)), np.swapaxes(U, 1, 2) @ _tri_inverse(L)
+        log_lam[rows], Winv[rows] = np.log(np.clip(lam, 1.0 / c, c)), np.swapaxes(U, 1, 2) @ tri_inverse(L)
 
     def whiten(block, rows):  # diag(λ_i^-½) W_i: M̄_i⁻¹ = (·)ᵀ(·)
         return np.exp(-0.5 * log_lam[rows])[:, :, None] * Winv[rows]

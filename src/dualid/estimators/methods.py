@@ -15,6 +15,7 @@ from dualid.estimators.dual_metric import DualMetric
 from dualid.estimators.fixed_point import BoundedFixedPoint
 from dualid.estimators.gls import FeasibleGLS
 from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS
+from dualid.estimators.noise_dm import NoiseModelDM
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,9 @@ _TABLE = (
     Method("dm-paper", "dual_metric", "DM (paper)", "#17becf",
            "the paper's dual-metric objective Σ rᵀ M(θ)⁻¹ r (biased under torque noise; see docs/estimators.md)",
            lambda **kw: DualMetric(**_common(kw))),
+    Method("dm-noise", "dm-noise", "DM (noise model)", "#bcbd22",
+           "dual-metric fit with a physical noise model Σ_τ + M(θ)Σ_aM(θ), its levels estimated from the data",
+           lambda **kw: NoiseModelDM(**_common(kw))),
     Method("dm-bfp", "dm-bfp", "DM (bounded fixed point)", "#e377c2",
            "experimental: the fixed point of the dual-metric weight with its eigenvalues bounded around a pilot",
            lambda **kw: BoundedFixedPoint(**_common(kw))),

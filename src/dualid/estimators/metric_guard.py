@@ -24,8 +24,8 @@ from dualid.errors import ConfigError, DataError, MetricError
 from dualid.problem import IdentificationProblem, sample_blocks, strided_rows
 
 
-def _tri_inverse(L):
-    from dualid.estimators.newton.objective import _tri_inverse as inverse  # lazy: keeps this module light to import
+def tri_inverse(L):
+    from dualid.estimators.newton.objective import tri_inverse as inverse  # lazy: keeps this module light to import
 
     return inverse(L)
 
@@ -66,7 +66,7 @@ def generalized_eigenvalues(
                 f"but it is not at {bad} of {len(lam)} samples in rows {start}.. (smallest eigenvalue "
                 f"{lam.min():.3g}); choose a reference with every body massive (a WLS fit or the prior)"
             ) from exc
-        Li = _tri_inverse(L)  # batched L⁻¹ (np.linalg.solve ran a general LU per sample)
+        Li = tri_inverse(L)  # batched L⁻¹ (np.linalg.solve ran a general LU per sample)
         A = Li @ M @ np.swapaxes(Li, 1, 2)  # L⁻¹ M L⁻ᵀ
         out[start : start + M.shape[0]] = np.linalg.eigvalsh(0.5 * (A + np.swapaxes(A, 1, 2)))
     return out

@@ -9,7 +9,7 @@ a sequence of smooth penalised problems
 U Λ Uᵀ = D Σ_β D the covariance in the column-scaled chart (D = diag of the independent columns' norms), its
 eigenvalues floored at SIGMA_RTOL × the largest, so that ‖u‖² c² is the statistic and u is O(1) whatever the units
 and the noise level. μ is found by regula falsi in log μ until ‖u‖ ∈ [1 − U_TOL, 1]: the penalised optimum is
-then the constrained one (KKT with multiplier μ/c²). Each solve is ``newton.interior_point._interior_point``
+then the constrained one (KKT with multiplier μ/c²). Each solve is ``newton.interior_point.run_interior_point``
 (primal–dual steps on the consistency LMIs and bound rows, affine-invariant, warm-started from the previous μ's
 solution); the first starts at the prior, which is strictly consistent, so no phase one is needed.
 
@@ -34,7 +34,7 @@ import numpy as np
 import pinocchio as pin
 
 from dualid.errors import SolverError
-from dualid.estimators.newton.objective import _Derivatives, _NotPositiveDefinite
+from dualid.estimators.newton.objective import Derivatives, NotPositiveDefinite
 from dualid.estimators.quadratic_newton import _run
 from dualid.model.consistency import FeasibleSet, feasible_set, pullback_metric
 from dualid.problem import IdentificationProblem
@@ -135,7 +135,7 @@ def prior_value(rigid, quad_idx, quad_w, theta, theta0, order: int = 0):
         try:
             L = np.linalg.cholesky(0.5 * (C + C.T))
         except np.linalg.LinAlgError:
-            raise _NotPositiveDefinite from None
+            raise NotPositiveDefinite from None
         f += -2.0 * float(np.sum(np.log(np.diag(L)))) + np.linalg.slogdet(C0)[1] + float(np.sum(C0inv * C)) - C.shape[0]
         if order:
             Cinv = np.linalg.inv(C)
@@ -150,7 +150,7 @@ def prior_divergence(problem: IdentificationProblem, theta: np.ndarray, theta0: 
     rigid, quad_idx, quad_w, _ = prior_terms(problem, theta0)
     try:
         return prior_value(rigid, quad_idx, quad_w, np.asarray(theta, dtype=float), theta0)[0]
-    except _NotPositiveDefinite:
+    except NotPositiveDefinite:
         return float("inf")
 
 
@@ -193,18 +193,18 @@ def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: n
     theta = _inside(np.asarray(theta0, dtype=float), cons)
 
     def solve(mu: float, start: np.ndarray) -> np.ndarray:
-        def objective(th: np.ndarray, order: int) -> _Derivatives:
+        def objective(th: np.ndarray, order: int) -> Derivatives:
             f, g, H = prior_value(rigid, quad_idx, quad_w, th, theta0, order)
             u = W @ th - b
             f += mu * float(u @ u)
             if not order:
-                return _Derivatives(f)
+                return Derivatives(f)
             H = H + 2.0 * mu * WtW
-            return _Derivatives(f, g + 2.0 * mu * (W.T @ u), 0.5 * (H + H.T))
+            return Derivatives(f, g + 2.0 * mu * (W.T @ u), 0.5 * (H + H.T))
 
         try:
             return _run(cons, start, TOL, 200, objective, 1.0)[0]
-        except _NotPositiveDefinite:  # a start outside the prior's domain (a body not strictly consistent)
+        except NotPositiveDefinite:  # a start outside the prior's domain (a body not strictly consistent)
             raise SolverError("plausible parameters: the start is not strictly consistent",
                               status="no_start") from None
 

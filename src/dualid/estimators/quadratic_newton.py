@@ -8,7 +8,7 @@ so f is accurate where it is small compared with c) and R one of the priors of L
     pullback: Σ_b (θ_b − θ_b0)ᵀ g_b (θ_b − θ_b0)                         (quadratic)
     logdet:   Σ_b −log det C_b(θ) + log det C_b0 + tr(C_b0⁻¹ C_b(θ)) − m_b   (smooth and convex on C_b ≻ 0)
 
-The iterations are those of the dual-metric solver (``newton.interior_point._interior_point``: primal–dual HKM steps on the
+The iterations are those of the dual-metric solver (``newton.interior_point.run_interior_point``: primal–dual HKM steps on the
 pseudo-inertia LMIs, a line search that keeps every C_b ≻ 0); only f, ∇f, ∇²f differ:
 
     ∇f = 2H(θ − θ_ls) [+ γ (2 g_b (θ_b − θ_b0))]  [+ γ (−tr(C_b⁻¹V_k) + tr(C_b0⁻¹V_k))_k]
@@ -24,10 +24,10 @@ import numpy as np
 
 from dualid.errors import SolverError
 from dualid.estimators.newton.closure import on_closure
-from dualid.estimators.newton.interior_point import _interior_point
-from dualid.estimators.newton.linalg import _solve_psd
-from dualid.estimators.newton.objective import _Derivatives, _NotPositiveDefinite
-from dualid.estimators.newton.start import _central_point
+from dualid.estimators.newton.interior_point import run_interior_point
+from dualid.estimators.newton.linalg import solve_psd
+from dualid.estimators.newton.objective import Derivatives, NotPositiveDefinite
+from dualid.estimators.newton.start import central_point
 from dualid.model.consistency import feasible_set
 
 
@@ -46,14 +46,14 @@ def _blocks(regularizer, parameters):
 
 
 def quadratic_objective(H: np.ndarray, g: np.ndarray, c: float, parameters, regularizer=None):
-    """objective(θ, order) → _Derivatives for the module's f; raises _NotPositiveDefinite outside log det's domain."""
+    """objective(θ, order) → Derivatives for the module's f; raises NotPositiveDefinite outside log det's domain."""
     H = 0.5 * (H + H.T)
-    theta_ls = _solve_psd(H, g, rtol=1e-12)
+    theta_ls = solve_psd(H, g, rtol=1e-12)
     f_min = max(float(c - g @ theta_ls), 0.0)
     kind, theta0, gamma = regularizer if regularizer is not None else (None, None, 0.0)
     blocks = _blocks(regularizer, parameters)
 
-    def objective(theta: np.ndarray, order: int) -> _Derivatives:
+    def objective(theta: np.ndarray, order: int) -> Derivatives:
         d = theta - theta_ls
         Hd = H @ d
         f = float(d @ Hd) + f_min
@@ -72,7 +72,7 @@ def quadratic_objective(H: np.ndarray, g: np.ndarray, c: float, parameters, regu
             try:
                 L = np.linalg.cholesky(0.5 * (C + C.T))
             except np.linalg.LinAlgError:
-                raise _NotPositiveDefinite from None
+                raise NotPositiveDefinite from None
             m = C.shape[0]
             f += gamma * (-2.0 * float(np.sum(np.log(np.diag(L)))) + np.linalg.slogdet(C0)[1]
                           + float(np.sum(C0inv * C)) - m)
@@ -82,8 +82,8 @@ def quadratic_objective(H: np.ndarray, g: np.ndarray, c: float, parameters, regu
                 CV = np.einsum("ab,kbc->kac", Cinv, V)  # C⁻¹ V_k
                 hess[np.ix_(idx, idx)] += gamma * np.einsum("kab,lba->kl", CV, CV)
         if not np.isfinite(f):
-            raise _NotPositiveDefinite
-        return _Derivatives(f, grad, None if hess is None else 0.5 * (hess + hess.T))
+            raise NotPositiveDefinite
+        return Derivatives(f, grad, None if hess is None else 0.5 * (hess + hess.T))
 
     return objective, theta_ls
 
@@ -107,13 +107,13 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
             return np.inf
         try:
             return objective(theta, 0).f
-        except _NotPositiveDefinite:
+        except NotPositiveDefinite:
             return np.inf
 
     f_scale = max(float(c), 1e-300)
     failure = None
     if start is not None:
-        warm = _central_point(np.asarray(start, dtype=float), cons, eps=1e-7)
+        warm = central_point(np.asarray(start, dtype=float), cons, eps=1e-7)
         if np.isfinite(value(warm)):
             try:
                 theta, info = _run(cons, warm, tol, max_iter, objective, f_scale, gap0=1e-6)
@@ -121,10 +121,10 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
                 return done(theta, info)
             except SolverError as exc:
                 failure = f"warm start failed ({exc.status})"
-    candidates = [_central_point(theta_ls, cons)]
+    candidates = [central_point(theta_ls, cons)]
     if regularizer is not None:
         candidates.append(np.asarray(regularizer[1], dtype=float))  # θ₀ (strictly consistent)
-        candidates.append(_central_point(candidates[-1], cons))
+        candidates.append(central_point(candidates[-1], cons))
     values = [value(t) for t in candidates]
     k = int(np.argmin(values))
     if not np.isfinite(values[k]):
@@ -143,13 +143,13 @@ RETRY_LEVENBERG = 0.0
 
 
 def _run(cons, theta, tol, max_iter, objective, f_scale, gap0=1.0):
-    """_interior_point on the module's f; an arithmetic failure inside it (e.g. a duality gap that underflows to 0)
+    """run_interior_point on the module's f; an arithmetic failure inside it (e.g. a duality gap that underflows to 0)
     is a SolverError of this solver, so that the caller's fallback or certification sees a failed solve. A failed
     run is retried once with RETRY_LEVENBERG (recorded as info["newton_levenberg"])."""
     failure = None
     for levenberg in (1e-12, RETRY_LEVENBERG):
         try:
-            theta_out, _, _, info = _interior_point(None, cons, theta, None, None, tol, max_iter, 0, False, gap0=gap0,
+            theta_out, _, _, info = run_interior_point(None, cons, theta, None, None, tol, max_iter, 0, False, gap0=gap0,
                                                     objective=objective, f_scale=f_scale, levenberg=levenberg)
             info["newton_levenberg"] = levenberg
             if failure is not None:

@@ -14,6 +14,30 @@ from dualid.model.parameters import ParameterSpace
 
 
 @dataclass(frozen=True, eq=False)
+class NoiseRecord:
+    """What ``dm`` estimated and chose: its noise model C_i = Σ_τ + M_i Σ_a M_i (both in the sensor chart)."""
+
+    sigma_tau: np.ndarray  # (n, n) torque-noise covariance [force²]
+    sigma_a: np.ndarray  # (n, n) acceleration-noise covariance [(coordinate/s²)²]
+    torque_share: float  # share of the residual covariance the torque noise explains (mean tr(C⁻¹Σ_τ)/n)
+    acceleration_share: float  # … and the acceleration noise (mean tr(C⁻¹MΣ_aM)/n)
+    source: str  # "estimated" | "fixed" (given by the user)
+    rounds: int  # noise-level / θ alternations
+    pilot_objective: float  # the pilot's objective
+    choice: str = "noise model"  # what θ̂ is: "noise model", or "wls: …" when the check rejected the noise model
+    check_excess: float = float("nan")  # held-out loss beyond the noise model's prediction, share of WLS's (noise_check)
+    check_measured_gap: float = float("nan")  # held-out loss dm − WLS, share of WLS's
+    check_predicted_gap: float = float("nan")  # … as the noise model predicts it
+
+    def as_dict(self) -> dict:
+        return {"sigma_tau": np.asarray(self.sigma_tau).tolist(), "sigma_a": np.asarray(self.sigma_a).tolist(),
+                "torque_share": self.torque_share, "acceleration_share": self.acceleration_share,
+                "source": self.source, "rounds": self.rounds, "pilot_objective": self.pilot_objective,
+                "choice": self.choice, "check_excess": self.check_excess,
+                "check_measured_gap": self.check_measured_gap, "check_predicted_gap": self.check_predicted_gap}
+
+
+@dataclass(frozen=True, eq=False)
 class IdentificationResult:
     """θ̂ and how it was obtained. ``objective`` is the estimator's own objective at θ̂."""
 
@@ -27,6 +51,7 @@ class IdentificationResult:
     iterations: int | None = None
     constrained: bool = True
     info: dict = field(default_factory=dict)  # solver-specific: duality gap, KKT residual, covariance, …
+    noise: NoiseRecord | None = None  # dm's noise model (estimators.noise_dm); None for the other estimators
 
     def __post_init__(self) -> None:
         theta = np.array(self.theta, dtype=float)
@@ -89,4 +114,5 @@ class IdentificationResult:
             "parameters": self.parameter_records(),
             "bodies": self.body_records(),
             "info": {k: v for k, v in self.info.items() if isinstance(v, (int, float, str, bool))},
+            **({"noise_model": self.noise.as_dict()} if self.noise is not None else {}),
         }

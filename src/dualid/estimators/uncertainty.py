@@ -49,7 +49,7 @@ from dualid.estimators.dual_metric import DualMetric
 from dualid.estimators.gls import FeasibleGLS
 from dualid.estimators.guards import Guarded
 from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS, covariance_weight
-from dualid.estimators.newton.objective import _NotPositiveDefinite, dual_metric_derivatives
+from dualid.estimators.newton.objective import NotPositiveDefinite, dual_metric_derivatives
 from dualid.estimators.result import IdentificationResult
 from dualid.identifiability import BaseParameters
 from dualid.linalg import pinv_psd
@@ -186,7 +186,7 @@ def derivatives(problem: IdentificationProblem, result: IdentificationResult, es
     if isinstance(est, DualMetric):
         try:
             d = dual_metric_derivatives(problem, theta, order=2, chunk=chunk)
-        except _NotPositiveDefinite:
+        except NotPositiveDefinite:
             raise MetricError("uncertainty (dm-paper): M_i(θ̂) is not positive definite at some sample") from None
         for start in range(0, problem.N, chunk):
             rows = slice(start, start + chunk)

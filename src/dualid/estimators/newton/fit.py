@@ -8,11 +8,11 @@ import warnings
 import numpy as np
 
 from dualid.errors import OptimumAtInfinityWarning, SolverError
-from dualid.estimators.newton.interior_point import _interior_point
+from dualid.estimators.newton.interior_point import run_interior_point
 from dualid.estimators.newton.objective import (
     CHUNK,
     _force_scale,
-    _NotPositiveDefinite,
+    NotPositiveDefinite,
     _objective,
     dual_metric_derivatives,
 )
@@ -64,7 +64,7 @@ def pushed_out(problem, theta, f, d, tol, max_iter, chunk) -> dict | None:
         # own strictly feasible start instead, solved cold below
         try:
             start, _ = starting_point(pushed, cons, chunk)
-        except (SolverError, _NotPositiveDefinite, np.linalg.LinAlgError):
+        except (SolverError, NotPositiveDefinite, np.linalg.LinAlgError):
             return None
         if cons.margin(start) <= 0 or not np.isfinite(_objective(pushed, start, chunk)):
             return None
@@ -73,14 +73,14 @@ def pushed_out(problem, theta, f, d, tol, max_iter, chunk) -> dict | None:
         # a small gap, as the warm start's; the cold re-solve if that fails (same optimum; arm7 N = 1,000: 3 instead
         # of 11 iterations, the fit's total 24 → 16)
         try:
-            _, _, _, info = _interior_point(pushed, cons, start, None, None, tol, min(max_iter, WARM_MAX_ITER), chunk,
+            _, _, _, info = run_interior_point(pushed, cons, start, None, None, tol, min(max_iter, WARM_MAX_ITER), chunk,
                                             False, gap0=WARM_GAP, balance=0.0)
-        except (SolverError, _NotPositiveDefinite):
+        except (SolverError, NotPositiveDefinite):
             info = None
     if info is None:
         try:
-            _, _, _, info = _interior_point(pushed, cons, start, None, None, tol, max_iter, chunk, False)
-        except (SolverError, _NotPositiveDefinite):
+            _, _, _, info = run_interior_point(pushed, cons, start, None, None, tol, max_iter, chunk, False)
+        except (SolverError, NotPositiveDefinite):
             return None
     if info["objective"] < f - 10 * tol * abs(f):
         return {"objective_pushed_out": float(info["objective"]), "pushed_out_bound": float(PUSH)}
@@ -137,7 +137,7 @@ def fit_dual_metric_newton(
         sub = problem.subset(slice(0, None, problem.N // m))
         theta, start = starting_point(sub, cons, chunk)
         try:
-            th, _, _, info_sub = _interior_point(sub, cons, theta, None, None, WARM_TOL, max_iter, chunk, verbose)
+            th, _, _, info_sub = run_interior_point(sub, cons, theta, None, None, WARM_TOL, max_iter, chunk, verbose)
             try:  # the objective's scale, from the subsample (saves a pass over all samples)
                 f_scale = _force_scale(sub, th, chunk) * problem.N / sub.N
             except np.linalg.LinAlgError:
@@ -147,13 +147,13 @@ def fit_dual_metric_newton(
             start = f"warm start from {sub.N} samples ({info_sub['iterations']} iterations)"
         except SolverError as exc:  # recorded in info["start"]; the cold start below decides
             warm, failed_warm = None, f"warm start from {sub.N} samples failed ({exc.status}); "
-        except _NotPositiveDefinite:
+        except NotPositiveDefinite:
             warm, failed_warm = None, f"warm start from {sub.N} samples left some M_i(θ) indefinite; "
     if warm is not None:
         # primal warm start; duals re-centred at θ with a small gap (WARM_GAP f): the subsample's own duals sit
         # too close to its boundary for the full problem and would jam the iterations
         try:
-            theta, Z, z, info = _interior_point(problem, cons, warm[0], None, None, tol, min(max_iter, WARM_MAX_ITER),
+            theta, Z, z, info = run_interior_point(problem, cons, warm[0], None, None, tol, min(max_iter, WARM_MAX_ITER),
                                                 chunk, verbose, der=warm[1], gap0=WARM_GAP, f_scale=f_scale,
                                                 balance=0.0)
         except SolverError as exc:  # the subsample's optimum can sit near a boundary the full data move away from
@@ -161,7 +161,7 @@ def fit_dual_metric_newton(
             failed_warm = f"{start} failed ({exc.status}); "
     if warm is None:
         theta, start = starting_point(problem, cons, chunk)
-        theta, Z, z, info = _interior_point(problem, cons, theta, None, None, tol, max_iter, chunk, verbose)
+        theta, Z, z, info = run_interior_point(problem, cons, theta, None, None, tol, max_iter, chunk, verbose)
         start = failed_warm + start
     f = info.pop("objective")
     info["start"] = start

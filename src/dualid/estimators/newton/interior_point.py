@@ -8,7 +8,7 @@ from dualid.errors import SolverError
 from dualid.estimators.newton.linalg import _NewtonSystem
 from dualid.estimators.newton.objective import (
     _force_scale,
-    _NotPositiveDefinite,
+    NotPositiveDefinite,
     dual_metric_derivatives,
 )
 from dualid.estimators.newton.trace import constraint_only_direction, constraint_only_growth, iteration_diagnostics
@@ -135,12 +135,12 @@ def _barrier(cons: FeasibleSet, theta) -> float:
     return val
 
 
-def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chunk, verbose, der=None, gap0=1.0,
+def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chunk, verbose, der=None, gap0=1.0,
                     objective=None, f_scale=None, levenberg=1e-12, balance: float = GAP_BALANCE):
     """Primal–dual iterations from a strictly feasible θ (and dual Z, z, or None: centred at θ, gap0·f).
 
-    Returns (θ, Z, z, info) at relative gap ≤ tol; raises SolverError otherwise. objective(θ, order) → _Derivatives
-    (raising _NotPositiveDefinite outside its domain) replaces the dual-metric f, with f_scale its size
+    Returns (θ, Z, z, info) at relative gap ≤ tol; raises SolverError otherwise. objective(θ, order) → Derivatives
+    (raising NotPositiveDefinite outside its domain) replaces the dual-metric f, with f_scale its size
     (then problem is unused): the same method for any smooth convex f under these constraints.
     """
     p = len(theta)
@@ -232,13 +232,13 @@ def _interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chun
                 try:
                     der_trial = objective(trial, 2)
                     phi1 = der_trial.f
-                except _NotPositiveDefinite:
+                except NotPositiveDefinite:
                     der_trial, phi1 = None, np.inf
             else:
                 der_trial = None
                 try:
                     phi1 = objective(trial, 0).f
-                except _NotPositiveDefinite:
+                except NotPositiveDefinite:
                     phi1 = np.inf
             first = False
             if np.isfinite(phi1):

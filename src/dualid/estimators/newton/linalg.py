@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 
-def _solve_psd(K: np.ndarray, b: np.ndarray, rtol: float = 1e-13) -> np.ndarray:
+def solve_psd(K: np.ndarray, b: np.ndarray, rtol: float = 1e-13) -> np.ndarray:
     """K⁺ b for K ⪰ 0 (Jacobi-scaled; directions with eigenvalue < rtol·max are left out)."""
     d = _jacobi(K)
     lam, U = np.linalg.eigh(K / np.outer(d, d))

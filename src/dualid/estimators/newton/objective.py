@@ -14,24 +14,24 @@ CHUNK = 1024  # samples per block of a pass: the per-chunk temporaries (Y_i, D_i
 # (benchmarks/speed_session5.md)
 
 
-class _NotPositiveDefinite(Exception):
+class NotPositiveDefinite(Exception):
     """Some M_i(θ) is not positive definite (θ outside the domain)."""
 
 
 # Per-sample matrices are tiny (n ≲ 10) and numerous, where LAPACK's per-matrix calls are slow: the
 # kernels below loop over the small dimensions and vectorise over the samples of a chunk instead.
-def _cholesky(M: np.ndarray) -> np.ndarray:
-    """L (c, n, n) lower triangular with M_i = L_i L_iᵀ; raises _NotPositiveDefinite."""
+def cholesky_batch(M: np.ndarray) -> np.ndarray:
+    """L (c, n, n) lower triangular with M_i = L_i L_iᵀ; raises NotPositiveDefinite."""
     try:
         L = np.linalg.cholesky(M)
     except np.linalg.LinAlgError:
-        raise _NotPositiveDefinite from None
+        raise NotPositiveDefinite from None
     if not np.all(np.isfinite(np.diagonal(L, axis1=1, axis2=2))):
-        raise _NotPositiveDefinite
+        raise NotPositiveDefinite
     return L
 
 
-def _tri_inverse(L: np.ndarray) -> np.ndarray:
+def tri_inverse(L: np.ndarray) -> np.ndarray:
     """L⁻¹ (c, n, n) of lower-triangular L, by substitution vectorised over the samples."""
     Lt = np.ascontiguousarray(np.moveaxis(L, 0, -1))  # (n, n, c): contiguous per-entry sample vectors
     n = Lt.shape[0]
@@ -47,7 +47,7 @@ def _tri_inverse(L: np.ndarray) -> np.ndarray:
     return np.moveaxis(X, -1, 0)
 
 
-def _forward(L: np.ndarray, r: np.ndarray) -> np.ndarray:
+def forward_substitute(L: np.ndarray, r: np.ndarray) -> np.ndarray:
     """L⁻¹ r for r (c, n)."""
     z = np.empty_like(r)
     for a in range(L.shape[1]):
@@ -59,7 +59,7 @@ def _forward(L: np.ndarray, r: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class _Derivatives:
+class Derivatives:
     f: float
     grad: np.ndarray | None = None  # (p,)
     hess: np.ndarray | None = None  # (p, p)
@@ -67,10 +67,10 @@ class _Derivatives:
 
 def dual_metric_derivatives(
     problem: IdentificationProblem, theta: np.ndarray, order: int = 2, chunk: int = CHUNK
-) -> _Derivatives:
+) -> Derivatives:
     """f (and ∇f, ∇²f for order 2) accumulated over chunks of samples (memory O(chunk·n·p)).
 
-    Raises _NotPositiveDefinite when some M_i(θ) is not positive definite.
+    Raises NotPositiveDefinite when some M_i(θ) is not positive definite.
     """
     n, p = problem.n, problem.p
     theta = np.asarray(theta, dtype=float)
@@ -81,12 +81,12 @@ def dual_metric_derivatives(
         Y = block.Y[rows]  # (c, n, p)
         c = Y.shape[0]
         r = (Y.reshape(c * n, p) @ theta).reshape(c, n) - block.tau[rows]  # (c, n)
-        L = _cholesky(block.metric.evaluate(theta, rows, symmetric=False))  # M_i = L_i L_iᵀ
+        L = cholesky_batch(block.metric.evaluate(theta, rows, symmetric=False))  # M_i = L_i L_iᵀ
         if not order:
-            z = _forward(L, r)  # L⁻¹ r
+            z = forward_substitute(L, r)  # L⁻¹ r
             f += float(np.sum(z * z))
             continue
-        Li = _tri_inverse(L)  # (c, n, n)
+        Li = tri_inverse(L)  # (c, n, n)
         z = np.einsum("cab,cb->ca", Li, r)  # L⁻¹ r
         f += float(np.sum(z * z))
         w = np.einsum("cba,cb->ca", Li, z)  # M⁻¹ r = L⁻ᵀ L⁻¹ r
@@ -95,15 +95,15 @@ def dual_metric_derivatives(
         Z = np.matmul(Li, D).reshape(-1, p)  # L⁻¹ (Y_i − M_ik w_i)
         hess += 2.0 * (Z.T @ Z)
     if not np.isfinite(f):
-        raise _NotPositiveDefinite
-    return _Derivatives(f, grad, None if hess is None else 0.5 * (hess + hess.T))
+        raise NotPositiveDefinite
+    return Derivatives(f, grad, None if hess is None else 0.5 * (hess + hess.T))
 
 
 def _objective(problem, theta, chunk) -> float:
     """f(θ), +inf outside the domain."""
     try:
         return dual_metric_derivatives(problem, theta, order=0, chunk=chunk).f
-    except _NotPositiveDefinite:
+    except NotPositiveDefinite:
         return np.inf
 
 
@@ -112,6 +112,6 @@ def _force_scale(problem, theta, chunk) -> float:
     total = 0.0
     for block, rows, _ in sample_blocks(problem, chunk):
         L = np.linalg.cholesky(block.metric.evaluate(theta, rows, symmetric=False))
-        z = _forward(L, block.tau[rows])  # L⁻¹ τ_i
+        z = forward_substitute(L, block.tau[rows])  # L⁻¹ τ_i
         total += float(np.sum(z * z))
     return total

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from dualid.errors import MetricError, SolverError
-from dualid.estimators.newton.linalg import _solve_psd
+from dualid.estimators.newton.linalg import solve_psd
 from dualid.estimators.newton.objective import _objective
 from dualid.estimators.statistics import energy_statistics, statistics
 from dualid.model.consistency import FeasibleSet
@@ -15,7 +15,7 @@ from dualid.problem import IdentificationProblem, sample_blocks
 def _ols(problem: IdentificationProblem, chunk: int) -> np.ndarray:
     """Unconstrained least squares from the sufficient statistics (min-norm where rank deficient)."""
     stats = statistics(problem, chunk=chunk)
-    return _solve_psd(stats.H, stats.g, rtol=1e-10)
+    return solve_psd(stats.H, stats.g, rtol=1e-10)
 
 
 def _clip_psd(C: np.ndarray, eps: float = 1e-2) -> np.ndarray:
@@ -25,7 +25,7 @@ def _clip_psd(C: np.ndarray, eps: float = 1e-2) -> np.ndarray:
     return (U * np.maximum(lam, eps * top)) @ U.T
 
 
-def _central_point(theta_ols: np.ndarray, cons: FeasibleSet, eps: float = 1e-2) -> np.ndarray:
+def central_point(theta_ols: np.ndarray, cons: FeasibleSet, eps: float = 1e-2) -> np.ndarray:
     """A strictly feasible point near θ_ols: each block's matrix with its eigenvalues lifted to ≥ eps·λ_max."""
     theta = theta_ols.copy()
     for c in cons.lmis:
@@ -94,7 +94,7 @@ def _not_pd_samples(problem, theta, chunk, limit=50) -> np.ndarray:
 def _energy_ls(problem: IdentificationProblem, chunk: int) -> np.ndarray:
     """min-norm argmin Σ (v_iᵀ r_i)²: v_iᵀr_i is the same in every chart, so is this θ."""
     stats = energy_statistics(problem, chunk=chunk)
-    return _solve_psd(stats.H, stats.g, rtol=1e-10)
+    return solve_psd(stats.H, stats.g, rtol=1e-10)
 
 
 def _frozen_metric_ls(problem: IdentificationProblem, theta_c: np.ndarray, chunk: int) -> np.ndarray | None:
@@ -111,7 +111,7 @@ def _frozen_metric_ls(problem: IdentificationProblem, theta_c: np.ndarray, chunk
         z = np.linalg.solve(L, block.tau[rows][..., None])[..., 0]
         H += np.einsum("nap,naq->pq", Z, Z)
         g += np.einsum("nap,na->p", Z, z)
-    return _solve_psd(H, g, rtol=1e-10)
+    return solve_psd(H, g, rtol=1e-10)
 
 
 def constant_metric_start(problem, cons: FeasibleSet, seed: np.ndarray) -> tuple[np.ndarray, str]:
@@ -119,7 +119,7 @@ def constant_metric_start(problem, cons: FeasibleSet, seed: np.ndarray) -> tuple
     where only the constraints ``cons`` (possibly the closed set of ``newton.closure``) decide: the seed's central
     point, else phase I over the constraints alone (no sample can leave the domain). SolverError (status
     infeasible) when they admit no strictly feasible θ."""
-    theta_c = _central_point(seed, cons)
+    theta_c = central_point(seed, cons)
     if cons.margin(theta_c) > 0:
         return theta_c, "weighted LS→central"
     try:
@@ -145,7 +145,7 @@ def starting_point(problem, cons: FeasibleSet, chunk: int) -> tuple[np.ndarray, 
     """
     for seed_name, seed in (("energy", _energy_ls), ("ols", _ols)):
         theta_seed = seed(problem, chunk)
-        theta_c = _central_point(theta_seed, cons)
+        theta_c = central_point(theta_seed, cons)
         if cons.margin(theta_c) <= 0 or not np.isfinite(_objective(problem, theta_c, chunk)):
             continue
         theta_f = _frozen_metric_ls(problem, theta_c, chunk) if seed_name == "energy" else theta_seed
@@ -161,11 +161,11 @@ def starting_point(problem, cons: FeasibleSet, chunk: int) -> tuple[np.ndarray, 
             beta *= 0.5
         # or the target with its blocks' eigenvalues lifted (it keeps the target's well-determined directions,
         # where the segment toward θ_c can stop far from it): whichever has the smaller f
-        lifted = _central_point(target, cons)
+        lifted = central_point(target, cons)
         f_line = _objective(problem, line, chunk)
         f_lifted = _objective(problem, lifted, chunk) if cons.margin(lifted) > 0 else np.inf
         return (lifted, f"{label}→lifted") if f_lifted < f_line else (line, label)
-    theta_c = _central_point(_ols(problem, chunk), cons)
+    theta_c = central_point(_ols(problem, chunk), cons)
     # phase I: a small conic problem over the constraints and the samples where M_i(θ_c) is not ≻ 0
     samples = np.zeros(0, dtype=int)
     if cons.margin(theta_c) > 0:

@@ -1,4 +1,4 @@
-"""Diagnostics of one interior-point iteration, printed by ``_interior_point(verbose=True)``.
+"""Diagnostics of one interior-point iteration, printed by ``run_interior_point(verbose=True)``.
 
 Per block b: the conditioning of C_b(θ) (λ_min/λ_max) and the centrality spread of the eigenvalues of
 L_bᵀ Z_b L_b / μ (C_b = L_b L_bᵀ, μ = gap/ν; all 1 on the central path); the Newton matrix's conditioning

@@ -24,10 +24,10 @@ import numpy as np
 
 from dualid.errors import MetricError
 from dualid.estimators.newton.closure import on_closure
-from dualid.estimators.newton.interior_point import _interior_point
-from dualid.estimators.newton.linalg import _solve_psd
-from dualid.estimators.newton.objective import CHUNK, _Derivatives, _forward, _tri_inverse
-from dualid.estimators.newton.start import _central_point, constant_metric_start
+from dualid.estimators.newton.interior_point import run_interior_point
+from dualid.estimators.newton.linalg import solve_psd
+from dualid.estimators.newton.objective import CHUNK, Derivatives, forward_substitute, tri_inverse
+from dualid.estimators.newton.start import central_point, constant_metric_start
 from dualid.estimators.newton.trace import direction_label, direction_names
 from dualid.estimators.result import IdentificationResult
 from dualid.model.consistency import feasible_set
@@ -82,7 +82,7 @@ class _Whitening:
         kind, F = self._factored(block, rows)
         if kind == "constant":
             return np.matmul(F, block.Y[rows]), block.tau[rows] @ F.T
-        W = F if kind == "factor" else _tri_inverse(F)  # L_i⁻¹ per sample
+        W = F if kind == "factor" else tri_inverse(F)  # L_i⁻¹ per sample
         return np.matmul(W, block.Y[rows]), np.einsum("cab,cb->ca", W, block.tau[rows])
 
     def residual(self, block: IdentificationProblem, rows: slice, theta: np.ndarray) -> np.ndarray:
@@ -92,7 +92,7 @@ class _Whitening:
         kind, F = self._factored(block, rows)
         if kind == "constant":
             return r @ F.T
-        return np.einsum("cab,cb->ca", F, r) if kind == "factor" else _forward(F, r)
+        return np.einsum("cab,cb->ca", F, r) if kind == "factor" else forward_substitute(F, r)
 
     def _constant(self, C: np.ndarray) -> np.ndarray:
         if self.Li is None or not np.array_equal(C, self.C):
@@ -102,7 +102,7 @@ class _Whitening:
                 L = None
             if L is None or not np.all(np.isfinite(L)):  # the same C at every sample: all of them fail
                 raise _not_positive_definite(self.problem, self.what, self.problem.N, float(np.linalg.eigvalsh(C)[0]))
-            self.C, self.Li = C.copy(), _tri_inverse(L[None])[0]
+            self.C, self.Li = C.copy(), tri_inverse(L[None])[0]
         return self.Li
 
 
@@ -190,7 +190,7 @@ def fit_weighted_newton(
     H, g, c, H_e, g_e = weighted_statistics(problem, white, chunk, energy=True)
     # parameters f cannot see that only loosen a block: solved on the closed set, then completed (newton.closure)
     cons, done = on_closure(feasible_set(problem.parameters, constrained), H, c, problem.parameters.names)
-    theta_f = _solve_psd(H, g, rtol=1e-10)  # the unconstrained weighted LS (min-norm): the frozen-metric LS
+    theta_f = solve_psd(H, g, rtol=1e-10)  # the unconstrained weighted LS (min-norm): the frozen-metric LS
     f_min = max(c - 2.0 * float(g @ theta_f) + float(theta_f @ H @ theta_f), 0.0)
 
     def f_of(th):
@@ -199,23 +199,23 @@ def fit_weighted_newton(
 
     def objective(th, order):
         if not order:
-            return _Derivatives(f_of(th))
-        return _Derivatives(f_of(th), 2.0 * (H @ th - g), 2.0 * H)
+            return Derivatives(f_of(th))
+        return Derivatives(f_of(th), 2.0 * (H @ th - g), 2.0 * H)
 
     start = None
-    theta_c = _central_point(_solve_psd(H_e, g_e, rtol=1e-10), cons)
+    theta_c = central_point(solve_psd(H_e, g_e, rtol=1e-10), cons)
     if cons.margin(theta_c) > 0:  # as newton.start.starting_point with the energy seed; every θ is in the domain
         d = theta_f - theta_c
         beta = min(1.0, 0.9 * cons.max_step(theta_c, d))
         line = theta_c + beta * d if beta > 1e-3 else theta_c
-        lifted = _central_point(theta_f, cons)
+        lifted = central_point(theta_f, cons)
         f_lifted = f_of(lifted) if cons.margin(lifted) > 0 else np.inf
         label = "energy→frozen-metric→central"
         start, theta0 = ((f"{label}→lifted", lifted) if f_lifted < f_of(line) else (label, line))
     if start is None:  # the same closed problem from the weighted LS's central point or phase I (not a fit without
         # the closure: newton.closure)
         theta0, start = constant_metric_start(problem, cons, theta_f)
-    theta, _, _, info = _interior_point(problem, cons, theta0, None, None, tol, max_iter, chunk, verbose,
+    theta, _, _, info = run_interior_point(problem, cons, theta0, None, None, tol, max_iter, chunk, verbose,
                                         objective=objective, f_scale=c)
     info.pop("objective")
     info.update(start=start, statistics="one pass (H = Σ YᵀC⁻¹Y)", weight=white.kind)

@@ -1,0 +1,147 @@
+"""The dual-metric fit with a physical noise model (estimators.noise_dm): its objective's derivatives against finite
+differences, its exact limits, its chart invariance, and its consistency under noise in the regressor."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from dualid.estimators.methods import make_estimator
+from dualid.estimators.newton.noise_objective import noise_model_derivatives
+from dualid.estimators.noise_dm import NoiseModelDM
+from dualid.estimators.noise_level import estimate_noise
+from tests.factories import drag_problem, random_chart
+
+
+def eiv_problem(seed: int, N: int = 300, torque: float = 0.05, regressor: float = 0.3):
+    """τ_i = M_i(θ) v_i (drag): Y built from the measured v_i + δv_i, τ from the true v_i + ε_i: noise in the regressor
+    enters the residual as M_i(θ) δv_i, as accelerations do in an inertia model. (problem, θ_true)."""
+    rng = np.random.default_rng(seed)
+    problem, theta = drag_problem(rng, N=N, n=3)
+    v_meas = problem.v + regressor * rng.standard_normal(problem.v.shape)
+    tau = problem.tau + torque * rng.standard_normal(problem.tau.shape)
+    return replace(problem, Y=problem.metric.apply(v_meas), tau=tau, v=v_meas), theta
+
+
+def rel(a, b):
+    return float(np.linalg.norm(np.asarray(a) - np.asarray(b)) / max(np.linalg.norm(b), 1e-300))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_gradient_and_hessian_match_finite_differences(seed):
+    problem, theta = eiv_problem(seed, N=40)
+    rng = np.random.default_rng(seed)
+    S = random_chart(rng, 1, 3, False)
+    S = S @ S.T * 0.01
+    A = random_chart(rng, 1, 3, False)
+    A = A @ A.T * 0.1
+    th = theta * rng.uniform(0.8, 1.2, theta.shape)
+    der = noise_model_derivatives(problem, th, S, A)
+    h = 1e-6 * np.abs(th)
+    g = np.empty_like(th)
+    H = np.empty((len(th), len(th)))
+    for k in range(len(th)):
+        e = np.zeros_like(th)
+        e[k] = h[k]
+        plus, minus = noise_model_derivatives(problem, th + e, S, A), noise_model_derivatives(problem, th - e, S, A)
+        g[k] = (plus.f - minus.f) / (2 * h[k])
+        H[:, k] = (plus.grad - minus.grad) / (2 * h[k])
+    assert rel(der.grad, g) < 1e-6
+    # the Hessian handed over is the exact one where it is positive definite, else its Gauss–Newton part
+    if np.linalg.eigvalsh(0.5 * (H + H.T))[0] > 1e-6 * np.abs(H).max():
+        assert rel(der.hess, H) < 1e-5
+
+
+def test_limits_wls_and_the_papers_objective():
+    problem, theta = eiv_problem(2, N=30)
+    S = np.diag([0.3, 0.2, 0.5])
+    r = problem.residual(theta)
+    wls = float(np.einsum("ia,ab,ib->", r, np.linalg.inv(S), r))
+    assert rel(noise_model_derivatives(problem, theta, S, np.zeros((3, 3)), 0).f, wls) < 1e-12  # Σ_a = 0: WLS
+    # Σ_τ = 0 and Σ_a = M(θ₀)⁻¹ on a single sample: C = M(θ₀) at θ₀, the paper's objective there
+    one = problem.subset([0])
+    Minv = np.linalg.inv(one.metric.evaluate(theta)[0])
+    assert rel(noise_model_derivatives(one, theta, np.zeros((3, 3)), Minv, 0).f, one.dual_metric_objective(theta)) < 1e-10
+
+
+def test_objective_is_invariant_when_the_noise_levels_are_carried_covariantly():
+    problem, theta = eiv_problem(3, N=30)
+    rng = np.random.default_rng(3)
+    S, A = np.diag([0.3, 0.2, 0.5]), np.diag([0.1, 0.4, 0.2])
+    f = noise_model_derivatives(problem, theta, S, A)
+    B = random_chart(rng, 1, 3, False)
+    Bi = np.linalg.inv(B)
+    g = noise_model_derivatives(problem.in_coordinates(B), theta, B.T @ S @ B, Bi @ A @ Bi.T)
+    assert rel(g.f, f.f) < 1e-12 and rel(g.grad, f.grad) < 1e-10
+
+
+def test_noise_levels_are_recovered_and_the_fit_is_consistent_under_regressor_noise():
+    problem, theta = eiv_problem(4, N=2000, torque=0.05, regressor=0.3)
+    levels = estimate_noise(problem, theta)
+    assert np.allclose(np.diag(levels.sigma_a), 0.09, rtol=0.25)
+    assert levels.acceleration_share > 0.9  # the torque noise is 0.1 % of this residual: its level is barely seen
+    dm = NoiseModelDM().fit(problem)
+    wls = make_estimator("wls").fit(problem)
+    assert rel(dm.theta, theta) < 0.3 * rel(wls.theta, theta)  # least squares shrinks θ (attenuation); dm does not
+    assert dm.noise is not None and dm.noise.source == "estimated" and dm.noise.acceleration_share > 0.5
+
+
+def by_hand(problem, B):
+    """The data as they would arrive in the chart B when logged so, with no record of the sensor chart."""
+    return replace(problem.in_coordinates(B), sensor_chart=None)
+
+
+def test_fit_is_the_same_in_every_recorded_chart_and_unit():
+    """The default (one acceleration variance for all joints, in the sensor chart): every chart the problem records,
+    and unit and force scalings done by hand that change every coordinate alike."""
+    problem, _ = eiv_problem(5, N=200)
+    rng = np.random.default_rng(5)
+    fit = NoiseModelDM().fit(problem)
+    charts = {
+        "constant": problem.in_coordinates(random_chart(rng, problem.N, 3, per_sample=False)),
+        "per_sample": problem.in_coordinates(random_chart(rng, problem.N, 3, per_sample=True)),
+        "units_recorded": problem.in_coordinates(np.diag([1e3, 1e-6, 1e6])),
+        "units_1e3": by_hand(problem, np.eye(3) * 1e3),
+        "units_1e-6": by_hand(problem, np.eye(3) * 1e-6),
+        "force_1e6": replace(problem, Y=problem.Y * 1e6, tau=problem.tau * 1e6,
+                             metric=problem.metric.pullback(np.eye(3) * 1e3)),  # N → µN: τ, Y and M ×1e6
+        "force_1e-6": replace(problem, Y=problem.Y * 1e-6, tau=problem.tau * 1e-6,
+                              metric=problem.metric.pullback(np.eye(3) * 1e-3)),
+    }
+    for name, other in charts.items():
+        res = NoiseModelDM().fit(other)
+        assert rel(res.objective, fit.objective) < 1e-8, name
+        assert rel(other.Y @ res.theta, other.Y @ fit.theta) < 1e-8, name
+
+
+def test_per_joint_levels_are_the_same_under_per_coordinate_units_by_hand():
+    """structure="diagonal" (a variance per joint): also each coordinate in its own unit, ×1e±3 and ×1e±6."""
+    problem, _ = eiv_problem(5, N=200)
+    est = NoiseModelDM(structure="diagonal")
+    fit = est.fit(problem)
+    for B in (np.diag([1e3, 1e-3, 1.0]), np.diag([1e-6, 1.0, 1e6])):
+        other = by_hand(problem, B)
+        res = est.fit(other)
+        assert rel(res.objective, fit.objective) < 1e-8
+        assert rel(other.Y @ res.theta, other.Y @ fit.theta) < 1e-8
+
+
+def test_fixed_noise_levels_are_used_and_recorded():
+    problem, theta = eiv_problem(6, N=200)
+    res = NoiseModelDM(sigma_tau=np.eye(3) * 0.0025, sigma_a=np.eye(3) * 0.09).fit(problem)
+    assert res.noise.source == "fixed" and res.noise.rounds == 1
+    assert res.solve_time > 0 and res.is_consistent
+
+
+def test_a_residual_that_is_not_noise_is_recognised_and_wls_returned():
+    """Unmodelled quadratic drag (the regressor nearly clean): dm's held-out torque is worse than its noise model
+    predicts, so it returns WLS and says why; with the modelled noise only it keeps its own fit."""
+    problem, theta = eiv_problem(0, N=1000, torque=0.05, regressor=0.05)
+    friction = replace(problem, tau=problem.tau + 0.8 * problem.v * np.abs(problem.v) * np.array([1.0, 2.0, 0.5]))
+    res = NoiseModelDM().fit(friction)
+    wls = make_estimator("wls").fit(friction.in_sensor_chart())
+    assert res.noise.choice.startswith("wls: the residual is not the modelled noise")
+    assert res.noise.check_excess > 0.01 and np.allclose(res.theta, wls.theta)
+    clean, _ = eiv_problem(0, N=1000, torque=0.05, regressor=0.3)
+    kept = NoiseModelDM().fit(clean)
+    assert kept.noise.choice == "noise model" and abs(kept.noise.check_excess) < 0.05
