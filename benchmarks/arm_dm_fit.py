@@ -1,6 +1,6 @@
 """A small simulated arm: OLS, WLS, the paper's DM and the feasible-GLS ``dm`` under torque noise and model error.
 
-Until benchmarks/statistics.py (wt-statbench) exists, this is the measurement for issue 11, points 1–2.
+A fixed 4-DoF arm with exact states, a smaller companion of benchmarks/statistical_quality.py (random 3–7-DoF arms).
 
 System: a 4-DoF Pinocchio arm (boxes; axes z, y, y, x) with viscous + Coulomb friction and armature
 on every joint, all of which the identification model has (``with_joint_terms``). Exact states

@@ -97,7 +97,7 @@ def summarise(rows: list[dict], methods) -> list[dict]:
     return out
 
 
-def _fmt(x, digits=3) -> str:
+def fmt(x, digits=3) -> str:
     return "–" if x is None else ("inf" if not np.isfinite(x) else f"{x:.{digits}f}")
 
 
@@ -113,14 +113,14 @@ def to_markdown(result: dict) -> str:
             cells = {s["method"]: s for s in summary if s["case"] == case and s["N"] == N}
             if not cells:
                 continue
-            rows.append([case, N] + [f"{_fmt(cells[m]['mean'])} ({_fmt(cells[m]['min'])}–{_fmt(cells[m]['max'])})"
+            rows.append([case, N] + [f"{fmt(cells[m]['mean'])} ({fmt(cells[m]['min'])}–{fmt(cells[m]['max'])})"
                                      if m in cells else "–" for m in methods]
                         + [sum(c["failures"] for c in cells.values()), sum(c["inconsistent"] for c in cells.values())])
     lines += markdown_table(["noise", "N", *methods, "failures", "inconsistent"], rows)
     n_max = max(s["N"] for s in summary)
     lines += ["", f"Median CPU time per fit [s] (N = {n_max}, all cases):", ""]
     full = [r for r in result["rows"] if r["N"] == n_max]
-    lines += markdown_table(methods, [[_fmt(float(np.median([r["cpu_s"] for r in full if r["method"] == m])), 3)
+    lines += markdown_table(methods, [[fmt(float(np.median([r["cpu_s"] for r in full if r["method"] == m])), 3)
                                        for m in methods]])
     lines += ["", f"Wall time {result['wall_time_s']:.0f} s; dualid from `{result['provenance']['dualid']}` "
               f"(commit {result['provenance']['commit'][:10]})."]
@@ -175,7 +175,7 @@ def main(argv=None) -> int:
         for seed in seeds:
             rows += run_seed(seed, case, methods, sizes)
             print(f"[{time.time() - t0:5.0f} s] {case} seed {seed}: " + ", ".join(
-                f"{r['method']}@{r['N']} {_fmt(r.get('geodesic'))}" for r in rows[-len(methods) * len(sizes):]), flush=True)
+                f"{r['method']}@{r['N']} {fmt(r.get('geodesic'))}" for r in rows[-len(methods) * len(sizes):]), flush=True)
     cmd = "python benchmarks/authors_example.py " + " ".join(sys.argv[1:] if argv is None else argv)
     result = {"command": cmd, "methods": methods, "seeds": seeds, "cases": args.cases,
               "truth": authors_arm.true_parameters(), "wall_time_s": time.time() - t0, "provenance": provenance(),

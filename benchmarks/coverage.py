@@ -1,4 +1,4 @@
-"""Coverage of the 95 % intervals of the base parameters (issue 14): do they contain the truth 95 % of the time?
+"""Coverage of the 95 % intervals of the base parameters: do they contain the truth 95 % of the time?
 
 A random 3-joint arm of dualid.bench.arms (true viscous/Coulomb friction and armature; the identification
 model has the same terms, so Y θ_true is the noise-free torque exactly). One excitation (fixed design, exact

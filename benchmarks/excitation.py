@@ -1,4 +1,4 @@
-"""Excitation benchmark (issue 15): optimised Fourier trajectories against the best of 20 random ones.
+"""Excitation benchmark: optimised Fourier trajectories against the best of 20 random ones.
 
     python benchmarks/excitation.py --out benchmarks/excitation            # the committed run
     python benchmarks/excitation.py --out /tmp/excitation --quick          # a smoke run (1 seed, small)

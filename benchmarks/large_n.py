@@ -1,5 +1,5 @@
 """Every method of the method table at large N on the benchmark Crazyflie: wall time, peak memory and the
-ratio to numpy lstsq on the same data (issue 12, point 6).
+ratio to numpy lstsq on the same data.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/large_n.py --out benchmarks/large_n.md
 

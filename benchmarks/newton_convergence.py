@@ -1,4 +1,4 @@
-"""Convergence corpus for dualid's interior-point solvers (issue 12): DM Newton vs the SDP, and the quadratic fits.
+"""Convergence corpus for dualid's interior-point solvers: DM Newton vs the SDP, and the quadratic fits.
 
     PYTHONPATH=src python benchmarks/newton_convergence.py [--sdp-max-n 1000] [--out benchmarks/newton_convergence.md]
 

@@ -1,4 +1,4 @@
-"""Why dm-paper Newton fails on 5 stress-corpus problems (issue 12, point 2): the infimum is not attained there.
+"""Why dm-paper Newton fails on 5 stress-corpus problems: the infimum is not attained there.
 
     OMP_NUM_THREADS=1 PYTHONPATH=src python benchmarks/newton_unattained.py [--out benchmarks/newton_unattained.md]
 

@@ -1,4 +1,4 @@
-"""dm-paper by Newton against the SDP (Clarabel), side by side in one run, at any N (issue 12, point 6).
+"""dm-paper by Newton against the SDP (Clarabel), side by side in one run, at any N.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/newton_vs_sdp.py --sizes 1000,20000 --out benchmarks/newton_vs_sdp.md
 

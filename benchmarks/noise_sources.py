@@ -45,7 +45,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from authors_example import _fmt, output_paths, provenance  # noqa: E402
+from authors_example import fmt, output_paths, provenance  # noqa: E402
 
 from dualid.bench import mujoco_arms as ma  # noqa: E402
 from dualid.errors import DualidError  # noqa: E402
@@ -195,7 +195,7 @@ def to_markdown(result: dict) -> str:
 
     def table(title, metric, keys, digits=3):
         out.extend(["", f"## {title}", ""])
-        out.extend(markdown_table(["case", *keys], [[c] + [_fmt(cell.get((c, k), {}).get(f"median_{metric}"), digits)
+        out.extend(markdown_table(["case", *keys], [[c] + [fmt(cell.get((c, k), {}).get(f"median_{metric}"), digits)
                                                           for k in keys] for c in cases]))
 
     table("Floor ratio: held-out torque error with exact states ÷ the true parameters'", "floor_ratio", methods)
@@ -208,8 +208,8 @@ def to_markdown(result: dict) -> str:
         for c in cases:
             for k in methods:
                 r = ratio.get((c, k), {}).get(metric, {})
-                rows.append([c, k, _fmt(r.get("vs_best_of_ols_wls_dm_paper")), _fmt(r.get("vs_dm_paper")),
-                             _fmt(r.get("vs_wls"))])
+                rows.append([c, k, fmt(r.get("vs_best_of_ols_wls_dm_paper")), fmt(r.get("vs_dm_paper")),
+                             fmt(r.get("vs_wls"))])
         out.extend(markdown_table(["case", "method", "÷ best of OLS, WLS, dm-paper", "÷ dm-paper", "÷ WLS"], rows))
     table("Base-parameter error ‖D(β̂ − β)‖ / ‖Dβ‖", "base_error", methods, 4)
     table("Forward dynamics: NCC of predicted vs true accelerations (higher is better)", "ncc", ["truth", *methods], 4)
@@ -256,7 +256,7 @@ def main(argv=None) -> int:
                 rows += run_dataset(robot, seed, case, methods, train_s=train_s)
                 done = rows[-len(methods):]
                 print(f"[{time.time() - t0:5.0f} s] {case} {robot} seed {seed}: " + ", ".join(
-                    f"{r['method']} {_fmt(r.get('floor_ratio'))} ({r['cpu_s']:.1f} s)" for r in done), flush=True)
+                    f"{r['method']} {fmt(r.get('floor_ratio'))} ({r['cpu_s']:.1f} s)" for r in done), flush=True)
     cmd = "python benchmarks/noise_sources.py " + " ".join(sys.argv[1:] if argv is None else argv)
     result = {"command": cmd, "methods": methods, "robots": robots, "seeds": seeds, "cases": cases,
               "config": {"fs_hz": FS, "train_s": train_s, "test_s": TEST_S, "savgol_window_s": WINDOW,

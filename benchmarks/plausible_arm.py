@@ -1,4 +1,4 @@
-"""Plausible parameters on simulated 7-DoF arms with a CAD-like prior (issue 14's done-when, over seeds).
+"""Plausible parameters on simulated 7-DoF arms with a CAD-like prior (over seeds).
 
 System: ``dualid.bench.arms.random_arm(rng, 7)`` (random axes and boxes, friction and armature). Prior:
 every body's 10 parameters scaled by one factor 1 ± U(0.2, 0.3) (a density error: a CAD-like prior that

@@ -1,10 +1,10 @@
-"""Statistical-quality benchmark of dualid's estimators (issue 11, point 4).
+"""Statistical-quality benchmark of dualid's estimators.
 
     python benchmarks/statistical_quality.py --quick          # smoke run, ~2 minutes
     python benchmarks/statistical_quality.py                  # full run (≤ ~20 minutes on 2 cores)
     python benchmarks/statistical_quality.py --methods ols,wls,dm-paper,dualid.estimators.gls:FeasibleGLS
 
-Writes benchmarks/statistics/results.json and results.md (or --out DIR). Data and metrics are
+Writes benchmarks/statistical_quality/results.json and results.md (or --out DIR). Data and metrics are
 defined in dualid.bench.arms (random 3–7-DoF arms simulated with Pinocchio). Two families:
 
 - noise: torque noise 0/2/5/10 % of each joint's τ rms, N = 1e3/3e3/1e4 training samples, seeds 0..S-1
@@ -277,7 +277,7 @@ def to_markdown(result: dict) -> str:
     cfg = result["config"]
     m = result["machine"]
     out = [
-        "# Statistical-quality benchmark (issue 11, point 4)",
+        "# Statistical-quality benchmark",
         "",
         f"Command: `{result['command']}`  ",
         f"Wall time {result['wall_time_s'] / 60:.1f} min with {result['workers']} worker(s) on {m['cpu']} "
@@ -440,7 +440,7 @@ def main(argv=None) -> int:
     ap.add_argument("--methods", default=DEFAULT_METHODS,
                     help="comma-separated: keys of the method table (ols, wls, dm, dm-paper, …) or [label=]module:Class[:kwargs-json]")
     ap.add_argument("--workers", type=int, default=2, help="processes (at most 2)")
-    ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "statistics"))
+    ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "statistical_quality"))
     ap.add_argument("--render", metavar="RESULTS_JSON", help="only rewrite results.md next to an existing results.json")
     args = ap.parse_args(argv)
     if args.render:

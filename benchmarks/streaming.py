@@ -1,4 +1,4 @@
-"""A fit streamed from a Parquet file, chunk by chunk, against the materialised problem's size (issue 12, point 7).
+"""A fit streamed from a Parquet file, chunk by chunk, against the materialised problem's size.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/streaming.py --n 1000000 --methods ols --out benchmarks/streaming.md
 

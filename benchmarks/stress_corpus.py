@@ -1,4 +1,4 @@
-"""Stress corpus of identification problems (issue 12, point 1): every method and solver on every problem.
+"""Stress corpus of identification problems: every method and solver on every problem.
 
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python benchmarks/stress_corpus.py \
         [--out benchmarks/stress_corpus] [--quick] [--no-large]
@@ -33,7 +33,7 @@ def _fmt(x, spec=".3g"):
 
 
 def summary(rows: list[dict]) -> list[str]:
-    """The count table per (method, variant, solver) and the issue's three counts."""
+    """The count table per (method, variant, solver) and the three summary counts."""
     keys = []
     for r in rows:
         k = (r["method"], r["variant"], r["solver_choice"])

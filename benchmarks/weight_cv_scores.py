@@ -1,6 +1,6 @@
 """dm's cross-validation scores on the statistical benchmark's model-error training sets (what its choice saw).
 
-    python benchmarks/weight_cv_scores.py --cases sensor,payload --out benchmarks/statistics/session6/cv_scores.md
+    python benchmarks/weight_cv_scores.py --cases sensor,payload --out benchmarks/weight_cv_scores.md
 
 For each case and seed (the same arms and training data as benchmarks/statistical_quality.py's model-error family),
 fits the default ``dm`` and records its choice and the cross-validated held-out torque NRMSE of its pilot and of its

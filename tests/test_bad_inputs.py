@@ -164,7 +164,8 @@ URDF_CASES = [
     ("mass-two-numbers", '<mass value="1.0"/>', '<mass value="1 2"/>', "expected 1 finite number, got '1 2'"),
     ("mass-no-value", '<mass value="1.0"/>', "<mass/>", "<mass value>: expected 1 finite number, got None"),
     ("mass-missing", '<mass value="1.0"/>', "", "link 'link1' <inertial> has no <mass value=...>"),
-    ("mass-zero-with-inertia", '<mass value="0.5"/>', '<mass value="0"/>', "link 'link2' <inertial>: a mass of 0 kg with a non-zero inertia"),
+    ("mimic-unknown-joint", '<dynamics damping="0.02" friction="0.0"/>', '<dynamics damping="0.02" friction="0.0"/><mimic joint="Joint9"/>',
+     "joint 'Joint2' <mimic joint>: expected the name of a joint of the URDF, got 'Joint9'"),
     ("inertia-nan", 'ixx="0.02"', 'ixx="nan"', "link 'link1' <inertial> <inertia ixx>: expected 1 finite number, got 'nan'"),
     ("inertia-word", 'iyy="0.011"', 'iyy="big"', "link 'link2' <inertial> <inertia iyy>: expected 1 finite number, got 'big'"),
     ("inertia-negative", 'ixx="0.02"', 'ixx="-0.02"', "<inertia>: expected a positive semi-definite matrix, got principal moments"),
@@ -551,6 +552,87 @@ for _id, _args, _msg in [
     _flag_case(_id, _args, _msg)
 
 
+# --- what vendors' URDFs and new users' inputs do (each a typed error or a warning, never a traceback) ------------
+TOOL = '''  <link name="tool">
+    <inertial>
+      <mass value="0"/>
+      <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/>
+    </inertial>
+  </link>
+  <joint name="tool_joint" type="fixed">
+    <parent link="link2"/>
+    <child link="tool"/>
+  </joint>
+</robot>'''
+MESH = '<collision><geometry><mesh filename="package://arm_description/meshes/link1.stl"/></geometry></collision></link>'
+for _id, _old, _new, _msg in [
+    ("massless-frame-with-inertia", "</robot>", TOOL, "link 'tool' <inertial>: a mass of 0 kg with a non-zero inertia "
+     "(ixx=0.001, ixy=0, ixz=0, iyy=0.001, iyz=0, izz=0.001); treated as a massless frame"),
+    ("two-origins", '<origin xyz="0 0 -0.4" rpy="0 0 0"/>', '<origin xyz="0 0 -0.4" rpy="0 0 0"/><origin xyz="0 0 -0.5"/>',
+     "joint 'Joint2' has 2 <origin> elements; the first is used (as urdfdom does)"),
+    ("mimic", '<dynamics damping="0.02" friction="0.0"/>', '<dynamics damping="0.02" friction="0.0"/><mimic joint="Joint1"/>',
+     "joint 'Joint2' mimics joint 'Joint1' (<mimic>); Pinocchio's regressor does not support mimic joints"),
+    ("package-mesh-not-found", "</inertial>\n  </link>\n  <link name=\"link2\">", "</inertial>\n  " + MESH + "\n  <link name=\"link2\">",
+     "MJCF: 1 collision mesh not found and left out of the MJCF (e.g. package://arm_description/meshes/link1.stl)"),
+]:
+    CASES.append(Case(f"urdf-warns-{_id}", (lambda old, new: lambda tmp: fit(tmp, write_urdf(tmp, URDF.replace(old, new, 1))))(_old, _new),
+                      0, _msg))
+    assert _old in URDF, _old
+_config_case("resample-rate-word", {"preprocessing": [{"resample": {"rate": "fast"}}, DIFF]},
+             "resample: rate must be a positive number of Hz, got 'fast'")
+_config_case("window-word", {"preprocessing": [{"differentiate": {"window": "short"}}]},
+             "differentiate: window must be a positive number of seconds, got 'short'")
+_config_case("cutoff-word", {"preprocessing": [DIFF, {"filter_lowpass": {"cutoff": "low"}}]}, "low-pass cutoff must be in (0, 250) Hz")
+_config_case("package-path-number", {"model": {"urdf": "r.urdf", "package_path": 5}}, "model.package_path: expected a list of file paths, got 5")
+_log_case("effort-all-zero", _with(lambda df: df.assign(tau_meas1=0.0, tau_meas2=0.0)),
+          "every effort column is 0 in every row (tau_meas1, tau_meas2): nothing to identify")
+_log_case("effort-one-joint-zero", _with(lambda df: df.assign(tau_meas2=0.0)), "effort column 'tau_meas2' is 0 in every row", code=0)
+PRISMATIC_COLUMNS = {"joints": {f"Joint{k}": {"position": f"pos_meas{k}", "velocity": f"vel_meas{k}", "effort": f"tau_meas{k}"}
+                                for k in (1, 2)}}
+
+
+@case("config-angular-unit-on-prismatic", 2, "column map: joint 'Joint1' is prismatic but its position unit is 'rad' "
+      "(angular); expected one of ['m', 'mm']")
+def _(tmp):
+    urdf = write_urdf(tmp, URDF.replace('type="revolute"', 'type="prismatic"', 1), "prismatic.urdf")
+    cfg = write_config(tmp, {"columns": {**PRISMATIC_COLUMNS, "units": {"position": {"Joint1": "rad"}}}})
+    return ["fit", "--config", str(cfg), "--model", str(urdf), "--out", str(tmp / "out")]
+
+
+_flag_case("simulate-seed-negative", lambda tmp: ["simulate", "pan-tilt", "--size", "small", "--seed", "-1", "--out", str(tmp / "o")],
+           "--seed: expected an integer ≥ 0, got -1")
+
+
+def _stream(tmp: Path, make: Callable[[Path], Path], *extra: str) -> list[str]:
+    return ["fit-stream", "--model", str(write_urdf(tmp)), "--data", str(make(tmp)), "--allow-unidentifiable", *extra]
+
+
+def _parquet(rows: int, random: bool):
+    def make(tmp: Path) -> Path:
+        model, rng = pin.buildModelFromXML(URDF), np.random.default_rng(0)
+        df = GOOD.iloc[:rows]
+        q, v = df[["pos_meas1", "pos_meas2"]].to_numpy(), df[["vel_meas1", "vel_meas2"]].to_numpy()
+        a = np.gradient(v, 1 / RATE, axis=0) if rows > 2 else np.zeros_like(v)
+        tau = np.stack([pin.rnea(model, model.createData(), *x) for x in zip(q, v, a)])
+        cols = {"q_0": q[:, 0], "q_1": q[:, 1], "v_Joint1": v[:, 0], "v_Joint2": v[:, 1], "a_Joint1": a[:, 0],
+                "a_Joint2": a[:, 1], "tau_Joint1": tau[:, 0], "tau_Joint2": tau[:, 1]}
+        if random:
+            cols = {k: rng.normal(size=rows) for k in cols}
+        pd.DataFrame(cols).to_parquet(tmp / "run.parquet")
+        return tmp / "run.parquet"
+    return make
+
+
+for _id, _make, _code, _msg in [
+    ("empty-file", lambda tmp: _text_file(b"", "e.parquet")(tmp), 2, "e.parquet: not a Parquet file"),
+    ("csv", lambda tmp: write_log(tmp), 2, "run.csv: not a Parquet file"),
+    ("one-row", _parquet(1, False), 2, "1 sample × 2 coordinates = 2 equations for 20 parameters; a fit needs more samples"),
+    ("random-numbers", _parquet(400, True), 0, "the fitted model explains"),
+    ("good", _parquet(400, False), 0, "ols: optimal"),
+]:
+    CASES.append(Case(f"stream-{_id}", (lambda make: lambda tmp: _stream(tmp, make))(_make), _code, _msg))
+
+
 IDS = [c.id for c in CASES]
 assert len(set(IDS)) == len(IDS), sorted({i for i in IDS if IDS.count(i) > 1})
 
@@ -647,3 +729,99 @@ def test_read_urdf_accepts_the_good_robot_and_the_dfki_one(tmp_path):
 
 def test_json_dump_of_ids_is_stable():
     json.dumps(IDS)  # ids are plain strings (readable in -k filters)
+
+
+
+def test_stream_warns_only_when_the_fit_explains_little(tmp_path):
+    good = runner.invoke(app, _stream(tmp_path, _parquet(400, False)))
+    assert good.exit_code == 0 and "explains" not in _text(good)
+
+
+def test_package_path_resolves_meshes_and_the_mjcf_keeps_them(tmp_path, monkeypatch):
+    """--package-path and ROS_PACKAGE_PATH find package:// meshes; the MJCF then holds the mesh."""
+    pkg = tmp_path / "share" / "arm_description" / "meshes"
+    pkg.mkdir(parents=True)
+    v = np.array([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0, 0, 0.1]], dtype=np.float32)  # a tetrahedron, binary STL
+    faces = [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)]
+    record = np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+    (pkg / "link1.stl").write_bytes(b"\0" * 80 + np.uint32(4).tobytes()
+                                    + np.array([(np.zeros(3), v[list(f)], 0) for f in faces], dtype=record).tobytes())
+    urdf = write_urdf(tmp_path, URDF.replace("</inertial>\n  </link>\n  <link name=\"link2\">",
+                                             "</inertial>\n  " + MESH + "\n  <link name=\"link2\">", 1))
+    mesh_urdf = write_urdf(tmp_path, urdf.read_text(), "mesh.urdf")
+    config = write_config(tmp_path, {"model": {"urdf": "mesh.urdf", "package_path": ["share"]}})  # relative to the config
+    for args, env in ((fit(tmp_path, mesh_urdf)[:-2] + ["--package-path", str(tmp_path / "share"), "--out"], None),
+                      (["fit", "--config", str(config), "--out"], None),
+                      (fit(tmp_path, mesh_urdf)[:-1], str(tmp_path / "share"))):
+        if env:
+            monkeypatch.setenv("ROS_PACKAGE_PATH", env)
+        out = tmp_path / f"o{len(list(tmp_path.glob('o*')))}"
+        result = runner.invoke(app, args + [str(out)])
+        assert result.exit_code == 0 and "not found" not in _text(result), _text(result)
+        xml = (out / "ols.xml").read_text()
+        assert 'file="' in xml and "link1.stl" in xml
+
+
+def test_mjcf_drops_the_range_the_logs_leave():
+    """The logged motion leaves Joint2's URDF range: the MJCF has no range there (no limit force in MuJoCo)."""
+    import mujoco
+
+    from dualid.model.mjcf import identified_mjcf
+    from dualid.model.rigid_body import RigidBodyModel
+
+    tmp = Path(__import__("tempfile").mkdtemp())
+    urdf = write_urdf(tmp)
+    rigid = RigidBodyModel.from_urdf(urdf)
+    text = identified_mjcf(urdf, rigid, rigid.nominal, logged={"Joint1": (-1.0, 1.0), "Joint2": (-0.5, 8.59)})
+    assert any("joint 'Joint2': the logs reach [-0.5, 8.59], outside the URDF's range [-3.2, 3.2]" in n for n in text.notes)
+    model = mujoco.MjModel.from_xml_string(text.xml)
+    assert list(model.jnt_limited) == [1, 0]
+
+
+def test_quaternion_columns_in_the_wrong_order_are_detected(tmp_path):
+    """A permuted quaternion has unit norm too; the logged twist tells the orders apart."""
+    from dualid.data.io import load_log
+    from dualid.errors import DataError
+
+    model = pin.Model()
+    model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "base")
+    t = np.arange(200) / 100.0
+    w = np.array([0.3, -0.2, 0.5, 0.4, 0.7, -0.3])  # a constant body twist (screw motion)
+    q = np.stack([pin.integrate(model, pin.neutral(model), w * tk) for tk in t])
+    cols = {"time": t, **{k: q[:, i] for i, k in enumerate(["x", "y", "z", "qx", "qy", "qz", "qw"])},
+            **{f"v{k}": np.full(t.size, w[k]) for k in range(6)}}
+    pd.DataFrame(cols).to_csv(tmp_path / "base.csv", index=False)
+    base = {"position": ["x", "y", "z"], "twist": [f"v{k}" for k in range(6)]}
+    load_log(tmp_path / "base.csv", {"time": "time", "base": {**base, "quaternion": ["qx", "qy", "qz", "qw"]}})
+    with pytest.raises(DataError, match="matches the quaternion columns .* read in xyzw order .* set columns.base.quaternion_order: xyzw"):
+        load_log(tmp_path / "base.csv", {"time": "time", "base": {**base, "quaternion": ["qx", "qy", "qz", "qw"],
+                                                                 "quaternion_order": "wxyz"}})
+
+
+def test_a_floating_body_without_wrenches_is_refused(tmp_path):
+    """A free body's motion without the forces on it determines no mass (it was fitted as a 2.5e-14 kg body)."""
+    from dualid.data.checks import check_effort
+    from dualid.errors import DataError
+
+    with pytest.raises(DataError, match="the floating base has no wrench section"):
+        check_effort("box.csv", np.zeros((10, 6)), None, [], True)
+
+
+def test_report_says_which_model_files_were_written_and_why_not(tmp_path):
+    """A mesh MuJoCo cannot read (an ASCII STL) leaves no MJCF: report.md and parameters.yaml say why; a mesh
+    not found leaves the MJCF without it, and the report says so."""
+    pkg = tmp_path / "share" / "arm_description" / "meshes"
+    pkg.mkdir(parents=True)
+    (pkg / "link1.stl").write_text("solid t\nendsolid t\n")
+    urdf = write_urdf(tmp_path, URDF.replace("</inertial>\n  </link>\n  <link name=\"link2\">",
+                                             "</inertial>\n  " + MESH + "\n  <link name=\"link2\">", 1))
+    for name, extra, said in (("bad", ["--package-path", str(tmp_path / "share")], "ols.xml not written: write_mjcf: "
+                               "MuJoCo refused the identified model"), ("missing", [], "1 collision mesh not found")):
+        out = tmp_path / name
+        result = runner.invoke(app, fit(tmp_path, urdf)[:-1] + [str(out), *extra])
+        assert result.exit_code == 0, _text(result)
+        report = " ".join((out / "report.md").read_text().split())
+        assert "## Model files" in report and said in report
+        record = yaml.safe_load((out / "parameters.yaml").read_text())["methods"]["ols"]
+        assert (record["mjcf"].startswith("not written: write_mjcf: MuJoCo refused") if name == "bad"
+                else record["mjcf"] == "ols.xml" and "not found" in record["mjcf_notes"])

@@ -56,8 +56,9 @@ def test_dfki_defaults_are_near_the_example_config():
 
 
 def test_dfki_fit_from_flags_alone_is_within_10_percent_of_the_example_config(tmp_path):
-    """Issue 13's target, on one training and one held-out run (ols), both scored with the example's
-    preprocessing (dualid validate --config), so the measured torques compared against are the same."""
+    """Flags alone come within 10 % of the example config, on one training and one held-out run (ols), both
+    scored with the example's preprocessing (dualid validate --config), so the measured torques compared
+    against are the same."""
     import yaml
     from typer.testing import CliRunner
 

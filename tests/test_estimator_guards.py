@@ -1,4 +1,4 @@
-"""Every estimator records the metric guard itself (issue 11): against a given θ_ref, else its own pilot or prior."""
+"""Every estimator records the metric guard itself: against a given θ_ref, else its own pilot or prior."""
 
 import numpy as np
 import pytest

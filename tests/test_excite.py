@@ -1,4 +1,4 @@
-"""``dualid excite`` (issue 15): the Fourier trajectory, the design problem, the optimiser and the command.
+"""``dualid excite``: the Fourier trajectory, the design problem, the optimiser and the command.
 
 References: finite differences (trajectory derivatives, constraint Jacobians), pin.rnea (torques),
 dualid's own identifiability (rank of the base parameters), the log reader and ``dualid fit``."""

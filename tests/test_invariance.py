@@ -1,4 +1,4 @@
-"""Coordinate invariance (DESIGN.md §1): under q = φ(q̃), B = ∂φ/∂q̃, τ̃ = Bᵀτ, Ỹ = BᵀY, M̃ = BᵀMB.
+"""Coordinate invariance: under q = φ(q̃), B = ∂φ/∂q̃, τ̃ = Bᵀτ, Ỹ = BᵀY, M̃ = BᵀMB.
 
 - the dual-metric objective and minimiser are the same in every chart, unit and scaling;
 - the energy objective too; covariance-WLS only under constant linear changes; OLS in none.

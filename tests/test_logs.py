@@ -285,7 +285,7 @@ def test_array_meta_goes_to_a_side_file_and_comes_back(tmp_path):
     assert meta["true"]["note"] == "exact" and meta["k"] == 3
 
 
-# --- inputs people log (issue 13) ---------------------------------------------------------------
+# --- inputs people log ---------------------------------------------------------------
 @pytest.mark.parametrize("spelling", ["N m", "Nm", "N·m", "N*m", "N.m", " N  m "])
 def test_torque_unit_spellings_are_one_unit(spelling):
     cmap = ColumnMap.pattern(JOINTS, units={"effort": spelling})

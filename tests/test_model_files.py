@@ -196,7 +196,7 @@ def _file_tau(path: Path, names, runs, vc: float, loader: str) -> list[np.ndarra
 
 
 def test_dfki_files_give_dualids_held_out_scores(tmp_path):
-    """The issue's done-when: the DFKI example's dm.xml, loaded unchanged in Pinocchio and MuJoCo, gives
+    """The DFKI example's dm.xml, loaded unchanged in Pinocchio and MuJoCo, gives
     the held-out τ RMSE of dualid's own validation to 1e-6 N m; dm.urdf loses the armature, and with it
     the joint-2 score."""
     from dualid.report.model_files import write_model_files, written_theta
@@ -207,12 +207,18 @@ def test_dfki_files_give_dualids_held_out_scores(tmp_path):
     config = FitConfig.from_yaml(example).with_overrides(methods=("dm",), references=())
     outcome = fit_robot(config)
     (tmp_path / "out").mkdir()
-    _, record = write_model_files(outcome, tmp_path / "out")  # what dualid fit writes (without the figures)
+    record = write_model_files(outcome, tmp_path / "out").record()  # what dualid fit writes (without the figures)
     fit = outcome.fits["dm"]
     assert record["dm"] == {"theta": written_theta(fit)[1], "urdf": "dm.urdf", "mjcf": "dm.xml",
                             "mjcf_notes": record["dm"]["mjcf_notes"]}
     assert fit.plausible is not None and fit.plausible.form == "confidence"  # the default: θ_plausible in the region
     names, vc = outcome.model.coordinates, outcome.model.coulomb_velocity
+    # the MJCF simulates what was logged: no joint range that a logged run leaves (MuJoCo would add limit forces)
+    mj = mujoco.MjModel.from_xml_path(str(tmp_path / "out" / "dm.xml"))
+    for k, name in enumerate(names):
+        j, q = mj.joint(name).id, np.concatenate([r.q[:, k] for r in (*outcome.train, *outcome.test)])
+        assert not mj.jnt_limited[j] or mj.jnt_range[j][0] <= q.min() <= q.max() <= mj.jnt_range[j][1], name
+    assert not mj.jnt_limited[mj.joint("Joint2").id] and "joint 'Joint2': the logs reach" in record["dm"]["mjcf_notes"]
     ours = np.array([r.tau_rmse for r in fit.plausible_validation.runs])  # dualid's validation of the written θ
     scores = {}
     for label, path, loader in (("xml pinocchio", "dm.xml", "pinocchio"), ("xml mujoco", "dm.xml", "mujoco"),

@@ -75,7 +75,7 @@ def test_tiny_and_huge_units_take_the_same_path(bench_samples, scale):
 
 
 def _dfki_problem(mass_bound: float | None = 5.0):
-    """trajectory_00 with the default preprocessing (the `dualid fit` reproducer of issue 12), N = 1000."""
+    """trajectory_00 with the default preprocessing (what `dualid fit` runs on it), N = 1000."""
     from dualid.robot.config import FitConfig
     from dualid.robot.fit import build_model, build_problem, column_map, load_runs
 

@@ -1,4 +1,4 @@
-"""The session-5 chunk kernels (dualid.estimators.newton.kernels) against AffineMetric.apply_quad, and
+"""The chunk kernels (dualid.estimators.newton.kernels) against AffineMetric.apply_quad, and
 AffineMetric.evaluate (with and without its symmetrisation) against M_i = Σ_b J_bᵀ (Σ_k θ_k E_k) J_b + M0_i by loops."""
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""The faster kernels of the Newton fit (issue 12, point 6) against independent references."""
+"""The faster kernels of the Newton fit against independent references."""
 
 import numpy as np
 import pytest

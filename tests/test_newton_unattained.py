@@ -1,5 +1,5 @@
-"""Why dm-paper Newton does not converge on the stress corpus's rank-deficient / point-mass problems (issue 12,
-point 2), as specifications:
+"""Why dm-paper Newton does not converge on the stress corpus's rank-deficient / point-mass problems, as
+specifications:
 
 - the infimum is not attained there: the first link's mass (and its first moment along the joint axis) enter
   neither Y nor the metric, only the consistency LMI, which loosens as they grow; the SDP reference (cvxpy +

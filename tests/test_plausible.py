@@ -3,7 +3,7 @@
 Specifications: (1) when the prior itself predicts like θ̂ (θ₀ − θ̂ in the null space), the answer is
 θ₀ (divergence 0); (2) against an independent formulation (θ as the cvxpy variable, equality
 Y(θ − θ̂) = 0 on scipy's null space); (3) training predictions unchanged, θ_p consistent; (4) a full-rank
-problem returns θ̂; (5) exact error messages; (6) the issue's 7-DoF case: masses the data leave to the
+problem returns θ̂; (5) exact error messages; (6) a 7-DoF case: masses the data leave to the
 prior land within 30 % of it, where the raw fit's are far off.
 """
 
@@ -120,7 +120,7 @@ def test_errors():
 
 
 def test_seven_dof_arm_masses_near_a_cad_prior():
-    """The issue's case: a 7-DoF arm, exact data (the regressor's null space is all that is unknown),
+    """A 7-DoF arm, exact data (the regressor's null space is all that is unknown),
     a CAD-like prior (each body's θ scaled by 1 ± 20–30 %, a density error)."""
     rng = np.random.default_rng(7)
     arm = random_arm(rng, 7)

@@ -166,7 +166,7 @@ class BaseParameters:
 
 def lead_preference(name: str) -> float:
     """Column weight in the pivoting: 4 for inertias, 2 for first moments, 1 for masses and the rest, so that
-    among dependent columns the lead is, as in the classic regrouping (Khalil & Gautier), an inertia or a first
+    among dependent columns the one kept is, as in the classic regrouping (Khalil & Gautier), an inertia or a first
     moment, which absorbs the masses and rotor inertias (armature) that act like it."""
     last = name.rsplit(".", 1)[-1]
     if last in ("Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz"):

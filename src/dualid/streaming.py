@@ -89,7 +89,14 @@ class ParquetSource:
         object.__setattr__(self, "path", Path(self.path))
         if not self.path.is_file():
             raise MissingFileError(f"ParquetSource: {self.path} not found")
-        names = set(pq.ParquetFile(self.path).schema_arrow.names)
+        try:
+            file = pq.ParquetFile(self.path)
+        except (OSError, ValueError) as exc:  # pyarrow's ArrowInvalid (a ValueError): empty, CSV, truncated, …
+            raise DataError(f"{self.path}: not a Parquet file ({exc}); expected Parquet with columns q_0..q_{self.nq - 1}, "
+                            "v_/a_/tau_<coordinate> (or a directory of q.npy, v.npy, a.npy, tau.npy)") from None
+        if file.metadata.num_rows == 0:
+            raise DataError(f"{self.path}: the Parquet file has no rows")
+        names = set(file.schema_arrow.names)
         missing = [c for c in self._columns() if c not in names]
         if missing:
             raise DataError(f"{self.path}: missing columns {missing[:6]}{' …' if len(missing) > 6 else ''}; "
@@ -196,6 +203,15 @@ class ChunkedProblem:
 
     def dual_metric_objective(self, theta: np.ndarray) -> float:
         return float(sum(b.dual_metric_objective(theta) for b in self.blocks()))
+
+    def explained(self, theta: np.ndarray) -> float:
+        """R² = 1 − Σ‖r_i‖² / Σ‖τ_i − τ̄‖² (one pass): the share of the effort's variance the model with θ explains."""
+        rss, s1, s2, N = 0.0, 0.0, 0.0, 0
+        for b in self.blocks():
+            rss += float(np.sum(b.residual(theta) ** 2))
+            s1, s2, N = s1 + b.tau.sum(axis=0), s2 + np.sum(b.tau ** 2, axis=0), N + b.tau.shape[0]
+        tss = float(np.sum(s2 - s1 ** 2 / max(N, 1)))
+        return 1.0 - rss / tss if tss > 0 else float("nan")
 
     def subset(self, idx: slice) -> IdentificationProblem:
         """The samples idx (a slice, e.g. every k-th) collected into an in-memory problem (one pass)."""

@@ -1,4 +1,4 @@
-"""The statistical-quality benchmark's data and metrics (issue 11, point 4); the driver is benchmarks/statistics.py.
+"""The statistical-quality benchmark's data and metrics; the driver is benchmarks/statistical_quality.py.
 
 Data (Pinocchio): a random serial arm of 3–7 revolute joints (random axes, link lengths, box-shaped links
 with random mass, size, centre of mass and orientation, so every body is physically consistent), with

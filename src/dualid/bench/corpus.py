@@ -1,4 +1,4 @@
-"""The stress corpus of identification problems (issue 12, point 1); the driver is benchmarks/stress_corpus.py.
+"""The stress corpus of identification problems; the driver is benchmarks/stress_corpus.py.
 
 Every problem is built with Pinocchio from random states (configurations from ``pin.randomConfiguration``,
 velocities and accelerations N(0, 1)), τ = Y θ_true + noise · rms(τ_j) · N(0, 1) per coordinate j, and the mass

@@ -1,4 +1,4 @@
-"""Corpus problems beyond the random chains (issue 12, point 1): N = 1e6, tiled real DFKI data, the paper's systems.
+"""Corpus problems beyond the random chains: N = 1e6, tiled real DFKI data, the paper's systems.
 
 - ``chain RP, 2 dof, N = 1e6``: 10⁴ random states of a 2-joint chain, each repeated 100 times with independent
   torque noise (5 %): N = 10⁶ samples (Y ≈ 320 MB). Only the methods that scale (ols, wls, dm, dm-paper by

@@ -57,6 +57,9 @@ def fit(
     force: bool = typer.Option(False, "--force", metavar=FLAG, help="write into an existing non-empty output directory"),
     margin: Optional[float] = typer.Option(None, "--margin", metavar="EPS", help="every method under M(θ) ⪰ EPS·M(θ_ref), "
                                            "θ_ref a WLS pilot (or the config's margin.reference); 0 ≤ EPS < 1"),
+    package_path: List[Path] = typer.Option([], "--package-path", metavar="DIR", help="a folder holding the packages "
+                                            "that the URDF's package:// mesh URIs name (searched before the config's "
+                                            "model.package_path and ROS_PACKAGE_PATH); repeatable"),
 ) -> None:
     """Identify a robot's inertial parameters, joint friction and armature from a URDF and logs (or a drag
     model's drag and damping: model.kind: drag in the config)."""
@@ -70,8 +73,10 @@ def fit(
     from dualid.robot.margin_config import with_epsilon
 
     cfg = _config(config, model, data)
+    if model is not None and config is not None:
+        cfg = cfg.with_overrides(model=replace(cfg.model, urdf=model))
     cfg = cfg.with_overrides(
-        model=replace(cfg.model, urdf=model) if model is not None and config is not None else None,
+        model=replace(cfg.model, package_path=(*package_path, *cfg.model.package_path)) if package_path else None,
         train=tuple(data) if data and config is not None else None,
         test=tuple(test) or None,
         methods=tuple(method) or None,

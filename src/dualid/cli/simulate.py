@@ -36,6 +36,8 @@ def simulate(
                                  ("--format", fmt, ("parquet", "npz"))):
         if value not in allowed:
             fail(f"{flag}: expected one of {', '.join(allowed)}, got {value!r}")
+    if seed < 0:
+        fail(f"--seed: expected an integer ≥ 0, got {seed}")
     output_dir(out, force)
     with Progress(SpinnerColumn(), TextColumn("{task.description}", markup=False), TimeElapsedColumn(), console=console) as bar:
         task = bar.add_task(f"simulating {system} (seed {seed}, noise {noise})", total=None)

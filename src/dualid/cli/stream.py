@@ -9,7 +9,9 @@ from pathlib import Path
 import typer
 
 from dualid.cli.app import FLAG, app
-from dualid.cli.common import console, fail
+from dualid.cli.common import console, fail, print_warning
+
+EXPLAINED = 0.5  # warn when the fit explains less than this share of the effort's variance (R²)
 
 
 @app.command("fit-stream")
@@ -41,6 +43,9 @@ def fit_stream(
         source = ArraySource.from_npy(data, chunk=chunk)
     else:
         source = ParquetSource(data, rb.coordinates, rb.nq, chunk=chunk)
+    if source.N < 2 or source.N * rb.nv < rb.parameters.p:
+        fail(f"--data {data}: {source.N} sample{'s' * (source.N != 1)} × {rb.nv} coordinates = {source.N * rb.nv} "
+             f"equations for {rb.parameters.p} parameters; a fit needs more samples")
     estimator = make_estimator(method, allow_unidentifiable=allow_unidentifiable)
     columns = (TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     with Progress(*columns, console=console) as progress:
@@ -59,3 +64,8 @@ def fit_stream(
                f"N = {problem.N:,}, {problem.passes} passes over the data, {wall:.1f} s")
     for name, value in result.named().items():
         typer.echo(f"  {name:32s} {value: .6g}")
+    r2 = problem.explained(result.theta)
+    if not r2 >= EXPLAINED:
+        print_warning(f"the fitted model explains {100 * r2:.1f} % of the logged effort's variance (R² = {r2:.3g}): "
+                      f"are these logs of this robot, with q, v, a, tau in the model's order ({', '.join(rb.coordinates)}) "
+                      "and SI units?")

@@ -1,10 +1,11 @@
 """Checks of logs that catch what would otherwise become silently wrong results.
 
 Errors (DataError) where the data cannot be right: duplicated column names in a CSV header (pandas
-would rename them and the wrong column would be fitted), time stamps that repeat or go back.
+would rename them and the wrong column would be fitted), time stamps that repeat or go back, every
+effort and wrench zero (a fit would return a robot without mass as the exact answer).
 Warnings (DualidWarning, through Python's ``warnings``; a fit records them in its report) where the
 data are probably but not certainly wrong: a median time step too long for a robot log (time in
-ms read as s?), a logged velocity whose size disagrees with dq/dt.
+ms read as s?), a logged velocity whose size disagrees with dq/dt, one joint's effort zero throughout.
 ``resample`` refuses to interpolate across a gap (``check_gaps``) or to invent most of a run's
 samples (``check_upsampling``).
 """
@@ -110,3 +111,28 @@ def check_magnitude(path, name: str, x: np.ndarray) -> None:
     if peak > MAX_MAGNITUDE:
         raise DataError(f"{path}: column {name!r} reaches {peak:.3g} in SI units; more than {MAX_MAGNITUDE:.0e} is not a "
                         "robot measurement (check its unit and scaling)")
+
+
+def check_effort(path, tau: np.ndarray, wrench: np.ndarray | None, columns, floating: bool) -> None:
+    """DataError when every generalized force and external wrench is 0 in every row (nothing to identify: the
+    fit's exact answer would be a massless robot); a warning for each mapped effort column that is 0 throughout."""
+    named = [c for c in columns if c is not None]
+    if not np.any(tau) and (wrench is None or not np.any(wrench)):
+        if floating and wrench is None:
+            raise DataError(
+                f"{path}: every generalized force is 0: the floating base has no wrench section (columns.wrenches) and "
+                f"{'the joints have no effort columns' if not named else 'the effort columns ' + str(named) + ' are 0'}; "
+                "a free body's motion without the forces on it determines no mass. Map the external wrenches")
+        raise DataError(f"{path}: every effort{' and wrench' * (wrench is not None)} column is 0 in every row "
+                        f"({', '.join(map(str, named)) or 'no effort columns'}): nothing to identify (efforts not logged?)")
+    offset = tau.shape[1] - len(columns)  # a floating base's 6 coordinates come first
+    for k, c in enumerate(columns):
+        if c is not None and not np.any(tau[:, offset + k]):
+            warnings.warn(f"{path}: effort column {c!r} is 0 in every row (an unactuated joint? then leave its effort "
+                          "out of the column map; or the effort was not logged)", DualidWarning, stacklevel=3)
+
+
+def check_efforts(paths, runs, cmap) -> None:
+    """``check_effort`` for each run (loaded with the column map ``cmap``)."""
+    for path, run in zip(paths, runs):
+        check_effort(path, run.tau, run.wrench, [j.effort for j in cmap.joints], cmap.base is not None)

@@ -23,6 +23,8 @@ dynamics as τ = rnea(q, v, a) − Σ_f J_f(q)ᵀ f (``dualid.model.external_wre
 
 from __future__ import annotations
 
+import dataclasses
+import warnings
 from dataclasses import dataclass
 from typing import Callable, Mapping
 
@@ -30,7 +32,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dualid.data.lie import gradient_on_group, unit_quaternions
-from dualid.errors import DataError
+from dualid.errors import DataError, DualidWarning
 
 QUATERNION_ORDERS = ("xyzw", "wxyz")
 TWIST_FRAMES = ("local", "local_world_aligned")
@@ -195,10 +197,37 @@ def with_base(base: BaseColumns, column, where: str, t, q, v, tau, a, logged_v: 
         raise DataError(f"{where}: acceleration columns are not supported with a floating base (the base has none); "
                         "leave them out and differentiate")
     q_base, v_base, notes = read_base(base, column, where)
+    if logged_v and base.twist and base.quaternion:
+        check_quaternion_order(base, column, where, t, q_base, v_base)
     T = t.size
     v_base = v_base if logged_v else gradient_on_group(t, q_base, 6)
     return (np.concatenate([q_base, q], axis=1), np.concatenate([v_base, v], axis=1),
             np.concatenate([np.zeros((T, 6)), tau], axis=1), notes)
+
+
+QUATERNION_MISMATCH = 0.5  # relative RMS difference between the logged angular velocity and the quaternions
+
+
+def check_quaternion_order(base: BaseColumns, column, where: str, t, q_base, v_base) -> None:
+    """A permuted quaternion has unit norm too; the logged twist tells the orders apart. DataError when the
+    logged angular velocity disagrees with the quaternions as mapped but agrees with the other order; a
+    warning when it agrees with neither."""
+    def mismatch(q) -> float:
+        w = gradient_on_group(t, q, 6)[:, 3:]
+        return float(np.sqrt(np.mean((w - v_base[:, 3:]) ** 2)) / max(np.sqrt(np.mean(v_base[:, 3:] ** 2)), 1e-12))
+
+    err = mismatch(q_base)
+    if err <= QUATERNION_MISMATCH:
+        return
+    other = "wxyz" if base.quaternion_order == "xyzw" else "xyzw"
+    err_other = mismatch(read_base(dataclasses.replace(base, quaternion_order=other), column, where)[0])
+    if err_other < QUATERNION_MISMATCH / 2:
+        raise DataError(f"{where}: the logged base angular velocity matches the quaternion columns "
+                        f"{list(base.quaternion)} read in {other} order ({err_other:.0%} RMS difference), not in "
+                        f"{base.quaternion_order} order ({err:.0%}); set columns.base.quaternion_order: {other}")
+    warnings.warn(f"{where}: the logged base angular velocity differs from that of the quaternion columns "
+                  f"{list(base.quaternion)} by {err:.0%} RMS; check the quaternion columns, their order "
+                  "(quaternion_order) and the twist's frame (twist_frame)", DualidWarning, stacklevel=3)
 
 
 def read_wrenches(wrenches, column: Callable[[str], np.ndarray], T: int) -> np.ndarray:

@@ -16,7 +16,7 @@ Rows are counted from 0 (the first data row, after any header) in error messages
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
@@ -103,6 +103,8 @@ class ColumnMap:
     joint_units: tuple[tuple[str, str, str], ...] = ()  # (joint, quantity, unit): overrides ``units`` per joint
     base: BaseColumns | None = None  # a floating base's pose (and twist) columns (dualid.data.floating_columns)
     wrenches: tuple[WrenchColumns, ...] = ()  # external wrenches on named frames
+    # (joint or "", quantity) of each unit the map was given (the others are SI by default): set by __post_init__
+    stated: tuple[tuple[str, str], ...] = field(default=(), compare=False, repr=False)
 
     def __post_init__(self) -> None:
         joints = tuple(self.joints)
@@ -123,6 +125,7 @@ class ColumnMap:
                     raise DataError(f"column map: units.{quantity} names joints {unknown} that are not mapped; joints: {names}")
                 per_joint += [(str(j), quantity, u) for j, u in unit.items()]
                 del units[quantity]
+        object.__setattr__(self, "stated", tuple(sorted({("", q) for q in units} | {(j, q) for j, q, _ in per_joint})))
         checked = []
         for where, quantity, unit in [(f"units.{q}", q, u) for q, u in units.items()] + \
                 [(f"units.{q}.{j}", q, u) for j, q, u in per_joint]:

@@ -34,10 +34,15 @@ def sample_rate(t: np.ndarray, rtol: float = 0.05) -> float:
     return 1.0 / med
 
 
+def _is_number(x) -> bool:
+    """A real number (not a bool, not text such as 'fast' from a config)."""
+    return not isinstance(x, bool) and isinstance(x, (int, float, np.integer, np.floating))
+
+
 def lowpass(x: np.ndarray, fs: float, cutoff: float, order: int = 4) -> np.ndarray:
     """Zero-phase Butterworth low-pass along axis 0 (filtfilt, second-order sections)."""
-    if not 0 < cutoff < fs / 2:
-        raise DataError(f"low-pass cutoff must be in (0, {fs / 2:.4g}) Hz (Nyquist at fs={fs:.4g} Hz), got {cutoff}")
+    if not _is_number(cutoff) or not 0 < cutoff < fs / 2:
+        raise DataError(f"low-pass cutoff must be in (0, {fs / 2:.4g}) Hz (Nyquist at fs={fs:.4g} Hz), got {cutoff!r}")
     sos = signal.butter(order, cutoff, btype="low", fs=fs, output="sos")
     padlen = 3 * (2 * len(sos) + 1)  # scipy's default for sosfiltfilt
     if np.shape(x)[0] <= padlen:
@@ -97,7 +102,7 @@ def resample(traj: Trajectory, rate: float, method: str = "linear") -> Trajector
     A floating-base q (with a unit quaternion) is interpolated on its Lie group ("linear" only: along
     the geodesic between samples, ``lie.interpolate_on_group``); the other channels as vectors.
     """
-    if not (np.isfinite(rate) and rate > 0):
+    if not (_is_number(rate) and np.isfinite(rate) and rate > 0):
         raise DataError(f"resample: rate must be a positive number of Hz, got {rate!r}")
     if method not in ("linear", "cubic"):
         raise DataError(f"resample: method must be 'linear' or 'cubic', got {method!r}")
@@ -182,7 +187,7 @@ def differentiate(
     if _has_quaternion(traj) and not floating:
         raise DataError(f"differentiate: q has {traj.q.shape[1]} columns for {traj.n} velocity coordinates; only a "
                         "floating base (free flyer first, nq = n + 1) is supported")
-    if method == "savgol" and not (np.isfinite(window) and window > 0):
+    if method == "savgol" and not (_is_number(window) and np.isfinite(window) and window > 0):
         raise DataError(f"differentiate: window must be a positive number of seconds, got {window!r}")
     if isinstance(polyorder, bool) or not isinstance(polyorder, (int, np.integer)) or polyorder < 2:
         raise DataError(f"differentiate: polyorder must be an integer ≥ 2 (accelerations need it), got {polyorder!r}")
@@ -247,7 +252,7 @@ def downsample(traj: Trajectory, factor: int, cutoff: float | None = None, order
     fs = sample_rate(traj.t)
     if cutoff is None:
         cutoff = 0.4 * fs / factor
-    if not (np.isfinite(cutoff) and cutoff > 0):
+    if not (_is_number(cutoff) and np.isfinite(cutoff) and cutoff > 0):
         raise DataError(f"downsample: cutoff must be a positive number of Hz, got {cutoff!r}")
     if factor > 1 and cutoff >= fs / (2 * factor):
         raise DataError(

@@ -1,4 +1,4 @@
-"""Optimal excitation trajectories (issue 15): periodic Fourier-series joint motions, at rest at both
+"""Optimal excitation trajectories: periodic Fourier-series joint motions, at rest at both
 ends, optimised for identification under the robot's limits. Computes and returns values; the files
 are written by ``dualid.report.excite`` and the command is ``dualid excite``."""
 

@@ -32,7 +32,7 @@ from dualid.model.base import Kind
 from dualid.model.drag_spec import MOTION_ROWS, DragSpec
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.parameters import ParameterBlock, ParameterSpace, diagonal_basis, symmetric_basis
-from dualid.model.rigid_body import _with_implicit_world
+from dualid.model.urdf_check import urdf_for_pinocchio
 
 _ONE_DOF = ("JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned", "JointModelPX",
             "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned")
@@ -143,7 +143,7 @@ class DragModel:
         path = Path(path)
         if not path.is_file():
             raise MissingFileError(f"URDF not found: {path}")
-        xml = _with_implicit_world(path)  # values checked before Pinocchio sees them; an undeclared "world" added
+        xml = urdf_for_pinocchio(path)  # values checked before Pinocchio sees them; an undeclared "world" added
         try:
             root = (pin.JointModelPlanar(),) if spec.base == "planar" else ()
             model = pin.buildModelFromUrdf(str(path), *root) if xml is None else pin.buildModelFromXML(xml, *root)

@@ -1,4 +1,4 @@
-"""The chart-invariant margin C_b(θ) ⪰ ε·C_b(θ_ref) on every constrained block (issue 11, point 2).
+"""The chart-invariant margin C_b(θ) ⪰ ε·C_b(θ_ref) on every constrained block.
 
 C_b is linear in θ, so the margin says θ − εθ_ref is physically consistent; M_i is linear in θ too, hence
 M_i(θ) − ε·M_i(θ_ref) = M_i(θ − εθ_ref) ⪰ 0 at EVERY configuration, seen in the data or not. Body quantities do

@@ -109,7 +109,7 @@ class AffineMetric:
                 G = G[rows]
             J = t.J[rows]  # (N', d, n)
             Jt = np.swapaxes(J, 1, 2)
-            # the Newton kernels' order (G J first: benchmarks/speed_session5.md); the symmetrised M keeps its own
+            # the Newton kernels' order (G J first: benchmarks/derivatives_speed.md); the symmetrised M keeps its own
             # order, so both give the values they gave before they shared this code
             term = np.matmul(Jt, np.matmul(G, J)) if not symmetric else Jt @ G @ J
             if M is None:

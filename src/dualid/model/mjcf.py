@@ -6,8 +6,20 @@ read by MuJoCo's URDF importer into an ``MjSpec``; then every identified joint g
 (Coulomb friction) set on the spec, gravity is set from the model, and ``MjSpec.to_xml`` writes the
 MJCF. What MuJoCo keeps of the URDF is what its importer keeps: visual geoms are discarded (its URDF
 default ``discardvisual``), links welded by fixed joints are fused into their parent body
-(``fusestatic``), collision geoms stay (their mesh files must exist; relative paths are rewritten to
-point at the same files from the output folder).
+(``fusestatic``), a <mimic> joint becomes a joint equality constraint, collision geoms stay when
+their mesh can be found and read (``model.meshes``: relative, absolute and ``package://`` names;
+paths are rewritten to point at the same files from the output folder; the others are left out and
+said in the notes).
+
+Joint ranges: a range copied from the URDF that the logged motion leaves (``logged``: the range
+each joint went through in the logs) would make MuJoCo add limit forces to what was logged, so such
+a joint is written without a range (as a continuous joint is), and the notes say so.
+
+The fused links leave MuJoCo's writer a ``<frame>`` wrapper around their child bodies, which
+Pinocchio's MJCF reader refuses (or loses the bodies under it); the frames are folded into the
+poses of the elements they hold, so the written MJCF has bodies only. Several bodies directly in
+the world (a fixed root with several moving children) are put in one jointless body, as
+Pinocchio's MJCF reader reads only the world's first body.
 
 Precision: MuJoCo's XML writer prints 6 significant digits by default, which changes a mass matrix
 by ~1e-6 relative. dualid raises it to 17 (a lossless round trip of doubles) through MuJoCo's
@@ -25,7 +37,7 @@ import glob
 import os
 import re
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from dualid.errors import ConsistencyError, ModelError
+from dualid.model.meshes import mujoco_geometry
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.model.urdf import identified_urdf, not_determined_comments
 
@@ -79,17 +92,83 @@ def _xml_precision(digits: int):
         lib._mjPRIVATE__set_xml_precision(before)
 
 
-def _absolute_meshes(urdf_text: str, source_dir: Path) -> tuple[str, list[str]]:
-    """The URDF text with relative mesh filenames made absolute (MuJoCo reads the text, not the file)."""
-    root = ET.fromstring(urdf_text)
-    uris = []
-    for mesh in root.iter("mesh"):
-        filename = mesh.get("filename", "")
-        if "://" in filename:
-            uris.append(filename)
-        elif filename and not os.path.isabs(filename):
-            mesh.set("filename", str((source_dir / filename).resolve()))
-    return ET.tostring(root, encoding="unicode"), uris
+def _for_pinocchio(xml: str, base: str) -> str:
+    """MuJoCo's MJCF text as Pinocchio's MJCF reader reads it whole: every <frame pos quat> replaced by the
+    elements it holds, their pos and quat composed with the frame's (innermost first; empty frames removed),
+    and, when the world holds several bodies (a fixed root link with several moving children, which MuJoCo
+    fused into the world), those bodies and the world's geoms put in one jointless body ``base`` (Pinocchio
+    reads only the world's first body)."""
+    import mujoco
+
+    root = ET.fromstring(xml)
+    world = root.find("worldbody")
+    if "<frame" not in xml and (world is None or len(world.findall("body")) < 2):
+        return xml
+    if len(world.findall("body")) > 1:
+        holder = ET.Element("body", {"name": base})
+        for child in list(world):
+            if child.tag in ("body", "geom", "site", "frame"):
+                world.remove(child)
+                holder.append(child)
+        world.insert(0, holder)
+    while True:
+        parents = {child: parent for parent in root.iter() for child in parent}
+        frames = [f for f in root.iter("frame") if f.find(".//frame") is None]
+        if not frames:
+            break
+        for frame in frames:
+            extra = set(frame.attrib) - {"pos", "quat", "name"}
+            if extra:
+                raise ModelError(f"write_mjcf: MuJoCo wrote a <frame> with {sorted(extra)}, which dualid cannot fold "
+                                 "into its bodies")
+            p_f = np.fromstring(frame.get("pos", "0 0 0"), sep=" ")
+            q_f = np.fromstring(frame.get("quat", "1 0 0 0"), sep=" ")
+            parent = parents[frame]
+            k = list(parent).index(frame)
+            parent.remove(frame)
+            for child in reversed(list(frame)):
+                if set(child.attrib) & {"euler", "axisangle", "xyaxes", "zaxis", "fromto"}:
+                    raise ModelError(f"write_mjcf: cannot fold a <frame> into a <{child.tag}> placed other than by pos and quat")
+                if child.tag not in ("joint", "inertial"):  # a joint's pos and axis are in its body's frame
+                    pos = np.zeros(3)
+                    mujoco.mju_rotVecQuat(pos, np.fromstring(child.get("pos", "0 0 0"), sep=" "), q_f)
+                    quat = np.zeros(4)
+                    mujoco.mju_mulQuat(quat, q_f, np.fromstring(child.get("quat", "1 0 0 0"), sep=" "))
+                    child.set("pos", " ".join(repr(float(x)) for x in pos + p_f))
+                    child.set("quat", " ".join(repr(float(x)) for x in quat))
+                parent.insert(k, child)
+    ET.indent(root, space="  ")
+    return ET.tostring(root, encoding="unicode") + "\n"
+
+
+def _base_name(root: ET.Element) -> str:
+    """A name for the body that holds the world's bodies (``_for_pinocchio``): the URDF's root link's."""
+    children = {c.get("link") for c in root.iter("child")}
+    roots = [link.get("name") for link in root.findall("link") if link.get("name") not in children]
+    return roots[0] if len(roots) == 1 and roots[0] != "world" else "fixed_base"
+
+
+def _logged_ranges(spec, logged: Mapping[str, tuple[float, float]] | None) -> list[str]:
+    """Drop the range of every limited joint whose logged motion leaves it; the notes say which."""
+    import mujoco
+
+    notes = []
+    limited = [j for j in spec.joints if j.limited != mujoco.mjtLimited.mjLIMITED_FALSE]
+    if logged is None:
+        if limited:
+            notes.append("joint ranges copied from the URDF (no logged motion was given to check them against)")
+        return notes
+    for joint in limited:
+        if joint.name not in logged:
+            continue
+        lo, hi = (float(x) for x in logged[joint.name])
+        a, b = (float(x) for x in joint.range)
+        slack = 1e-9 * max(1.0, abs(a), abs(b))
+        if lo < a - slack or hi > b + slack:
+            joint.limited = mujoco.mjtLimited.mjLIMITED_FALSE
+            notes.append(f"joint {joint.name!r}: the logs reach [{lo:.4g}, {hi:.4g}], outside the URDF's range "
+                         f"[{a:.4g}, {b:.4g}]; written without a range, so MuJoCo adds no limit force to the logged motion")
+    return notes
 
 
 def _comment_bodies(xml: str, comments: dict[str, list[str]]) -> str:
@@ -118,12 +197,17 @@ def identified_mjcf(
     friction: dict[str, tuple[float, float]] | None = None,
     armature: dict[str, float] | None = None,
     not_determined: Mapping[str, str] | None = None,
+    logged: Mapping[str, tuple[float, float]] | None = None,
+    package_path: Iterable[str | Path] = (),
 ) -> MjcfText:
     """The MJCF of ``source_urdf`` with the identified inertials θ (model.parameters.p,), per-joint
     friction {joint: (damping [N m s/rad], Coulomb [N m])} and armature {joint: [kg m²]}.
 
-    Mesh files of collision geoms are referred to relative to ``out_dir`` (absolute when None).
+    Mesh files of collision geoms are referred to relative to ``out_dir`` (absolute when None);
+    ``package_path``: folders that hold the packages of ``package://`` mesh URIs (``model.meshes``).
     ``not_determined`` ({parameter label: why}) is said in XML comments on the bodies, as in the URDF.
+    ``logged`` ({joint: (lowest, highest) position in the logs}): a joint whose logs leave its URDF range
+    is written without one.
     ``dualid.report.mjcf.write_mjcf`` writes it to a file.
     """
     import mujoco
@@ -134,12 +218,10 @@ def identified_mjcf(
                          "linear velocities, Pinocchio's free flyer body-frame ones); write the URDF instead")
     comments = not_determined_comments(model, not_determined, "write_mjcf")
     text = identified_urdf(source_urdf, model, theta, friction=friction)  # armature goes on the spec below
-    text, uris = _absolute_meshes(text, source_urdf.resolve().parent)
-    if uris:
-        raise ModelError(f"write_mjcf: {source_urdf} refers to meshes by URI ({uris[0]}, …), which MuJoCo cannot "
-                         "resolve; give file paths")
+    root = ET.fromstring(text)
+    notes = mujoco_geometry(root, source_urdf.resolve().parent, package_path)
     try:
-        spec = mujoco.MjSpec.from_string(text)
+        spec = mujoco.MjSpec.from_string(ET.tostring(root, encoding="unicode"))
     except ValueError as exc:
         raise ModelError(f"write_mjcf: MuJoCo could not read the identified URDF of {source_urdf}: {exc}") from None
     spec.option.gravity = np.asarray(model.gravity, dtype=float)
@@ -158,19 +240,20 @@ def identified_mjcf(
                 joints[name].frictionloss = float(value[1])
             else:
                 joints[name].armature = float(value)
+    notes += _logged_ranges(spec, logged)
     try:
         spec.compile()
     except ValueError as exc:
         raise ModelError(f"write_mjcf: MuJoCo refused the identified model of {source_urdf}: {exc}") from None
-    notes = ["visual geoms dropped (MuJoCo's URDF import discards them)",
-             "links welded by fixed joints fused into their moving body"]
+    notes += ["visual geoms dropped (MuJoCo's URDF import discards them)",
+              "links welded by fixed joints fused into their moving body"]
     if out_dir is not None:  # relative to the output folder, where MuJoCo resolves them when it loads the file
         out_dir = Path(out_dir).resolve()
         for mesh in spec.meshes:
             mesh.file = os.path.relpath(mesh.file, out_dir)
         spec.modelfiledir = str(out_dir)  # to_xml compiles again: resolve them from there too
     with _xml_precision(FULL_PRECISION) as digits:
-        xml = _comment_bodies(spec.to_xml(), comments)
+        xml = _comment_bodies(_for_pinocchio(spec.to_xml(), _base_name(root)), comments)
     if digits < FULL_PRECISION:
         notes.append(f"written at MuJoCo's default precision ({digits} significant digits): its precision setter "
                      "is not available in this build")

@@ -1,4 +1,4 @@
-"""Lift a geometric prior off the consistency boundary, chart-invariantly (issue 12, point 3).
+"""Lift a geometric prior off the consistency boundary, chart-invariantly.
 
 The log-det and pullback priors (``consistency.prior_blocks``) use C_b0⁻¹, the inverse of each body's
 pseudo-inertia at θ₀. A prior taken from a constrained fit sits on the cone boundary: a body's centred

@@ -14,7 +14,6 @@ Ixz, Iyz, Izz], expressed in the joint frame (inertia about the joint-frame orig
 from __future__ import annotations
 
 import dataclasses
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -28,7 +27,7 @@ from dualid.errors import DataError, MissingFileError, ModelError
 from dualid.model.base import Kind
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.parameters import ParameterSpace, rigid_body_space
-from dualid.model.urdf_check import read_urdf
+from dualid.model.urdf_check import urdf_for_pinocchio
 
 FREE_FLYER_COORDINATES = BASE_COORDINATES  # one home: data.lie
 
@@ -68,22 +67,6 @@ def _joint_coordinates(model: pin.Model) -> tuple[tuple[str, ...], tuple[str, ..
         else:
             names += [f"{name}_{k}" for k in range(joint.nv)]
     return tuple(names), base
-
-
-def _with_implicit_world(path: Path) -> str | None:
-    """The URDF text with ``<link name="world"/>`` declared, when a joint uses an undeclared "world" parent.
-
-    Many URDFs (e.g. Gazebo-style ones such as the DFKI pendulum's) weld the robot to a "world" link
-    they never declare; urdfdom (hence Pinocchio) rejects that. Declaring the empty link is exactly
-    what those files mean. Returns None when the file needs no change.
-    """
-    root = read_urdf(path)  # values checked before Pinocchio (dualid.model.urdf_check)
-    links = {link.get("name") for link in root.findall("link")}
-    parents = {p.get("link") for joint in root.findall("joint") for p in joint.findall("parent")}
-    if "world" in links or "world" not in parents:
-        return None
-    root.insert(0, ET.Element("link", {"name": "world"}))
-    return ET.tostring(root, encoding="unicode")
 
 
 def _as_samples(x, width: int, label: str) -> np.ndarray:
@@ -146,7 +129,7 @@ class RigidBodyModel:
         if not path.is_file():
             raise MissingFileError(f"RigidBodyModel.from_urdf: no URDF file at {path}")
         root_joint = (pin.JointModelFreeFlyer(),) if floating_base else ()
-        xml = _with_implicit_world(path)
+        xml = urdf_for_pinocchio(path)  # values checked first; an implicit world declared, massless frames
         try:
             if xml is None:
                 model = pin.buildModelFromUrdf(str(path), *root_joint)

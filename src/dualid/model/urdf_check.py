@@ -7,25 +7,50 @@ value, so a fit never starts from a silently different model:
 
 - the file is XML (a parse error names its line and column) with a <robot> root;
 - link and joint names are present and unique; joint parents/children name declared links
-  (an undeclared "world" parent is allowed: see rigid_body._with_implicit_world);
-- every <inertial>: mass finite and ≥ 0 kg (0 only for a massless link with zero inertia),
-  inertia about the centre of mass finite, positive semi-definite and satisfying the triangle
-  inequalities of its principal moments (a real body's); origin xyz/rpy three finite numbers;
+  (an undeclared "world" parent is allowed: see urdf_for_pinocchio);
+- every <inertial>: mass finite and ≥ 0 kg, inertia about the centre of mass finite, positive
+  semi-definite and satisfying the triangle inequalities of its principal moments (a real body's);
+  origin xyz/rpy three finite numbers;
 - every moving joint: a known type, an axis of three finite numbers that is not zero;
 - <dynamics damping friction armature>: finite and ≥ 0.
+
+What vendors' URDFs commonly do and a fit can still use is accepted with a DualidWarning:
+
+- a massless frame (mass 0) that carries a non-zero inertia (e.g. Franka's panda_link8): a body
+  without mass has no inertia, so the inertia is ignored (``urdf_for_pinocchio`` drops it);
+- an element given twice where one is read (two <origin> in a joint, two <axis>, <mass>, …):
+  the first is used, as urdfdom does;
+- a <mimic> joint: Pinocchio's regressor does not support mimic joints, so dualid models it as a
+  joint of its own, whose position and effort must be logged like any other joint's.
 """
 
 from __future__ import annotations
 
+import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 
-from dualid.errors import MissingFileError, ModelError
+from dualid.errors import DualidWarning, MissingFileError, ModelError
 
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 _INERTIA_KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+_SINGLE = {"link": ("inertial",), "inertial": ("origin", "mass", "inertia"),
+           "joint": ("origin", "parent", "child", "axis", "limit", "dynamics", "mimic")}  # urdfdom reads the first
+
+
+def _warn(message: str) -> None:
+    warnings.warn(message, DualidWarning, stacklevel=3)
+
+
+def _check_duplicates(element: ET.Element, where: str, path: Path) -> None:
+    """Warn for each child element that urdfdom reads once but ``element`` has more than once."""
+    for tag in _SINGLE.get(element.tag, ()):
+        count = len(element.findall(tag))
+        if count > 1:
+            _warn(f"{path}: {where} has {count} <{tag}> elements; the first is used (as urdfdom does), the others "
+                  "are ignored")
 
 
 def _check_origins(element, where: str, path) -> None:
@@ -47,7 +72,9 @@ def _numbers(text: str | None, count: int, where: str, path: Path) -> np.ndarray
 
 
 def _inertia(inertial: ET.Element, link: str, path: Path) -> None:
+    """Check one <inertial> (a massless frame with a non-zero inertia: warned; ``massless_frames`` lists them)."""
     where = f"link {link!r} <inertial>"
+    _check_duplicates(inertial, where, path)
     mass_el = inertial.find("mass")
     if mass_el is None:
         raise ModelError(f"{path}: {where} has no <mass value=...>")
@@ -71,7 +98,9 @@ def _inertia(inertial: ET.Element, link: str, path: Path) -> None:
     tol = 1e-9 * max(float(np.abs(lam).max()), 1e-12)
     shown = ", ".join(f"{k}={inertia_el.get(k, '0')}" for k in _INERTIA_KEYS)
     if mass == 0 and np.abs(lam).max() > 0:
-        raise ModelError(f"{path}: {where}: a mass of 0 kg with a non-zero inertia ({shown})")
+        _warn(f"{path}: {where}: a mass of 0 kg with a non-zero inertia ({shown}); treated as a massless frame "
+              "(its inertia is ignored: a body without mass has none). Give the link its mass if it has one")
+        return
     if lam[0] < -tol:
         raise ModelError(
             f"{path}: {where} <inertia>: expected a positive semi-definite matrix, got principal moments "
@@ -80,6 +109,44 @@ def _inertia(inertial: ET.Element, link: str, path: Path) -> None:
         raise ModelError(
             f"{path}: {where} <inertia>: principal moments {np.array2string(lam, precision=4)} kg m² break the "
             f"triangle inequality (the two smallest must sum to at least the largest; no body has them) ({shown})")
+
+
+def massless_frames(root: ET.Element) -> list[str]:
+    """Names of the links whose first <inertial> has mass 0 and a non-zero inertia (checked by ``read_urdf``)."""
+    out = []
+    for link in root.findall("link"):
+        inertial = link.find("inertial")
+        mass = None if inertial is None else inertial.find("mass")
+        inertia = None if inertial is None else inertial.find("inertia")
+        if mass is not None and inertia is not None and float(mass.get("value")) == 0 and any(
+                float(inertia.get(k, "0")) != 0 for k in _INERTIA_KEYS):
+            out.append(link.get("name"))
+    return out
+
+
+def urdf_for_pinocchio(path: str | Path) -> str | None:
+    """The checked URDF's text as Pinocchio should read it, or None when the file can be read as it is.
+
+    - ``<link name="world"/>`` declared when a joint uses an undeclared "world" parent: many URDFs (e.g.
+      Gazebo-style ones such as the DFKI pendulum's) weld the robot to a "world" link they never declare,
+      which urdfdom rejects; declaring the empty link is exactly what those files mean;
+    - the <inertial> of a massless frame with a non-zero inertia removed (a link without <inertial> is
+      massless to Pinocchio, which merges it into its parent joint's body).
+    """
+    root = read_urdf(path)
+    changed = False
+    links = {link.get("name") for link in root.findall("link")}
+    parents = {p.get("link") for joint in root.findall("joint") for p in joint.findall("parent")}
+    if "world" not in links and "world" in parents:
+        root.insert(0, ET.Element("link", {"name": "world"}))
+        changed = True
+    frames = set(massless_frames(root))
+    for link in root.findall("link"):
+        if link.get("name") in frames:
+            for inertial in link.findall("inertial"):
+                link.remove(inertial)
+            changed = True
+    return ET.tostring(root, encoding="unicode") if changed else None
 
 
 def read_urdf(path: str | Path) -> ET.Element:
@@ -107,10 +174,21 @@ def read_urdf(path: str | Path) -> ET.Element:
         raise ModelError(f"{path}: the <robot> has no links and no joints")
     declared = {el.get("name") for el in links}
     for link in links:
-        for inertial in link.findall("inertial"):
+        _check_duplicates(link, f"link {link.get('name')!r}", path)
+        for inertial in link.findall("inertial")[:1]:  # urdfdom reads the first (others: warned above)
             _inertia(inertial, link.get("name"), path)
+    joint_names = {el.get("name") for el in joints}
     for joint in joints:
         name, kind = joint.get("name"), joint.get("type")
+        _check_duplicates(joint, f"joint {name!r}", path)
+        mimic = joint.find("mimic")
+        if mimic is not None and kind != "fixed":
+            if mimic.get("joint") not in joint_names:
+                raise ModelError(f"{path}: joint {name!r} <mimic joint>: expected the name of a joint of the URDF, got "
+                                 f"{mimic.get('joint')!r}")
+            _warn(f"{path}: joint {name!r} mimics joint {mimic.get('joint')!r} (<mimic>); Pinocchio's regressor does "
+                  "not support mimic joints, so dualid models it as a joint of its own: log its position and effort "
+                  "like any other joint's (the MJCF keeps the coupling as an equality constraint)")
         if kind not in JOINT_TYPES:
             raise ModelError(f"{path}: joint {name!r}: unknown type {kind!r}; expected one of {', '.join(JOINT_TYPES)}")
         for tag in ("parent", "child"):

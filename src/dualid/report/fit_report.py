@@ -32,7 +32,7 @@ from dualid.report.document import (
     runs_phrase,
 )
 from dualid.report.metadata import metadata_items
-from dualid.report.model_files import plausible_section
+from dualid.report.model_files import ModelFiles, model_files_section, plausible_section
 from dualid.report.render import table_markdown
 from dualid.report.signals import score_bars, signal_plot
 from dualid.report.svgplot import signal_svg
@@ -129,14 +129,16 @@ class FitReportData:
     meta: dict
     train: dict[str, Validation] = field(default_factory=dict)
     held_out: dict[str, Validation] = field(default_factory=dict)
+    model_files: ModelFiles | None = None  # what report.model_files.write_model_files wrote, and why not
 
 
-def report_data(outcome: FitOutcome, urdfs: dict[str, str], meta: dict) -> FitReportData:
+def report_data(outcome: FitOutcome, urdfs: dict[str, str], meta: dict,
+                model_files: ModelFiles | None = None) -> FitReportData:
     """The held-out validations of the outcome and the same scores on the training runs (θ̂ of each
     method and reference predicting the data it was fitted on; computed by ``robot.fit``)."""
     held = {m: f.validation for m, f in outcome.fits.items() if f.ok and f.validation is not None}
     held.update({lab: v for lab, (_, v) in outcome.references.items() if v is not None})
-    return FitReportData(outcome, urdfs, meta, dict(outcome.training), held)
+    return FitReportData(outcome, urdfs, meta, dict(outcome.training), held, model_files)
 
 
 def _summary(d: FitReportData) -> Section:
@@ -293,8 +295,12 @@ def _plausible(d: FitReportData) -> Section:
     return plausible_section(d.outcome)
 
 
+def _model_files(d: FitReportData) -> Section:
+    return model_files_section(d.model_files)
+
+
 FIT_SECTIONS: list[Callable[[FitReportData], Section]] = [
-    _summary, _warnings, _identifiability, _fits, _scores, _figures, _base, _plausible, _parameters,
+    _summary, _warnings, _identifiability, _fits, _scores, _figures, _base, _plausible, _model_files, _parameters,
 ]
 
 

@@ -133,9 +133,10 @@ def write_fit(outcome: FitOutcome, out: str | Path, force: bool = False, command
 
 
 def _write_fit(outcome: FitOutcome, out: Path, meta: dict) -> dict[str, Path]:
-    written, files = write_model_files(outcome, out)
+    model_files = write_model_files(outcome, out)
+    written, files = model_files.written, model_files.record()
     urdfs = {m: e["urdf"] for m, e in files.items()}
-    data = report_data(outcome, urdfs, meta)
+    data = report_data(outcome, urdfs, meta, model_files)
     record = parameters_record(outcome, urdfs, meta, data.train, files)
     (out / "parameters.yaml").write_text(yaml.safe_dump(record, sort_keys=False, allow_unicode=True))
     write_json(out / "parameters.json", record)

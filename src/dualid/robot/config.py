@@ -43,7 +43,7 @@ _TOP_KEYS = (
     "model", "columns", "train", "test", "preprocessing", "joint_terms", "bounds", "methods", "solver", "prior",
     "validation", "references", "out", "uncertainty", "margin",
 )
-_MODEL_KEYS = ("urdf", "floating_base", "gravity", "kind", "drag")
+_MODEL_KEYS = ("urdf", "floating_base", "gravity", "kind", "drag", "package_path")
 _JOINT_TERM_KEYS = ("viscous", "coulomb", "coulomb_velocity", "armature", "joints")
 _PRIOR_KEYS = ("source", "gamma", "per_equation", "plausible")
 _VALIDATION_KEYS = ("xcorr_window",)
@@ -99,6 +99,7 @@ class ModelConfig:
     gravity: tuple[float, float, float] | None = None  # [m/s²]; None: the URDF/Pinocchio default (0, 0, −9.81)
     kind: str = "inertia"  # "inertia" (rigid bodies) or "drag" (dualid.robot.drag_config)
     drag: DragSpec | None = None  # the drag model's spec (kind "drag")
+    package_path: tuple[Path, ...] = ()  # folders holding the packages of package:// mesh URIs (model.meshes)
 
 
 @dataclass(frozen=True)
@@ -191,7 +192,8 @@ class FitConfig:
                 gravity = ()
             if len(gravity) != 3:
                 raise ConfigError(f"model.gravity: expected 3 numbers [m/s²], got {m.get('gravity')!r}")
-        model = ModelConfig(_path(m["urdf"], base, "model.urdf"), _bool(m.get("floating_base", False), "model.floating_base"), gravity)
+        model = ModelConfig(_path(m["urdf"], base, "model.urdf"), _bool(m.get("floating_base", False), "model.floating_base"),
+                            gravity, package_path=_paths(m.get("package_path"), base, "model.package_path"))
         return FitConfig._from_dict(d, base, model)
 
     @staticmethod
@@ -295,6 +297,7 @@ class FitConfig:
             "model": {"urdf": None if self.model.urdf is None else str(self.model.urdf),
                       "floating_base": self.model.floating_base,
                       "gravity": None if self.model.gravity is None else list(self.model.gravity),
+                      **({"package_path": [str(x) for x in self.model.package_path]} if self.model.package_path else {}),
                       **({"kind": "drag", "drag": self.model.drag.as_dict()} if self.model.kind == "drag" else {})},
             "columns": None if self.columns is None else dict(self.columns),
             "train": [str(p) for p in self.train],

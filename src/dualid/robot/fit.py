@@ -23,6 +23,7 @@ from typing import Callable
 import cvxpy as cp
 import numpy as np
 
+from dualid.data.checks import check_efforts
 from dualid.data.files import read_mapping
 from dualid.data.io import ColumnMap, load_log, read_table
 from dualid.data.preprocessing import preprocess
@@ -333,6 +334,7 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
     steps, steps_note = choose_preprocessing(config.preprocessing, config.train[0], cmap, joints)
     check_floating(config.model.floating_base, cmap)
     train = load_runs(config.train, cmap, joints, steps, rigid)
+    check_efforts(config.train, train, cmap)  # all efforts 0: a massless robot would be the exact fit
     test = load_runs(config.test, cmap, joints, steps, rigid)
     _say(progress, "building regressors")
     problem = with_bounds(build_problem(model, train), config.bounds)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dualid.data.io import LINEAR_UNITS, SI_UNITS, ColumnMap
+from dualid.data.io import LINEAR_UNITS, SI_UNITS, UNITS, ColumnMap
 from dualid.data.tables import read_table
 from dualid.errors import DataError, DualidError, DualidWarning
 from dualid.model.rigid_body import RigidBodyModel
@@ -28,7 +28,7 @@ def array_column_map(joints: tuple[str, ...], available: list[str]) -> ColumnMap
 
 def check_units(rigid: RigidBodyModel, cmap: ColumnMap) -> None:
     """DataError when a joint's unit does not fit its type: a linear unit (m, mm, N, …) on a revolute
-    joint, or a non-SI angular one (deg, N mm, …) on a prismatic joint."""
+    joint, or an angular one (rad, deg, N m, …) on a prismatic joint (one not given is SI, which fits both)."""
     for name in cmap.joint_names:
         if not rigid.model.existJointName(name):
             continue
@@ -38,8 +38,11 @@ def check_units(rigid: RigidBodyModel, cmap: ColumnMap) -> None:
             linear = unit in LINEAR_UNITS
             if linear and not prismatic:
                 raise DataError(f"column map: joint {name!r} is revolute but its {quantity} unit is {unit!r} (linear)")
-            if prismatic and not linear and unit != SI_UNITS[quantity]:
-                raise DataError(f"column map: joint {name!r} is prismatic but its {quantity} unit is {unit!r} (angular)")
+            stated = (name, quantity) in cmap.stated or ("", quantity) in cmap.stated  # not SI by default
+            if prismatic and not linear and (unit != SI_UNITS[quantity] or stated):
+                linear_units = [u for u in UNITS[quantity] if u in LINEAR_UNITS]
+                raise DataError(f"column map: joint {name!r} is prismatic but its {quantity} unit is {unit!r} (angular); "
+                                f"expected one of {linear_units}")
 
 
 def check_floating(floating_base: bool, cmap: ColumnMap) -> None:

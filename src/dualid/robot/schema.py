@@ -26,6 +26,9 @@ class ModelSection(_Section):
     urdf: str | None = Field(None, description="the robot's URDF (relative to the config file); required unless "
                                                "kind is drag with drag.chain")
     floating_base: bool = Field(False, description="add a free-flyer root joint")
+    package_path: list[str] | str | None = Field(None, description="folders holding the packages that package:// mesh "
+                                                 "URIs name (relative to the config file); ROS_PACKAGE_PATH is searched "
+                                                 "after them")
     gravity: list[float] | None = Field(None, min_length=3, max_length=3, description="[m/s²]; default (0, 0, -9.81)")
     kind: Literal["inertia", "drag"] = Field("inertia", description="inertia: τ = M(q)a + h(q, v); drag: τ = D(q)v")
     drag: DragSection | None = Field(None, description="the drag model (kind: drag)")

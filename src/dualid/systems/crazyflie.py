@@ -1,4 +1,4 @@
-"""Simulated Crazyflie–pendulum runs (DESIGN.md §2–3): a geometric controller tracks sinusoidal
+"""Simulated Crazyflie–pendulum runs (docs/crazyflie.md): a geometric controller tracks sinusoidal
 x, y, z, yaw references while the pendulum swings; motion capture, differentiation and the
 firmware's thrust calibration turn the true motion into "measured" trajectories.
 

@@ -18,7 +18,7 @@ import pinocchio as pin
 # --- Crazyflie 2.0 (published) ---------------------------------------------------------------
 CF_MASS = 0.027  # [kg] stock Crazyflie 2.0 (Bitcraze datasheet)
 # [kg m²] inertia about the CoM, Förster 2015 (ETH bachelor thesis, "System identification of the
-# Crazyflie 2.0 nano quadrocopter"), Table 4.2; within DESIGN.md's ranges
+# Crazyflie 2.0 nano quadrocopter"), Table 4.2
 CF_INERTIA = np.array(
     [
         [1.657171e-5, 0.830806e-6, 0.718277e-6],
