@@ -38,6 +38,7 @@ import numpy as np  # noqa: E402
 
 import dualid  # noqa: E402
 from dualid.bench import authors_arm  # noqa: E402
+from dualid.bench.runner import machine  # noqa: E402
 from dualid.errors import DualidError  # noqa: E402
 from dualid.estimators.methods import make_estimator  # noqa: E402
 from dualid.evaluation.parameter_error import geodesic_distance  # noqa: E402
@@ -104,7 +105,7 @@ def fmt(x, digits=3) -> str:
 def to_markdown(result: dict) -> str:
     methods, summary = result["methods"], result["summary"]
     lines = ["# The authors' minimal example: pseudo-inertia geodesic error to the truth", "",
-             f"Command: `{result['command']}`", "",
+             header(result), "",
              f"Seeds {', '.join(map(str, result['seeds']))}. Cell: mean (min–max) over seeds; "
              "lower is better; a failed or inconsistent fit is counted in the last columns.", ""]
     rows = []
@@ -122,8 +123,7 @@ def to_markdown(result: dict) -> str:
     full = [r for r in result["rows"] if r["N"] == n_max]
     lines += markdown_table(methods, [[fmt(float(np.median([r["cpu_s"] for r in full if r["method"] == m])), 3)
                                        for m in methods]])
-    lines += ["", f"Wall time {result['wall_time_s']:.0f} s; dualid from `{result['provenance']['dualid']}` "
-              f"(commit {result['provenance']['commit'][:10]})."]
+    lines += ["", f"Wall time {result['wall_time_s']:.0f} s (the machine may be shared)."]
     return "\n".join(lines) + "\n"
 
 
@@ -134,7 +134,17 @@ def provenance() -> dict:
                                 check=False).stdout.strip()
     except OSError:
         commit = ""
-    return {"dualid": str(src), "commit": commit or "unknown", "python": platform.python_version()}
+    return {"dualid": str(src), "commit": commit or "unknown", "python": platform.python_version(), "machine": machine()}
+
+
+def header(result: dict) -> str:
+    """The result's first line: its command, the dualid commit and the machine."""
+    prov = result["provenance"]
+    where = ""
+    if "machine" in prov:
+        m = prov["machine"]
+        where = f", {m['cpu']}, {m['cores']} cores, load average {m['load_average_at_start'][0]:.1f} at start"
+    return f"Command: `{result['command']}` (dualid {prov['commit'][:10]} from `{prov['dualid']}`{where})."
 
 
 def output_paths(out: str, force: bool) -> tuple[Path, Path]:

@@ -45,7 +45,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from authors_example import fmt, output_paths, provenance  # noqa: E402
+from authors_example import fmt, header, output_paths, provenance  # noqa: E402
 
 from dualid.bench import mujoco_arms as ma  # noqa: E402
 from dualid.errors import DualidError  # noqa: E402
@@ -188,7 +188,7 @@ def to_markdown(result: dict) -> str:
     cases = [c for c in CASES if any(p["case"] == c for p in s["per_method"])]
     cell = {(p["case"], p["method"]): p for p in s["per_method"]}
     ratio = {(p["case"], p["method"]): p for p in s["ratios"]}
-    out = ["# Noise-source benchmark: torque noise, regressor noise, both", "", f"Command: `{result['command']}`", "",
+    out = ["# Noise-source benchmark: torque noise, regressor noise, both", "", header(result), "",
            f"Robots {', '.join(result['robots'])}; seeds {', '.join(map(str, result['seeds']))}; "
            f"N = {', '.join(map(str, result['N']))} training samples per fit. Every cell is a median over robots × seeds; lower is "
            "better except NCC.", ""]
@@ -218,8 +218,7 @@ def to_markdown(result: dict) -> str:
     out.extend(markdown_table(["case", *methods], [[c] + [f"{cell[(c, k)]['failures']} / {cell[(c, k)]['inconsistent']}"
                                                          if (c, k) in cell else "–" for k in methods] for c in cases]))
     out.extend(["", f"Wall time {result['wall_time_s']:.0f} s, CPU time {result['cpu_time_s']:.0f} s (one process, "
-                f"one BLAS thread); dualid from `{result['provenance']['dualid']}` "
-                f"(commit {result['provenance']['commit'][:10]})."])
+                "one BLAS thread; the wall time depends on the machine's other jobs)."])
     return "\n".join(out) + "\n"
 
 
