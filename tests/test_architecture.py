@@ -214,15 +214,17 @@ def _repository_files() -> list[Path]:
             and not any(part in UNTRACKED_DIRS or part.endswith(".egg-info") for part in p.relative_to(REPO).parts)]
 
 
-@pytest.mark.xfail(strict=False, reason="docs/estimators.md, performance.md, results.md, real-robot.md, cli.md, "
-                   "README.md and src/dualid/estimators/ still carry run labels; remove this mark once they are clean")
+# Pages still carrying labels while they are being rewritten. This set may only shrink: clean a page, remove it here.
+LABELLED_PAGES = {"docs/results.md"}
+
+
 def test_no_run_tracker_or_people_labels_outside_the_changelog():
     files = _repository_files()
     assert files, f"no files found under {REPO}"
     bad = []
     for path in files:
         rel = path.relative_to(REPO).as_posix()
-        if rel in HISTORY_FILES or not path.exists():  # a tracked file deleted in the working tree has no text
+        if rel in HISTORY_FILES or rel in LABELLED_PAGES or not path.exists():  # deleted in the tree: no text
             continue
         for lineno, line in enumerate(path.read_bytes().splitlines(), 1):
             if m := RUN_LABEL.search(line):

@@ -1,4 +1,4 @@
-"""An independent check of every cvxpy solution of a quadratic or regularized fit (issue 12, point 3).
+"""An independent check of every cvxpy solution of a quadratic or regularized fit.
 
 Clarabel can stop with status ``optimal`` on an objective well above the optimum: on log-det / pullback fits
 whose prior is on the consistency boundary it was 1e-5 … 4e-2 above (stress corpus), with nothing in its status

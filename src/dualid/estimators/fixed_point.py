@@ -2,7 +2,7 @@
 
 The plain fixed point θ_{k+1} = argmin Σ r_iᵀ M_i(θ_k)⁻¹ r_i solves the unbiased estimating
 equation Σ Y_iᵀ M_i(θ̂)⁻¹ r_i = 0 but, under model error, lets the weight follow the estimate without
-bound (DESIGN.md §5: a real arm's wrist metric shrank ×70). Here the weight's metric is kept inside
+bound (on a real arm's data the wrist metric shrank ×70). Here the weight's metric is kept inside
 a chart-invariant trust region around a fixed pilot θ_ref:
 
     M̄_i = L_i · clip_[1/c, c](L_i⁻¹ M_i(θ_k) L_i⁻ᵀ) · L_iᵀ,    M_i(θ_ref) = L_i L_iᵀ

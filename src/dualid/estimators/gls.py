@@ -10,7 +10,7 @@ in (a covector covariance; B_i = ``problem.sensor_chart`` carries it to the prob
 fixed pilot fit. Then θ̂ = argmin Σ r_iᵀ C_i⁻¹ r_i, one convex weighted least squares under the
 same physical-consistency constraints as every estimator. The weights never depend on θ̂, so the
 metric cannot run away with the estimate (the paper's DM inflates M under noise, the fixed point
-θ_{k+1} = argmin Σ rᵀM(θ_k)⁻¹r shrinks it under model error; DESIGN.md §5).
+θ_{k+1} = argmin Σ rᵀM(θ_k)⁻¹r shrinks it under model error).
 
 Limits: κ → 0 gives WLS with W = Σ⁻¹ (joint-local residuals: sensor noise, friction); Σ → 0 gives
 the frozen dual metric Σ r_iᵀ M_i(θ_ref)⁻¹ r_i. Since Σ_i and M_i both transform as B_iᵀ(·)B_i,

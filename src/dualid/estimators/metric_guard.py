@@ -10,7 +10,7 @@ q = φ(q̃), M̃ = BᵀMB for both matrices and the pencil's eigenvalues do not 
 and flag ``degenerate`` when either leaves [1/c, c], with c = ``DEFAULT_BOUND`` = 100 unless told.
 
 Why 100: a well-posed fit moves the metric by noise-sized amounts; the worst non-degenerate
-behaviour measured here (the paper's DM under 10 % torque noise, armatures off ×3–12, issue 11)
+behaviour measured here (the paper's DM under 10 % torque noise, armatures off ×3–12)
 stays inside ×12, while the ghost optima the guard exists for (the Crazyflie pendulum made
 massless, M_αα ≈ 1e-12 against 1.5e-4; a wrist mass matrix shrunk ×70 by the fixed point) are
 outside ×70 and usually by many orders of magnitude. The bound is a flag, not a constraint.

@@ -1,5 +1,5 @@
 """The diagonal chart θ = s ⊙ φ in which a weighted or energy least-squares fit (with or without a geometric prior)
-is handed to cvxpy (issue 12, point 3).
+is handed to cvxpy.
 
 The chart used before, s_k = 1/‖Y_k‖ with Y the raw regressor, is the Jacobi scaling of OLS. A weighted fit
 (W = Σ̂⁻¹) or an energy fit (residual vᵀr) does not change when one coordinate changes units, but ‖Y_k‖ does: with

@@ -33,7 +33,7 @@ GAP_BALANCE = 3.0  # the centring target σμ is kept ≥ GAP_BALANCE · λ²/ν
 # local quadratic model; on the dual metric (M(θ)⁻¹ inside f) and at rank-deficient optima it cut the gap 10–20×
 # per step while λ² stayed put, the iterates reached a block's boundary far from the optimum and crawled along it
 # (σ = 1 centring steps of 0.01–0.1 for 20 iterations). Stress corpus (benchmarks/stress_corpus.py --no-large):
-# dm-paper Newton median/max 27/54 → 20.5/32 iterations; see docs/performance.md ("Gap balance").
+# dm-paper Newton median/max 27/54 → 20.5/32 iterations (docs/performance.md, "What keeps the solvers converging").
 
 
 def diverging_iterates(thetas: list[np.ndarray], f_history: list[float]) -> dict:

@@ -1,7 +1,7 @@
 """Per-chunk kernels of the dual-metric derivatives, arranged for numpy's batched small products.
 
 Same mathematics as ``AffineMetric.apply_quad`` (the reference the tests compare with), re-arranged where that was
-measured to be cheaper on a 4,096-sample Crazyflie chunk (n = 8, p = 30, three bodies; benchmarks/speed_session5.md):
+measured to be cheaper on a 4,096-sample Crazyflie chunk (n = 8, p = 30, three bodies; benchmarks/derivatives_speed.md):
 
 - M_i(θ) = Σ_b J_bᵀ (G_b J_b): G_b J_b by one broadcast product, no explicit symmetrisation (the Cholesky reads
   the lower triangle only): 530 → 420 ns per sample; that is ``AffineMetric.evaluate(θ, rows, symmetric=False)``;

@@ -11,7 +11,7 @@ from dualid.problem import IdentificationProblem, sample_blocks
 
 CHUNK = 1024  # samples per block of a pass: the per-chunk temporaries (Y_i, D_i, L⁻¹D_i: c·n·p floats each) stay in
 # cache; on the benchmark Crazyflie a pass costs 2.7 µs per sample with 1,024 against 3.1 µs with 4,096
-# (benchmarks/speed_session5.md)
+# (benchmarks/derivatives_speed.md)
 
 
 class NotPositiveDefinite(Exception):
