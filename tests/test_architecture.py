@@ -17,7 +17,7 @@ LAYERS = {
     "dualid.errors": 0, "dualid.linalg": 0,
     "dualid.data": 1,
     "dualid.model": 2,
-    "dualid.problem": 3, "dualid.identifiability": 3, "dualid.streaming": 3,
+    "dualid.problem": 3, "dualid.identifiability": 3, "dualid.streaming": 3, "dualid.distributed": 3,
     "dualid.estimators": 4,
     "dualid.evaluation": 5,
     "dualid.systems": 6,

@@ -8,6 +8,7 @@ change of coordinates or a subsample return a new problem.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -207,6 +208,43 @@ class IdentificationProblem:
         )
 
 
+def additive(kernel):
+    """Mark a pass over the data whose value is a sum of per-sample terms (a float, an array, or a tuple of them;
+    None left alone). On a problem spread over partitions (one with ``map_sum``, ``dualid.distributed``) the pass
+    runs where each partition lives and only the sums travel; on any other problem it runs as written."""
+
+    @functools.wraps(kernel)
+    def run(problem, *args, **kwargs):
+        spread = getattr(problem, "map_sum", None)
+        return kernel(problem, *args, **kwargs) if spread is None else spread(run, *args, **kwargs)
+
+    return run
+
+
+def stacked(kernel):
+    """Mark a pass whose value is rows to stack (an (N, …) array, one row per sample, or a triangular factor): on a
+    problem spread over partitions it runs on each partition and the rows are concatenated in the partitions' order
+    (``map_concat``)."""
+
+    @functools.wraps(kernel)
+    def run(problem, *args, **kwargs):
+        spread = getattr(problem, "map_concat", None)
+        return kernel(problem, *args, **kwargs) if spread is None else spread(run, *args, **kwargs)
+
+    return run
+
+
+def add_sums(x, y):
+    """x + y for the values of ``additive`` passes: floats and arrays added, sets joined, tuples element by element, None kept."""
+    if x is None or y is None:
+        return None if x is None and y is None else (x if y is None else y)
+    if isinstance(x, (set, frozenset)):
+        return x | y
+    if isinstance(x, tuple):
+        return tuple(add_sums(a, b) for a, b in zip(x, y, strict=True))
+    return x + y
+
+
 def identifiability_of(problem) -> Identifiability:
     """``problem.identifiability()`` for an IdentificationProblem or a ChunkedProblem. With more than 4p rows the
     stacked regressor A is replaced by its triangular factor R (AᵀA = RᵀR: same singular values, null space,
@@ -216,13 +254,21 @@ def identifiability_of(problem) -> Identifiability:
     if problem.N * problem.n > 4 * p:
         scale = problem.column_norms()
         scale[scale == 0] = 1.0
-        R = np.zeros((0, p))
-        for block, rows, _ in sample_blocks(problem, CHECK_CHUNK):
-            R = np.linalg.qr(np.vstack([R, block.Y[rows].reshape(-1, p) / scale]), mode="r")
+        R = np.linalg.qr(_scaled_factor(problem, scale), mode="r")  # spread: the factors of the partitions, stacked
         A = R * scale  # the factor of the unscaled A
     else:
         A = np.concatenate([b.Y.reshape(-1, p) for b in problem.blocks()])
     return identifiability(A, problem.parameters)
+
+
+@stacked
+def _scaled_factor(problem, scale: np.ndarray) -> np.ndarray:
+    """R with RᵀR = AᵀA for the column-scaled stacked regressor A = [Y_i / scale] (TSQR over blocks of samples)."""
+    p = problem.p
+    R = np.zeros((0, p))
+    for block, rows, _ in sample_blocks(problem, CHECK_CHUNK):
+        R = np.linalg.qr(np.vstack([R, block.Y[rows].reshape(-1, p) / scale]), mode="r")
+    return R
 
 
 def strided_rows(N: int, max_samples: int) -> slice:

@@ -21,7 +21,7 @@ import numpy as np
 
 from dualid.errors import DataError, MissingFileError
 from dualid.model.base import Model
-from dualid.problem import IdentificationProblem, identifiability_of, owned
+from dualid.problem import IdentificationProblem, additive, identifiability_of, owned, stacked
 
 Chunk = tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]  # q (c, nq), v (c, n), a (c, n) or None, τ (c, n)
 
@@ -189,27 +189,21 @@ class ChunkedProblem:
         return self
 
     def column_norms(self) -> np.ndarray:
-        sq = np.zeros(self.p)
-        for block in self.blocks():
-            sq += block.column_norms() ** 2
-        return np.sqrt(sq)
+        return np.sqrt(_column_squares(self))
 
     def identifiability(self):
         return identifiability_of(self)
 
     def residual(self, theta: np.ndarray) -> np.ndarray:
         """r_i (N, n): N·n floats (not N·n·p), for callers that need every residual."""
-        return np.concatenate([b.residual(theta) for b in self.blocks()])
+        return _residuals(self, theta)
 
     def dual_metric_objective(self, theta: np.ndarray) -> float:
-        return float(sum(b.dual_metric_objective(theta) for b in self.blocks()))
+        return float(_dual_metric_sum(self, theta))
 
     def explained(self, theta: np.ndarray) -> float:
         """R² = 1 − Σ‖r_i‖² / Σ‖τ_i − τ̄‖² (one pass): the share of the effort's variance the model with θ explains."""
-        rss, s1, s2, N = 0.0, 0.0, 0.0, 0
-        for b in self.blocks():
-            rss += float(np.sum(b.residual(theta) ** 2))
-            s1, s2, N = s1 + b.tau.sum(axis=0), s2 + np.sum(b.tau ** 2, axis=0), N + b.tau.shape[0]
+        rss, s1, s2, N = _explained_sums(self, theta)
         tss = float(np.sum(s2 - s1 ** 2 / max(N, 1)))
         return 1.0 - rss / tss if tss > 0 else float("nan")
 
@@ -232,3 +226,30 @@ class ChunkedProblem:
         """All samples in memory (for the solvers that need them at once, e.g. the SDP)."""
         return self.subset(slice(None))
 
+
+
+# The passes above as sums (or rows) per sample, so that a problem spread over partitions (``dualid.distributed``)
+# runs them where the data live (``dualid.problem.additive``).
+@additive
+def _column_squares(problem) -> np.ndarray:
+    return sum(block.column_norms() ** 2 for block in problem.blocks())
+
+
+@stacked
+def _residuals(problem, theta: np.ndarray) -> np.ndarray:
+    return np.concatenate([b.residual(theta) for b in problem.blocks()])
+
+
+@additive
+def _dual_metric_sum(problem, theta: np.ndarray) -> float:
+    return float(sum(b.dual_metric_objective(theta) for b in problem.blocks()))
+
+
+@additive
+def _explained_sums(problem, theta: np.ndarray) -> tuple:
+    """(Σ‖r_i‖², Σ τ_i, Σ τ_i², N)."""
+    rss, s1, s2, N = 0.0, 0.0, 0.0, 0
+    for b in problem.blocks():
+        rss += float(np.sum(b.residual(theta) ** 2))
+        s1, s2, N = s1 + b.tau.sum(axis=0), s2 + np.sum(b.tau ** 2, axis=0), N + b.tau.shape[0]
+    return rss, s1, s2, N

@@ -18,9 +18,10 @@ EXPLAINED = 0.5  # warn when the fit explains less than this share of the effort
 @app.command("fit-stream")
 def fit_stream(
     model: Path = typer.Option(..., "--model", help="URDF of the robot"),
-    data: Path = typer.Option(..., "--data", help="Parquet file (columns q_0.., v_/a_/tau_<joint>), a directory "
-                                                  "of q.npy, v.npy, a.npy, tau.npy (memory-mapped), or a log read as "
-                                                  "dualid fit reads it: a ROS bag, or any log with --config"),
+    data: list[Path] = typer.Option(..., "--data", help="Parquet file (columns q_0.., v_/a_/tau_<joint>), a directory "
+                                    "of q.npy, v.npy, a.npy, tau.npy (memory-mapped), or a log read as dualid fit reads "
+                                    "it: a ROS bag, or any log with --config; with --workers/--scheduler one or more "
+                                    "Parquet files (repeat --data), one task per file"),
     config: Optional[Path] = typer.Option(None, "--config", help="fit.yaml whose columns (or columns.topics) and "
                                           "preprocessing read --data as a log; the log is read whole"),
     method: str = typer.Option("ols", "--method", help="ols, ols_unconstrained, wls, energy, dm, dm-paper"),
@@ -28,13 +29,15 @@ def fit_stream(
     chunk: int = typer.Option(65536, "--chunk", help="samples per chunk (memory: chunk·n·p floats for Y)"),
     allow_unidentifiable: bool = typer.Option(False, "--allow-unidentifiable", metavar=FLAG,
                                               help="accept one minimiser when the data do not determine θ"),
+    workers: int = typer.Option(0, "--workers", help="run the passes on a local Dask cluster of this many worker "
+                                "processes (needs dualid[distributed])"),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="run the passes on the Dask cluster whose "
+                                            "scheduler is at this address (e.g. tcp://host:8786)"),
 ) -> None:
     """Fit without loading the data: every pass reads the file chunk by chunk and builds the regressor on the
-    fly, so memory holds one chunk. Prints the identified parameters, the objective and the passes made."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
+    fly, so memory holds one chunk. Prints the identified parameters, the objective and the passes made. With
+    --workers or --scheduler the passes run on a Dask cluster, one task per file, and only sums travel."""
     from dualid.data.bags import is_bag
-    from dualid.estimators.methods import make_estimator
     from dualid.model.rigid_body import RigidBodyModel
     from dualid.robot.config import FitConfig
     from dualid.robot.stream_source import log_source
@@ -46,6 +49,12 @@ def fit_stream(
     if chunk < 1:
         fail(f"--chunk: expected a positive number of samples, got {chunk}")
     rb = RigidBodyModel.from_urdf(model, floating_base=floating_base)
+    if workers or scheduler:
+        _fit_spread(rb, data, method, chunk, allow_unidentifiable, workers, scheduler, config)
+        return
+    if len(data) != 1:
+        fail(f"--data: {len(data)} files given; several files are read by a Dask cluster (--workers N or --scheduler)")
+    data = data[0]
     if config is not None or is_bag(data):  # a log: columns (or bag topics) and preprocessing as dualid fit's
         cfg = None if config is None else FitConfig.from_yaml(config)
         source = log_source(rb, [data], None if cfg is None else cfg.columns, None if cfg is None else cfg.preprocessing,
@@ -57,6 +66,47 @@ def fit_stream(
     if source.N < 2 or source.N * rb.nv < rb.parameters.p:
         fail(f"--data {data}: {source.N} sample{'s' * (source.N != 1)} × {rb.nv} coordinates = {source.N * rb.nv} "
              f"equations for {rb.parameters.p} parameters; a fit needs more samples")
+    _fit_and_print(rb, method, allow_unidentifiable, lambda report: ChunkedProblem(rb, source, report))
+
+
+def _fit_spread(rb, data: list[Path], method: str, chunk: int, allow_unidentifiable: bool, workers: int,
+                scheduler: Optional[str], config: Optional[Path]) -> None:
+    """The fit's passes as one task per Parquet file on a Dask cluster (local, or at ``scheduler``)."""
+    try:
+        from distributed import Client
+    except ImportError:
+        fail("--workers/--scheduler need dask.distributed: pip install 'dualid[distributed]'")
+    from dualid.distributed import DaskProblem, local_client
+
+    if workers and scheduler:
+        fail("--workers and --scheduler: give one (a local cluster of N workers, or a running cluster's address)")
+    if workers < 0:
+        fail(f"--workers: expected a positive number of worker processes, got {workers}")
+    if config is not None or any(p.is_dir() for p in data):
+        fail("--workers/--scheduler read Parquet files (columns q_0.., v_/a_/tau_<joint>), not --config logs or .npy "
+             "directories")
+    try:
+        client = local_client(workers) if workers else Client(scheduler, timeout=5)
+    except OSError as exc:
+        fail(f"--scheduler {scheduler}: no Dask scheduler reached ({exc})")
+    try:
+        typer.echo(f"Dask cluster: {len(client.scheduler_info()['workers'])} workers "
+                   f"({'local' if workers else scheduler}), {len(data)} file{'s' * (len(data) != 1)}")
+        _fit_and_print(rb, method, allow_unidentifiable,
+                       lambda report: DaskProblem.from_files(rb, data, client, chunk=chunk, progress=report))
+    finally:
+        cluster = client.cluster if workers else None
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _fit_and_print(rb, method: str, allow_unidentifiable: bool, make_problem) -> None:
+    """Fit ``make_problem(progress)`` with one progress bar per pass; print θ̂, the objective, the passes, R²."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from dualid.estimators.methods import make_estimator
+
     estimator = make_estimator(method, allow_unidentifiable=allow_unidentifiable)
     columns = (TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     with Progress(*columns, console=console) as progress:
@@ -67,7 +117,7 @@ def fit_stream(
                 tasks[k] = progress.add_task(f"pass {k}", total=total)
             progress.update(tasks[k], completed=done)
 
-        problem = ChunkedProblem(rb, source, report)
+        problem = make_problem(report)
         t0 = time.perf_counter()
         result = estimator.fit(problem)
         wall = time.perf_counter() - t0

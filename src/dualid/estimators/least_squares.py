@@ -27,7 +27,7 @@ from dualid.estimators.result import IdentificationResult
 from dualid.estimators.statistics import energy_statistics, statistics
 from dualid.model.prior_lift import DEFAULT_FLOOR as PRIOR_FLOOR
 from dualid.model.prior_lift import lift_prior
-from dualid.problem import IdentificationProblem, sample_blocks
+from dualid.problem import IdentificationProblem, additive, sample_blocks
 
 
 @dataclass(frozen=True)
@@ -91,14 +91,20 @@ def residual_covariance(problem: IdentificationProblem, theta: np.ndarray, floor
     The floor keeps W = Σ̂⁻¹ finite when a coordinate fits exactly (noiseless data, or a passive
     joint whose modelled torque is identically zero).
     """
+    S = _residual_products(problem, theta) / problem.N
+    w, U = np.linalg.eigh(0.5 * (S + S.T))
+    w = np.maximum(w, max(floor * np.trace(S) / problem.n, 1e-300))
+    return (U * w) @ U.T
+
+
+@additive
+def _residual_products(problem, theta: np.ndarray) -> np.ndarray:
+    """Σ r_i r_iᵀ (n, n)."""
     S = np.zeros((problem.n, problem.n))
     for block, rows, _ in sample_blocks(problem, 16384):
         r = block.Y[rows] @ theta - block.tau[rows]
         S += r.T @ r
-    S /= problem.N
-    w, U = np.linalg.eigh(0.5 * (S + S.T))
-    w = np.maximum(w, max(floor * np.trace(S) / problem.n, 1e-300))
-    return (U * w) @ U.T
+    return S
 
 
 def covariance_weight(problem: IdentificationProblem, covariance, reference: _Common) -> tuple[np.ndarray, dict]:

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from dualid.errors import ConfigError, DataError, MetricError
-from dualid.problem import IdentificationProblem, sample_blocks, strided_rows
+from dualid.problem import IdentificationProblem, stacked, sample_blocks, strided_rows
 
 
 def tri_inverse(L):
@@ -41,6 +41,7 @@ def _check_bound(bound: float) -> float:
     return bound
 
 
+@stacked
 def generalized_eigenvalues(
     problem: IdentificationProblem, theta: np.ndarray, theta_ref: np.ndarray, chunk: int = 8192
 ) -> np.ndarray:

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dualid.problem import IdentificationProblem, sample_blocks
+from dualid.problem import IdentificationProblem, additive, sample_blocks
 
 
 @dataclass(frozen=True)
@@ -22,26 +22,38 @@ class Statistics:
 
     def objective(self, problem: IdentificationProblem, theta: np.ndarray) -> float:
         """Σ r_iᵀ W_i r_i from the residuals (no cancellation, unlike θᵀHθ − 2gᵀθ + c)."""
-        f = 0.0
-        for block, rows, _ in sample_blocks(problem, 16384):
-            r = block.Y[rows] @ theta - block.tau[rows]
-            if self.energy:
-                f += float(np.sum(np.einsum("na,na->n", block.v[rows], r) ** 2))
-            elif self.W is None:
-                f += float(np.sum(r * r))
-            else:
-                f += float(np.einsum("na,ab,nb->", r, self.W, r))
-        return f
+        return _residual_sum(problem, theta, self.W, self.energy)
+
+
+@additive
+def _residual_sum(problem, theta: np.ndarray, W: np.ndarray | None, energy: bool) -> float:
+    f = 0.0
+    for block, rows, _ in sample_blocks(problem, 16384):
+        r = block.Y[rows] @ theta - block.tau[rows]
+        if energy:
+            f += float(np.sum(np.einsum("na,na->n", block.v[rows], r) ** 2))
+        elif W is None:
+            f += float(np.sum(r * r))
+        else:
+            f += float(np.einsum("na,ab,nb->", r, W, r))
+    return f
 
 
 def statistics(problem: IdentificationProblem, W: np.ndarray | None = None, chunk: int = 16384) -> Statistics:
     """H, g, c for a constant weight W (n, n) (None: identity), accumulated in chunks of samples."""
-    p = problem.p
-    H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
     F = None
     if W is not None:  # W = F Fᵀ (eigen-factor, W ⪰ 0): Σ Y_iᵀ W Y_i = Σ (Fᵀ Y_i)ᵀ (Fᵀ Y_i), one GEMM per chunk
         lam, U = np.linalg.eigh(0.5 * (np.asarray(W, dtype=float) + np.asarray(W, dtype=float).T))
         F = U * np.sqrt(np.clip(lam, 0.0, None))
+    H, g, c = _sums(problem, F, chunk)
+    return Statistics(0.5 * (H + H.T), g, c, W)
+
+
+@additive
+def _sums(problem, F: np.ndarray | None, chunk: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """Σ A_iᵀA_i, Σ A_iᵀt_i, Σ t_iᵀt_i with A_i = FᵀY_i, t_i = Fᵀτ_i (F None: the identity)."""
+    p = problem.p
+    H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
     for block, rows, _ in sample_blocks(problem, chunk):
         Yc, tau = block.Y[rows], block.tau[rows]
         if F is not None:
@@ -50,11 +62,16 @@ def statistics(problem: IdentificationProblem, W: np.ndarray | None = None, chun
         H += A.T @ A
         g += A.T @ t
         c += float(t @ t)
-    return Statistics(0.5 * (H + H.T), g, c, W)
+    return H, g, c
 
 
 def energy_statistics(problem: IdentificationProblem, chunk: int = 16384) -> Statistics:
     """W_i = v_i v_iᵀ: the rows e_i = Y_iᵀ v_i and targets v_iᵀ τ_i, accumulated in chunks of samples."""
+    return Statistics(*_energy_sums(problem, chunk), energy=True)
+
+
+@additive
+def _energy_sums(problem, chunk: int) -> tuple[np.ndarray, np.ndarray, float]:
     p = problem.p
     H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
     for block, rows, _ in sample_blocks(problem, chunk):
@@ -63,4 +80,4 @@ def energy_statistics(problem: IdentificationProblem, chunk: int = 16384) -> Sta
         H += e.T @ e
         g += e.T @ y
         c += float(y @ y)
-    return Statistics(H, g, c, energy=True)
+    return H, g, c

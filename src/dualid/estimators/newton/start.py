@@ -9,7 +9,7 @@ from dualid.estimators.newton.linalg import solve_psd
 from dualid.estimators.newton.objective import _objective
 from dualid.estimators.statistics import energy_statistics, statistics
 from dualid.model.consistency import FeasibleSet
-from dualid.problem import IdentificationProblem, sample_blocks
+from dualid.problem import IdentificationProblem, additive, sample_blocks
 
 
 def _ols(problem: IdentificationProblem, chunk: int) -> np.ndarray:
@@ -100,18 +100,25 @@ def _energy_ls(problem: IdentificationProblem, chunk: int) -> np.ndarray:
 def _frozen_metric_ls(problem: IdentificationProblem, theta_c: np.ndarray, chunk: int) -> np.ndarray | None:
     """min-norm argmin Σ r_iᵀ M_i(θ_c)⁻¹ r_i (the metric frozen at θ_c): chart-invariant; None if some
     M_i(θ_c) is not positive definite."""
+    H, g, failed = _frozen_metric_sums(problem, theta_c, chunk)
+    return None if failed else solve_psd(H, g, rtol=1e-10)
+
+
+@additive
+def _frozen_metric_sums(problem, theta_c: np.ndarray, chunk: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """(Σ Y_iᵀM_i(θ_c)⁻¹Y_i, Σ Y_iᵀM_i(θ_c)⁻¹τ_i, 1 if some M_i(θ_c) is not positive definite else 0)."""
     p = problem.p
     H, g = np.zeros((p, p)), np.zeros(p)
     for block, rows, _ in sample_blocks(problem, chunk):
         try:
             L = np.linalg.cholesky(block.metric.evaluate(theta_c, rows))
         except np.linalg.LinAlgError:
-            return None
+            return H, g, 1
         Z = np.linalg.solve(L, block.Y[rows])  # L⁻¹ Y_i (n, p)
         z = np.linalg.solve(L, block.tau[rows][..., None])[..., 0]
         H += np.einsum("nap,naq->pq", Z, Z)
         g += np.einsum("nap,na->p", Z, z)
-    return solve_psd(H, g, rtol=1e-10)
+    return H, g, 0
 
 
 def constant_metric_start(problem, cons: FeasibleSet, seed: np.ndarray) -> tuple[np.ndarray, str]:

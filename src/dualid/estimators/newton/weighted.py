@@ -17,6 +17,7 @@ C = L Lᵀ, and its rows whitened by the one L⁻¹ (a batched matmul), instead 
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Callable
 
@@ -31,7 +32,7 @@ from dualid.estimators.newton.start import central_point, constant_metric_start
 from dualid.estimators.newton.trace import direction_label, direction_names
 from dualid.estimators.result import IdentificationResult
 from dualid.model.consistency import feasible_set
-from dualid.problem import IdentificationProblem, sample_blocks
+from dualid.problem import IdentificationProblem, additive, sample_blocks
 
 # (block, rows) → C_i (c, n, n) symmetric positive definite, for the samples ``rows`` of the in-memory ``block``
 # (see dualid.problem.sample_blocks; for an in-memory problem the block is the problem itself)
@@ -59,6 +60,18 @@ class _Whitening:
         self.problem, self.weight, self.what, self.whiten = problem, weight, what, whiten
         self.C = self.Li = None  # the constant weight (n, n) and its L⁻¹, once factored
         self.kinds: set[str] = set()
+
+    def on(self, problem) -> "_Whitening":
+        """This whitening for the samples of ``problem``: itself, or (for a partition of a spread problem, where this
+        whitening arrived without its problem) a copy bound to the partition, keeping the factored weight."""
+        if self.problem is problem:
+            return self
+        other = copy.copy(self)
+        other.problem, other.kinds = problem, set()
+        return other
+
+    def __getstate__(self) -> dict:  # sent to the workers of a spread problem: the weight, not the problem
+        return {**self.__dict__, "problem": None}
 
     @property
     def kind(self) -> str:
@@ -133,6 +146,17 @@ def weighted_statistics(problem: IdentificationProblem, weight: Weight, chunk: i
     energy=True also (H_e, g_e) of the energy residual v_iᵀ r_i, from the same pass. weight: a Weight, or the
     fit's ``_Whitening`` (which keeps a constant weight's factor between passes)."""
     white = _whitening(problem, weight, what, whiten)
+    H, g, c, He, ge, kinds = _weighted_sums(problem, white, chunk, energy)
+    white.kinds |= kinds
+    if energy:
+        return 0.5 * (H + H.T), g, c, He, ge
+    return 0.5 * (H + H.T), g, c
+
+
+@additive
+def _weighted_sums(problem, white: "_Whitening", chunk: int, energy: bool):
+    """(H, g, c, H_e, g_e, the weight kinds seen) summed over the samples, as ``weighted_statistics``."""
+    white = white.on(problem)
     p = problem.p
     H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
     He, ge = np.zeros((p, p)), np.zeros(p)
@@ -146,20 +170,26 @@ def weighted_statistics(problem: IdentificationProblem, weight: Weight, chunk: i
         H += Z2.T @ Z2
         g += Z2.T @ z1
         c += float(z1 @ z1)
-    if energy:
-        return 0.5 * (H + H.T), g, c, He, ge
-    return 0.5 * (H + H.T), g, c
+    return H, g, c, He, ge, white.kinds
 
 
 def weighted_objective(problem: IdentificationProblem, weight: Weight, theta: np.ndarray, chunk: int = CHUNK) -> float:
     """Σ r_iᵀ C_i⁻¹ r_i from the residuals (no cancellation, unlike θᵀHθ − 2gᵀθ + c); weight as in
     ``weighted_statistics``."""
     white = _whitening(problem, weight, "the weight")
+    f, kinds = _weighted_residual_sum(problem, white, theta, chunk)
+    white.kinds |= kinds
+    return f
+
+
+@additive
+def _weighted_residual_sum(problem, white: "_Whitening", theta: np.ndarray, chunk: int) -> tuple[float, set]:
+    white = white.on(problem)
     f = 0.0
     for block, rows, _ in sample_blocks(problem, chunk):
         e = white.residual(block, rows, theta)
         f += float(np.sum(e * e))
-    return f
+    return f, white.kinds
 
 
 def fit_weighted_newton(
