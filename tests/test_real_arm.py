@@ -47,11 +47,29 @@ def panda_fit(tmp_path_factory):
     out = tmp / "out"
     result = CliRunner().invoke(app, ["fit", "--model", str(tmp / "panda.urdf"), "--data", str(logs[0]),
                                       "--data", str(logs[1]), "--test", str(logs[2]), "--out", str(out)])
-    return result, out, tmp / "panda.urdf"
+    return result, out, tmp / "panda.urdf", logs
+
+
+def test_no_absurd_link_is_written_without_the_plausible_step(panda_fit, tmp_path):
+    """prior.plausible: false: the raw dm fit puts a link at thousands of kg (the pathology above); its model files are
+    not written, and the console's last line, the warnings, report.md and parameters.yaml name the link and its mass."""
+    *_, prior_file, logs = panda_fit
+    config = tmp_path / "fit.yaml"
+    config.write_text(yaml.safe_dump({"model": {"urdf": str(prior_file)}, "train": [str(p) for p in logs[:2]],
+                                      "test": [str(logs[2])], "methods": ["dm"], "prior": {"plausible": False}}))
+    result = CliRunner().invoke(app, ["fit", "--config", str(config), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 1 and result.exception is not None and "Traceback" not in result.output
+    last = result.output.rstrip().splitlines()[-1]
+    assert "not written: dm.urdf and dm.xml (the raw fit θ̂ puts link 'panda_link" in last, last
+    assert not (tmp_path / "out" / "dm.urdf").exists() and not (tmp_path / "out" / "dm.xml").exists()
+    record = yaml.safe_load((tmp_path / "out" / "parameters.yaml").read_text())
+    assert record["methods"]["dm"]["urdf"].startswith("not written: the raw fit θ̂ puts link 'panda_link")
+    assert any(w.startswith("dm: model files not written") for w in record["warnings"])
+    assert "dm.xml not written: the raw fit θ̂ puts link" in (tmp_path / "out" / "report.md").read_text()
 
 
 def test_the_default_fit_finishes_and_writes_every_model_file(panda_fit):
-    result, out, _ = panda_fit
+    result, out, *_ = panda_fit
     assert result.exit_code == 0, result.output
     assert "Traceback" not in result.output and result.exception is None
     record = yaml.safe_load((out / "parameters.yaml").read_text())
@@ -72,7 +90,7 @@ def test_the_written_masses_make_physical_sense(panda_fit):
 
     from dualid.model.rigid_body import RigidBodyModel
 
-    result, out, prior_file = panda_fit
+    result, out, prior_file, _ = panda_fit
     prior = RigidBodyModel.from_urdf(prior_file).nominal[::10]
     record = yaml.safe_load((out / "parameters.yaml").read_text())
     for m, entry in record["methods"].items():
@@ -93,7 +111,7 @@ def test_the_written_masses_make_physical_sense(panda_fit):
 
 
 def test_the_written_model_predicts_held_out_torque_as_well_as_the_raw_fit(panda_fit):
-    _, out, _ = panda_fit
+    _, out, *_ = panda_fit
     record = yaml.safe_load((out / "parameters.yaml").read_text())
     for m, entry in record["methods"].items():
         raw = np.mean(list(entry["validation"]["mean"]["tau_rmse"].values()))
