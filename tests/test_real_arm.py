@@ -117,3 +117,30 @@ def test_the_written_model_predicts_held_out_torque_as_well_as_the_raw_fit(panda
         raw = np.mean(list(entry["validation"]["mean"]["tau_rmse"].values()))
         written = np.mean(entry["plausible"]["held_out_tau_rmse"])
         assert written <= 1.02 * raw, (m, written, raw)
+
+
+def test_a_urdf_without_inertials_gets_a_regularised_prior(panda_fit, tmp_path):
+    """No <inertial> anywhere: every body's prior is the same ball fitted to the torques (a PlausibleWarning says its
+    mass and radius); the fit exits 0 and writes model files whose arm weighs what the true one does (±50 %)."""
+    import xml.etree.ElementTree as ET
+
+    import pinocchio as pin
+
+    from dualid.model.rigid_body import RigidBodyModel
+
+    *_, prior_file, logs = panda_fit
+    root = ET.fromstring(prior_file.read_text())
+    for link in root.findall("link"):
+        for inertial in link.findall("inertial"):
+            link.remove(inertial)
+    bare = tmp_path / "bare.urdf"
+    bare.write_text(ET.tostring(root, encoding="unicode"))
+    out = tmp_path / "out"
+    result = CliRunner().invoke(app, ["fit", "--model", str(bare), "--data", str(logs[0]), "--data", str(logs[1]),
+                                      "--test", str(logs[2]), "--method", "dm", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "the URDF has no inertials: every body's prior is the same ball" in result.output
+    true_mass = RigidBodyModel(pin.buildModelFromXML(arm_urdf(example_robot_urdf()))).nominal[::10]
+    written = RigidBodyModel.from_urdf(out / "dm.urdf").nominal[::10]
+    assert 0.5 <= written.sum() / true_mass.sum() <= 1.5, (written, true_mass)
+    assert written.max() < true_mass.sum()  # no link heavier than the whole true arm

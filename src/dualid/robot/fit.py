@@ -39,6 +39,7 @@ from dualid.estimators.guards import guard_info
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.methods import method as method_entry
 from dualid.estimators.plausible import PlausibleParameters
+from dualid.estimators.plausible_newton import ball_prior
 from dualid.estimators.uncertainty import BaseUncertainty
 from dualid.evaluation.validation import Validation, validate
 from dualid.model.external_wrench import apply_wrenches
@@ -298,8 +299,8 @@ def _plausible(config: FitConfig, rigid, model, problem, method: str, theta: np.
 def _refused(config: FitConfig, rigid, model, problem, method: str, theta: np.ndarray, plausible) -> str:
     """Why ``method``'s model files are not written ("" when they are): the θ they would carry (θ_plausible, else θ̂)
     has a link heavier than twice the prior's whole moving mass (``robot.plausible_step.refused_files``)."""
-    try:
-        theta0 = prior_theta(config, rigid, model, theta, problem)[0]
+    try:  # a URDF without inertials: compared with the regularised prior the plausible step uses
+        theta0 = ball_prior(problem, prior_theta(config, rigid, model, theta, problem)[0])[0]
     except DualidError:  # an unreadable prior file (only read here when no step needs it): nothing to compare with
         return ""
     links = {}

@@ -18,7 +18,7 @@ import numpy as np
 
 from dualid.errors import ConfigError, ModelFileWarning, PlausibleWarning
 from dualid.estimators.plausible import PlausibleParameters, plausible_parameters
-from dualid.estimators.plausible_newton import MASSLESS_SHARE, rounded_prior
+from dualid.estimators.plausible_newton import MASSLESS_SHARE, ball_prior, rounded_prior
 from dualid.estimators.plausible_region import LEVEL, check_level, plausible_in_region, training_rmse
 from dualid.estimators.uncertainty import BaseUncertainty
 from dualid.problem import IdentificationProblem
@@ -55,6 +55,9 @@ def choose_plausible(problem: IdentificationProblem, theta_hat: np.ndarray, thet
     """θ_plausible of one method (module docstring); raises what the estimators raise. The prior's rigid bodies are
     made at most 10 % rounder first (``estimators.plausible_newton.rounded_prior``: a thin CAD link would make the
     divergence 1/λ² stiff along one direction and push the fit's disagreement into that link's mass)."""
+    theta0, ball = ball_prior(problem, theta0)
+    if ball:  # no prior body at all: a regularised one at the data's scale (said: a fallback that is used)
+        warnings.warn(PlausibleWarning(ball), stacklevel=2)
     rounded = rounded_prior(problem.parameters, theta0)
     P = problem.parameters
     replaced = [b.name for b in P.blocks if b.kind == "rigid_body"  # rounding keeps the mass, replacing does not
