@@ -61,11 +61,26 @@ def test_no_absurd_link_is_written_without_the_plausible_step(panda_fit, tmp_pat
     assert result.exit_code == 1 and result.exception is not None and "Traceback" not in result.output
     last = result.output.rstrip().splitlines()[-1]
     assert "not written: dm.urdf and dm.xml (the raw fit θ̂ puts link 'panda_link" in last, last
+    assert "keep prior.plausible on (the default)" in last
     assert not (tmp_path / "out" / "dm.urdf").exists() and not (tmp_path / "out" / "dm.xml").exists()
     record = yaml.safe_load((tmp_path / "out" / "parameters.yaml").read_text())
     assert record["methods"]["dm"]["urdf"].startswith("not written: the raw fit θ̂ puts link 'panda_link")
     assert any(w.startswith("dm: model files not written") for w in record["warnings"])
     assert "dm.xml not written: the raw fit θ̂ puts link" in (tmp_path / "out" / "report.md").read_text()
+
+
+def test_no_absurd_link_is_written_when_the_exact_plausible_choice_fails(panda_fit, tmp_path):
+    """prior.plausible.level: 0 (θ̂'s training predictions exactly): on noisy dm data that slice holds no
+    consistent θ near the prior, the step fails, and the raw θ̂'s absurd links are not written either."""
+    *_, prior_file, logs = panda_fit
+    config = tmp_path / "fit.yaml"
+    config.write_text(yaml.safe_dump({"model": {"urdf": str(prior_file)}, "train": [str(p) for p in logs[:2]],
+                                      "methods": ["dm"], "prior": {"plausible": {"level": 0}}}))
+    result = CliRunner().invoke(app, ["fit", "--config", str(config), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 1 and "Traceback" not in result.output
+    assert "dm: plausible parameters failed" in result.output
+    last = result.output.rstrip().splitlines()[-1]
+    assert "not written: dm.urdf and dm.xml (the raw fit θ̂ puts link" in last and "the plausible step failed" in last
 
 
 def test_the_default_fit_finishes_and_writes_every_model_file(panda_fit):

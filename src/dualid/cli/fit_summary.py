@@ -24,7 +24,8 @@ def print_plausible(outcome) -> list[str]:
         p = f.plausible
         if p is None:
             continue
-        where = (f"in the {p.level:g} confidence region (statistic {p.statistic:.3g} ≤ {p.radius2:.3g})"
+        inside = "≤" if p.status != "outside_region" else "> the radius"
+        where = (f"in the {p.level:g} confidence region (statistic {p.statistic:.3g} {inside} {p.radius2:.3g})"
                  if p.form == "confidence" else "with the training predictions of θ̂")
         by_prior = p.by_prior()
         console.print(f"{m}: the model files carry the parameters closest to the prior {where}; "

@@ -101,7 +101,7 @@ def rounded_prior(P, theta0: np.ndarray) -> np.ndarray:
 
 
 def ball_prior(problem: IdentificationProblem, theta0: np.ndarray) -> tuple[np.ndarray, str]:
-    """(θ₀, how its bodies were chosen or ""): when no rigid body of θ₀ has a positive mass (a URDF without inertials,
+    """(θ₀, how its bodies were chosen or ""): when every rigid body of θ₀ has a zero mass (a URDF without inertials,
     or with zero masses everywhere), every body becomes the same ball: mass m at its joint frame's origin, inertia
     m r² 1 (r ≥ BALL_RADIUS_MIN), (m, m r²) the non-negative least squares of the training torques by that uniform
     robot (the other parameters at θ₀, NaN as 0). A regularised prior at the data's scale, physically consistent;
@@ -111,7 +111,7 @@ def ball_prior(problem: IdentificationProblem, theta0: np.ndarray) -> tuple[np.n
     P = problem.parameters
     blocks = [b for b in P.blocks if b.kind == "rigid_body"]
     theta0 = np.array(theta0, dtype=float)
-    if not blocks or any(theta0[b.indices[0]] > 0 for b in blocks):
+    if not blocks or any(theta0[b.indices[0]] != 0 for b in blocks):  # a negative mass is a bad prior, not none
         return theta0, ""
     rigid = [i for b in blocks for i in b.indices]
     rest = np.setdiff1d(np.arange(P.p), rigid)

@@ -309,7 +309,7 @@ def _refused(config: FitConfig, rigid, model, problem, method: str, theta: np.nd
             links.setdefault(rigid.model.names[f.parentJoint], f.name)
     written = theta if plausible is None else plausible.theta
     return refused_files(method, problem.parameters, written, theta0, "raw" if plausible is None else "plausible",
-                         links)
+                         links, config.prior.plausible)
 
 
 def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome:

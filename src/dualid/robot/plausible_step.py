@@ -94,17 +94,19 @@ def heavy_links(P, theta: np.ndarray, theta0: np.ndarray) -> list[tuple[str, flo
             if theta[b.indices[0]] > HEAVY_RATIO * total]
 
 
-def refused_files(method: str, P, theta: np.ndarray, theta0: np.ndarray, which: str, links: dict[str, str]) -> str:
+def refused_files(method: str, P, theta: np.ndarray, theta0: np.ndarray, which: str, links: dict[str, str],
+                  step_on: bool = False) -> str:
     """Why ``method``'s model files are not written ("" when they are): a link heavier than HEAVY_RATIO × the prior's
     whole moving mass (a simulator would carry a body no arm has; MuJoCo refuses 10³–10⁹ kg links). Warned
-    (``ModelFileWarning``); ``which``: the θ the files would carry, ``links``: {joint: its child link}."""
+    (``ModelFileWarning``); ``which``: the θ the files would carry, ``links``: {joint: its child link}, ``step_on``:
+    prior.plausible was on (so a raw θ̂ means the step failed)."""
     heavy = heavy_links(P, theta, theta0)
     if not heavy:
         return ""
     total = sum(max(theta0[b.indices[0]], 0.0) for b in P.blocks if b.kind == "rigid_body")
     named = ", ".join(f"link {links.get(j, j)!r} {m:.4g} kg (prior {m0:.4g} kg)" for j, m, m0 in heavy)
-    hint = ("; keep prior.plausible on (the default) to draw what the data leave free toward the prior"
-            if which == "raw" else "")
+    hint = ("" if which != "raw" else "; the plausible step failed (its error says why)" if step_on else
+            "; keep prior.plausible on (the default) to draw what the data leave free toward the prior")
     reason = (f"{'the raw fit θ̂' if which == 'raw' else 'θ_plausible'} puts {named} above {HEAVY_RATIO:g} × the prior's whole moving mass ({total:.4g} kg){hint}")
     warnings.warn(ModelFileWarning(f"{method}: model files not written: {reason}"), stacklevel=2)
     return reason
