@@ -782,7 +782,7 @@ def test_mjcf_drops_the_range_the_logs_leave():
 def test_quaternion_columns_in_the_wrong_order_are_detected(tmp_path):
     """A permuted quaternion has unit norm too; the logged twist tells the orders apart."""
     from dualid.data.io import load_log
-    from dualid.errors import DataError
+    from dualid.errors import DataError, DualidWarning
 
     model = pin.Model()
     model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "base")
@@ -797,6 +797,10 @@ def test_quaternion_columns_in_the_wrong_order_are_detected(tmp_path):
     with pytest.raises(DataError, match="matches the quaternion columns .* read in xyzw order .* set columns.base.quaternion_order: xyzw"):
         load_log(tmp_path / "base.csv", {"time": "time", "base": {**base, "quaternion": ["qx", "qy", "qz", "qw"],
                                                                  "quaternion_order": "wxyz"}})
+    # without a twist no cheap check tells the orders apart (a permutation keeps the norm and the angular speed): warned
+    with pytest.warns(DualidWarning, match=r"read in wxyz order \(quaternion_order\), which could not be checked"):
+        load_log(tmp_path / "base.csv", {"time": "time", "base": {"position": ["x", "y", "z"], "quaternion_order": "wxyz",
+                                                                 "quaternion": ["qw", "qx", "qy", "qz"]}}, velocity="gradient")
 
 
 def test_a_floating_body_without_wrenches_is_refused(tmp_path):

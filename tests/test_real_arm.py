@@ -47,11 +47,44 @@ def panda_fit(tmp_path_factory):
     out = tmp / "out"
     result = CliRunner().invoke(app, ["fit", "--model", str(tmp / "panda.urdf"), "--data", str(logs[0]),
                                       "--data", str(logs[1]), "--test", str(logs[2]), "--out", str(out)])
-    return result, out, tmp / "panda.urdf"
+    return result, out, tmp / "panda.urdf", logs
+
+
+def test_no_absurd_link_is_written_without_the_plausible_step(panda_fit, tmp_path):
+    """prior.plausible: false: the raw dm fit puts a link at thousands of kg (the pathology above); its model files are
+    not written, and the console's last line, the warnings, report.md and parameters.yaml name the link and its mass."""
+    *_, prior_file, logs = panda_fit
+    config = tmp_path / "fit.yaml"
+    config.write_text(yaml.safe_dump({"model": {"urdf": str(prior_file)}, "train": [str(p) for p in logs[:2]],
+                                      "test": [str(logs[2])], "methods": ["dm"], "prior": {"plausible": False}}))
+    result = CliRunner().invoke(app, ["fit", "--config", str(config), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 1 and result.exception is not None and "Traceback" not in result.output
+    last = result.output.rstrip().splitlines()[-1]
+    assert "not written: dm.urdf and dm.xml (the raw fit θ̂ puts link 'panda_link" in last, last
+    assert "keep prior.plausible on (the default)" in last
+    assert not (tmp_path / "out" / "dm.urdf").exists() and not (tmp_path / "out" / "dm.xml").exists()
+    record = yaml.safe_load((tmp_path / "out" / "parameters.yaml").read_text())
+    assert record["methods"]["dm"]["urdf"].startswith("not written: the raw fit θ̂ puts link 'panda_link")
+    assert any(w.startswith("dm: model files not written") for w in record["warnings"])
+    assert "dm.xml not written: the raw fit θ̂ puts link" in (tmp_path / "out" / "report.md").read_text()
+
+
+def test_no_absurd_link_is_written_when_the_exact_plausible_choice_fails(panda_fit, tmp_path):
+    """prior.plausible.level: 0 (θ̂'s training predictions exactly): on noisy dm data that slice holds no
+    consistent θ near the prior, the step fails, and the raw θ̂'s absurd links are not written either."""
+    *_, prior_file, logs = panda_fit
+    config = tmp_path / "fit.yaml"
+    config.write_text(yaml.safe_dump({"model": {"urdf": str(prior_file)}, "train": [str(p) for p in logs[:2]],
+                                      "methods": ["dm"], "prior": {"plausible": {"level": 0}}}))
+    result = CliRunner().invoke(app, ["fit", "--config", str(config), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 1 and "Traceback" not in result.output
+    assert "dm: plausible parameters failed" in result.output
+    last = result.output.rstrip().splitlines()[-1]
+    assert "not written: dm.urdf and dm.xml (the raw fit θ̂ puts link" in last and "the plausible step failed" in last
 
 
 def test_the_default_fit_finishes_and_writes_every_model_file(panda_fit):
-    result, out, _ = panda_fit
+    result, out, *_ = panda_fit
     assert result.exit_code == 0, result.output
     assert "Traceback" not in result.output and result.exception is None
     record = yaml.safe_load((out / "parameters.yaml").read_text())
@@ -72,7 +105,7 @@ def test_the_written_masses_make_physical_sense(panda_fit):
 
     from dualid.model.rigid_body import RigidBodyModel
 
-    result, out, prior_file = panda_fit
+    result, out, prior_file, _ = panda_fit
     prior = RigidBodyModel.from_urdf(prior_file).nominal[::10]
     record = yaml.safe_load((out / "parameters.yaml").read_text())
     for m, entry in record["methods"].items():
@@ -93,9 +126,36 @@ def test_the_written_masses_make_physical_sense(panda_fit):
 
 
 def test_the_written_model_predicts_held_out_torque_as_well_as_the_raw_fit(panda_fit):
-    _, out, _ = panda_fit
+    _, out, *_ = panda_fit
     record = yaml.safe_load((out / "parameters.yaml").read_text())
     for m, entry in record["methods"].items():
         raw = np.mean(list(entry["validation"]["mean"]["tau_rmse"].values()))
         written = np.mean(entry["plausible"]["held_out_tau_rmse"])
         assert written <= 1.02 * raw, (m, written, raw)
+
+
+def test_a_urdf_without_inertials_gets_a_regularised_prior(panda_fit, tmp_path):
+    """No <inertial> anywhere: every body's prior is the same ball fitted to the torques (a PlausibleWarning says its
+    mass and radius); the fit exits 0 and writes model files whose arm weighs what the true one does (±50 %)."""
+    import xml.etree.ElementTree as ET
+
+    import pinocchio as pin
+
+    from dualid.model.rigid_body import RigidBodyModel
+
+    *_, prior_file, logs = panda_fit
+    root = ET.fromstring(prior_file.read_text())
+    for link in root.findall("link"):
+        for inertial in link.findall("inertial"):
+            link.remove(inertial)
+    bare = tmp_path / "bare.urdf"
+    bare.write_text(ET.tostring(root, encoding="unicode"))
+    out = tmp_path / "out"
+    result = CliRunner().invoke(app, ["fit", "--model", str(bare), "--data", str(logs[0]), "--data", str(logs[1]),
+                                      "--test", str(logs[2]), "--method", "dm", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "the URDF has no inertials: every body's prior is the same ball" in result.output
+    true_mass = RigidBodyModel(pin.buildModelFromXML(arm_urdf(example_robot_urdf()))).nominal[::10]
+    written = RigidBodyModel.from_urdf(out / "dm.urdf").nominal[::10]
+    assert 0.5 <= written.sum() / true_mass.sum() <= 1.5, (written, true_mass)
+    assert written.max() < true_mass.sum()  # no link heavier than the whole true arm

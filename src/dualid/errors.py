@@ -70,6 +70,11 @@ class PlausibleWarning(DualidWarning):
     inside the fit's confidence region; the run goes on, and the report, parameters.yaml and the exit code say so."""
 
 
+class ModelFileWarning(DualidWarning):
+    """A method's model files were not written: the parameters they would carry are not physical (e.g. a link
+    heavier than twice the prior's whole moving mass); parameters.yaml keeps the values, the report says why."""
+
+
 class SolverOutputWarning(UserWarning):
     """A line a compiled solver printed to standard output (``estimators.base.solver_stdout``), re-issued as a
     warning so that the estimator records it (``solver_warnings``) instead of the terminal showing it raw."""

@@ -24,7 +24,8 @@ def print_plausible(outcome) -> list[str]:
         p = f.plausible
         if p is None:
             continue
-        where = (f"in the {p.level:g} confidence region (statistic {p.statistic:.3g} ≤ {p.radius2:.3g})"
+        inside = "≤" if p.status != "outside_region" else "> the radius"
+        where = (f"in the {p.level:g} confidence region (statistic {p.statistic:.3g} {inside} {p.radius2:.3g})"
                  if p.form == "confidence" else "with the training predictions of θ̂")
         by_prior = p.by_prior()
         console.print(f"{m}: the model files carry the parameters closest to the prior {where}; "
@@ -51,10 +52,12 @@ def files_line(written: dict[str, Path], out: Path, outcome) -> str:
         if not f.ok:
             missing.append(f"{m}.urdf and {m}.xml (the fit failed)")
             continue
-        for key, name in (("urdf", f"{m}.urdf"), ("mjcf", f"{m}.xml")):
-            if name not in written:
-                why = str(record.get(m, {}).get(key) or "unknown").removeprefix("not written: ")
-                missing.append(f"{name} ({why})")
+        whys = {name: str(record.get(m, {}).get(key) or "unknown").removeprefix("not written: ")
+                for key, name in (("urdf", f"{m}.urdf"), ("mjcf", f"{m}.xml")) if name not in written}
+        if len(whys) == 2 and len(set(whys.values())) == 1:  # one reason for both files: said once
+            missing.append(f"{m}.urdf and {m}.xml ({whys[f'{m}.urdf']})")
+        else:
+            missing += [f"{name} ({why})" for name, why in whys.items()]
     return text + (f"; not written: {'; '.join(missing)}" if missing else "")
 
 
@@ -79,6 +82,7 @@ def print_summary(outcome, written: dict[str, Path], out: Path) -> list[str]:
     for m in failed:
         print_error(f"{m}: failed: {outcome.fits[m].error}")
     failed += print_plausible(outcome)
+    failed += [m for m, f in outcome.fits.items() if f.ok and f.files_refused and m not in failed]
     console.print(files_line(written, out, outcome) + (" (incomplete: see report.html)" if failed else ""),
                   markup=False, highlight=False)
     return failed

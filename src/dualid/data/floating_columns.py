@@ -199,6 +199,11 @@ def with_base(base: BaseColumns, column, where: str, t, q, v, tau, a, logged_v: 
     q_base, v_base, notes = read_base(base, column, where)
     if logged_v and base.twist and base.quaternion:
         check_quaternion_order(base, column, where, t, q_base, v_base)
+    elif base.quaternion and not base.twist:  # the same text for every log: said once
+        warnings.warn(f"the base quaternion columns {list(base.quaternion)} are read in {base.quaternion_order} order "
+                      "(quaternion_order), which could not be checked: no base twist is logged, and a permuted "
+                      "quaternion is a unit quaternion with the same angular speed; a wrong order tilts gravity in "
+                      "the fit without an error", DualidWarning, stacklevel=3)
     T = t.size
     v_base = v_base if logged_v else gradient_on_group(t, q_base, 6)
     return (np.concatenate([q_base, q], axis=1), np.concatenate([v_base, v], axis=1),

@@ -45,6 +45,7 @@ MU_MAX = 1e14  # the largest penalty tried before the point is kept outside the 
 MAX_SOLVES = 40
 TOL = 1e-9  # the interior point's relative gap
 MASSLESS_SHARE = 0.01  # a prior body without mass: this share of the other bodies' mean mass (rounded_prior)
+BALL_RADIUS_MIN = 0.01  # [m] the smallest radius of gyration of ball_prior's bodies
 ROUNDING = 0.1  # each prior body's inertia about its centre of mass made up to this much rounder (rounded_body)
 
 
@@ -97,6 +98,37 @@ def rounded_prior(P, theta0: np.ndarray) -> np.ndarray:
         for idx in bad:
             theta0[idx] = ball
     return theta0
+
+
+def ball_prior(problem: IdentificationProblem, theta0: np.ndarray) -> tuple[np.ndarray, str]:
+    """(θ₀, how its bodies were chosen or ""): when every rigid body of θ₀ has a zero mass (a URDF without inertials,
+    or with zero masses everywhere), every body becomes the same ball: mass m at its joint frame's origin, inertia
+    m r² 1 (r ≥ BALL_RADIUS_MIN), (m, m r²) the non-negative least squares of the training torques by that uniform
+    robot (the other parameters at θ₀, NaN as 0). A regularised prior at the data's scale, physically consistent;
+    otherwise θ₀ unchanged. Raises SolverError when the torques give such a robot no positive mass."""
+    from scipy.optimize import nnls
+
+    P = problem.parameters
+    blocks = [b for b in P.blocks if b.kind == "rigid_body"]
+    theta0 = np.array(theta0, dtype=float)
+    if not blocks or any(theta0[b.indices[0]] != 0 for b in blocks):  # a negative mass is a bad prior, not none
+        return theta0, ""
+    rigid = [i for b in blocks for i in b.indices]
+    rest = np.setdiff1d(np.arange(P.p), rigid)
+    A = problem.Y.reshape(-1, P.p)
+    target = problem.tau.reshape(-1) - A[:, rest] @ np.nan_to_num(theta0[rest])
+    columns = np.stack([A[:, [b.indices[0] for b in blocks]].sum(axis=1),  # mass at each joint frame's origin
+                        A[:, [b.indices[k] for b in blocks for k in (4, 6, 9)]].sum(axis=1)], axis=1)  # Ixx, Iyy, Izz
+    (m, J), _ = nnls(columns, target)
+    if not m > 0:
+        raise SolverError("ball_prior: the URDF has no inertials and the training torques give a robot of equal "
+                          "balls no positive mass; give inertials in the URDF or a prior.source parameters file")
+    r = max(float(np.sqrt(J / m)), BALL_RADIUS_MIN)
+    ball = pin.Inertia(float(m), np.zeros(3), m * r**2 * np.eye(3)).toDynamicParameters()
+    for b in blocks:
+        theta0[list(b.indices)] = ball
+    return theta0, (f"the URDF has no inertials: every body's prior is the same ball fitted to the training torques "
+                    f"({m:.4g} kg at its joint frame, radius of gyration {r:.3g} m)")
 
 
 def prior_terms(problem: IdentificationProblem, theta0: np.ndarray):

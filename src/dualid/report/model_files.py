@@ -104,6 +104,9 @@ def write_model_files(outcome: FitOutcome, out: Path) -> ModelFiles:
             continue
         theta, which = written_theta(f)
         thetas.append((m, which))
+        if f.files_refused:  # a link no arm has (robot.plausible_step.refused_files): neither file is written
+            files += [ModelFile(m, "urdf", None, f.files_refused), ModelFile(m, "mjcf", None, f.files_refused)]
+            continue
         friction = model.friction(theta) if isinstance(model, JointTermsModel) else {}
         armature = model.armature_values(theta) if isinstance(model, JointTermsModel) else {}
         # a completed mass (not determined by the data) is said on its body when the files carry θ̂ itself

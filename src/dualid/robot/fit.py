@@ -22,6 +22,7 @@ from typing import Callable
 
 import cvxpy as cp
 import numpy as np
+import pinocchio as pin
 
 from dualid.data.bag_inspect import bag_summary, default_topics
 from dualid.data.bags import is_bag
@@ -38,6 +39,7 @@ from dualid.estimators.guards import guard_info
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.methods import method as method_entry
 from dualid.estimators.plausible import PlausibleParameters
+from dualid.estimators.plausible_newton import ball_prior
 from dualid.estimators.uncertainty import BaseUncertainty
 from dualid.evaluation.validation import Validation, validate
 from dualid.model.external_wrench import apply_wrenches
@@ -49,7 +51,7 @@ from dualid.robot.config import FitConfig
 from dualid.robot.defaults import adaptive_preprocessing, warn_far_from_data
 from dualid.robot.inputs import array_column_map, check_floating, check_runs_differ, check_units
 from dualid.robot.margin_config import apply_margin
-from dualid.robot.plausible_step import choose_plausible
+from dualid.robot.plausible_step import choose_plausible, refused_files
 from dualid.robot.prior import prior_theta
 from dualid.robot.uncertainty import method_uncertainty, parameter_errors
 
@@ -194,6 +196,7 @@ class MethodFit:
     plausible_validation: Validation | None = None  # held-out scores of θ_plausible (the written model files)
     base: BaseUncertainty | None = None
     base_error: str = ""
+    files_refused: str = ""  # why its model files are not written (robot.plausible_step.refused_files), "" if they are
 
     @property
     def ok(self) -> bool:
@@ -293,6 +296,22 @@ def _plausible(config: FitConfig, rigid, model, problem, method: str, theta: np.
     return plausible, ""
 
 
+def _refused(config: FitConfig, rigid, model, problem, method: str, theta: np.ndarray, plausible) -> str:
+    """Why ``method``'s model files are not written ("" when they are): the θ they would carry (θ_plausible, else θ̂)
+    has a link heavier than twice the prior's whole moving mass (``robot.plausible_step.refused_files``)."""
+    try:  # a URDF without inertials: compared with the regularised prior the plausible step uses
+        theta0 = ball_prior(problem, prior_theta(config, rigid, model, theta, problem)[0])[0]
+    except DualidError:  # an unreadable prior file (only read here when no step needs it): nothing to compare with
+        return ""
+    links = {}
+    for f in rigid.model.frames:  # the first body frame on a joint is its child link
+        if f.type == pin.FrameType.BODY and f.parentJoint > 0:
+            links.setdefault(rigid.model.names[f.parentJoint], f.name)
+    written = theta if plausible is None else plausible.theta
+    return refused_files(method, problem.parameters, written, theta0, "raw" if plausible is None else "plausible",
+                         links, config.prior.plausible)
+
+
 def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcome:
     from dualid.robot.dfki import reference_theta
 
@@ -356,7 +375,8 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
             plausible_validation = validate(model, plausible.theta, test, method, config.xcorr_window)
         fits[method] = MethodFit(method, result, parameter_errors(base_unc, ident.base), validation, base=base_unc,
                                  base_error=base_error, plausible=plausible, plausible_error=plausible_error,
-                                 plausible_validation=plausible_validation)
+                                 plausible_validation=plausible_validation,
+                                 files_refused=_refused(config, rigid, model, problem, method, result.theta, plausible))
 
     references = {}
     for label, path in config.references:

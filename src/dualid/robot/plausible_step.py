@@ -16,9 +16,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from dualid.errors import ConfigError, PlausibleWarning
+from dualid.errors import ConfigError, ModelFileWarning, PlausibleWarning
 from dualid.estimators.plausible import PlausibleParameters, plausible_parameters
-from dualid.estimators.plausible_newton import MASSLESS_SHARE, rounded_prior
+from dualid.estimators.plausible_newton import MASSLESS_SHARE, ball_prior, rounded_prior
 from dualid.estimators.plausible_region import LEVEL, check_level, plausible_in_region, training_rmse
 from dualid.estimators.uncertainty import BaseUncertainty
 from dualid.problem import IdentificationProblem
@@ -55,6 +55,9 @@ def choose_plausible(problem: IdentificationProblem, theta_hat: np.ndarray, thet
     """θ_plausible of one method (module docstring); raises what the estimators raise. The prior's rigid bodies are
     made at most 10 % rounder first (``estimators.plausible_newton.rounded_prior``: a thin CAD link would make the
     divergence 1/λ² stiff along one direction and push the fit's disagreement into that link's mass)."""
+    theta0, ball = ball_prior(problem, theta0)
+    if ball:  # no prior body at all: a regularised one at the data's scale (said: a fallback that is used)
+        warnings.warn(PlausibleWarning(ball), stacklevel=2)
     rounded = rounded_prior(problem.parameters, theta0)
     P = problem.parameters
     replaced = [b.name for b in P.blocks if b.kind == "rigid_body"  # rounding keeps the mass, replacing does not
@@ -75,3 +78,35 @@ def choose_plausible(problem: IdentificationProblem, theta_hat: np.ndarray, thet
     return dataclasses.replace(p, fallback_used=True, note=(
         f"no uncertainty of the base parameters ({base_error or 'none'}): the exact-prediction choice instead of "
         f"the {level:g} confidence region"))
+
+
+HEAVY_RATIO = 2.0  # a link heavier than this × the prior's whole moving mass is not written to a model file
+
+
+def heavy_links(P, theta: np.ndarray, theta0: np.ndarray) -> list[tuple[str, float, float]]:
+    """[(block, mass, the prior's mass)] of the rigid bodies of ``theta`` heavier than HEAVY_RATIO × the total mass
+    of ``theta0``'s bodies (none when the prior has no mass: nothing to compare with)."""
+    blocks = [b for b in P.blocks if b.kind == "rigid_body"]
+    total = float(sum(max(theta0[b.indices[0]], 0.0) for b in blocks))
+    if not total > 0:
+        return []
+    return [(b.name, float(theta[b.indices[0]]), float(theta0[b.indices[0]])) for b in blocks
+            if theta[b.indices[0]] > HEAVY_RATIO * total]
+
+
+def refused_files(method: str, P, theta: np.ndarray, theta0: np.ndarray, which: str, links: dict[str, str],
+                  step_on: bool = False) -> str:
+    """Why ``method``'s model files are not written ("" when they are): a link heavier than HEAVY_RATIO × the prior's
+    whole moving mass (a simulator would carry a body no arm has; MuJoCo refuses 10³–10⁹ kg links). Warned
+    (``ModelFileWarning``); ``which``: the θ the files would carry, ``links``: {joint: its child link}, ``step_on``:
+    prior.plausible was on (so a raw θ̂ means the step failed)."""
+    heavy = heavy_links(P, theta, theta0)
+    if not heavy:
+        return ""
+    total = sum(max(theta0[b.indices[0]], 0.0) for b in P.blocks if b.kind == "rigid_body")
+    named = ", ".join(f"link {links.get(j, j)!r} {m:.4g} kg (prior {m0:.4g} kg)" for j, m, m0 in heavy)
+    hint = ("" if which != "raw" else "; the plausible step failed (its error says why)" if step_on else
+            "; keep prior.plausible on (the default) to draw what the data leave free toward the prior")
+    reason = (f"{'the raw fit θ̂' if which == 'raw' else 'θ_plausible'} puts {named} above {HEAVY_RATIO:g} × the prior's whole moving mass ({total:.4g} kg){hint}")
+    warnings.warn(ModelFileWarning(f"{method}: model files not written: {reason}"), stacklevel=2)
+    return reason
