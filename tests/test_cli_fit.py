@@ -68,7 +68,7 @@ def test_unknown_method(tmp_path):
     result = runner.invoke(app, ["fit", "--model", str(URDF), "--data", str(DFKI / "trajectory_00.csv"),
                                  "--method", "lasso", "--out", str(tmp_path / "o")])
     assert result.exit_code == 2
-    assert "unknown method 'lasso'; known methods: ols, ols_unconstrained, wls, energy, logdet, pullback, dm, dm-paper, dm-bfp" in _out(result)
+    assert "unknown method 'lasso'; known methods: ols, ols_unconstrained, wls, energy, logdet, pullback, dm, dm-paper, dm-noise, dm-bfp" in _out(result)
 
 
 def test_unknown_config_key(tmp_path):
