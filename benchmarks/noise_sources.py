@@ -229,7 +229,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     ap.add_argument("--robots", nargs="+", choices=ROBOTS, default=list(ROBOTS))
     ap.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), metavar="CASE",
-                    help=f"noise cases (default all: {'; '.join(CASES)})")
+                    help=f"noise cases (default all: {'; '.join(CASES)})".replace("%", "%%"))
     ap.add_argument("--train-seconds", type=float, default=TRAIN_S, help="training duration at 200 Hz")
     ap.add_argument("--quick", action="store_true", help="smoke run: one robot, seed 0, 3 s of training, 3 cases")
     ap.add_argument("--out", default=str(HERE / "noise_sources.json"))
