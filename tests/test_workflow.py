@@ -173,7 +173,7 @@ def test_config_rejects_unknown_and_missing_keys():
         FitConfig.from_dict({"train": ["a.csv"]})
     with pytest.raises(ConfigError, match=r"joint_terms: unknown keys \['damping'\]"):
         FitConfig.from_dict(small_config(joint_terms={"damping": True}))
-    with pytest.raises(ConfigError, match="unknown method 'lasso'; known methods: ols, ols_unconstrained, wls, energy, logdet, pullback, dm, dm-paper, dm-bfp"):
+    with pytest.raises(ConfigError, match="unknown method 'lasso'; known methods: ols, ols_unconstrained, wls, energy, logdet, pullback, dm, dm-paper, dm-noise, dm-bfp"):
         FitConfig.from_dict(small_config(methods=["ols", "lasso"]))
 
 

@@ -59,7 +59,7 @@ _TABLE = (
     Method("dm-paper", "dual_metric", "DM (paper)", "#17becf",
            "the paper's dual-metric objective Σ rᵀ M(θ)⁻¹ r (biased under torque noise; see docs/estimators.md)",
            lambda **kw: DualMetric(**_common(kw))),
-    Method("dm-noise", "dm-noise", "DM (noise model)", "#bcbd22",
+    Method("dm-noise", "dm-noise", "DM (noise model)", "#e6ab02",
            "dual-metric fit with a physical noise model Σ_τ + M(θ)Σ_aM(θ), its levels estimated from the data",
            lambda **kw: NoiseModelDM(**_common(kw))),
     Method("dm-bfp", "dm-bfp", "DM (bounded fixed point)", "#e377c2",
