@@ -128,7 +128,7 @@ def test_low_data_subsets_keep_the_rank(system):
 def test_input_errors(system):
     with pytest.raises(ValueError, match=r"case: expected 'both', 'low' or 'high', got 'medium'"):
         run_study(system, case="medium")
-    with pytest.raises(ConfigError, match=r"^unknown method 'lasso'; known methods: ols, ols_unconstrained, wls, energy, logdet, pullback, dm, dm-paper, dm-bfp$"):
+    with pytest.raises(ConfigError, match=r"^unknown method 'lasso'; known methods: ols, ols_unconstrained, wls, energy, logdet, pullback, dm, dm-paper, dm-noise, dm-bfp$"):
         run_study(system, methods=("lasso",))
     with pytest.raises(ValueError, match=r"ablation: expected None, 'units' or a constant matrix B, got 'meters'"):
         run_study(system, case="high", methods=("ols",), ablation="meters")
@@ -189,7 +189,7 @@ def _lines(log: list, done: int, total: int, description: str) -> None:
 
 def test_data_sets_in_worker_processes_pool_to_the_same_study():
     """workers=2 simulates and studies the data sets in two processes: the pooled fits are one process's, in the
-    same order, and the progress callback runs in the workers (a sequential run calls it here)."""
+    same order (the pool calls the progress callback here as its jobs finish)."""
     from functools import partial
 
     from dualid.paper.seeds import run_data_seeds
