@@ -61,7 +61,7 @@ def test_reproduce_writes_progress_lines_into_a_redirected_log(tmp_path):
                               stdout=f, stderr=subprocess.STDOUT, env=env, cwd=tmp_path).returncode
     text = log.read_text()
     assert code == 0, text
-    for line in ("data set 0: simulating", "data set 1: simulating", "] 16/16 data set ", "data set 0: high: dm",
+    for line in ("0/16 data set 0: simulating", "0/16 data set 1: simulating", "] 16/16 data set ", "data set 0: high: dm",
                  "data set 1: high: dm", "done in"):
         assert line in text, line
     assert "⠋" not in text and "\r" not in text  # no spinner frames, no redrawn lines

@@ -106,7 +106,7 @@ def run_data_seeds(
     plans = []
     for seed in data_list:
         if callable(progress) and not hasattr(progress, "add_task"):
-            progress(0, 0, f"data set {seed}: simulating")
+            progress(0, len(data_list) * _fits_per_data_set(case, seeds, kw), f"data set {seed}: simulating")
         system = make_system(system_name, seed=seed, noise=noise, size=size, **system_options)
         plans.append(StudyPlan.of(system, case=case, seeds=seeds, ablation=ablation, **kw))
     studies = _fit_in_pool(plans, data_list, workers, progress)
@@ -154,11 +154,15 @@ def _one_data_set(system_name: str, seed: int, *, case, seeds, noise, size, abla
     if callback and tag:
         progress = partial(_tagged, progress, f"data set {seed}")
     if callback:
-        items = (seeds if case in ("both", "low") else 0) + (case in ("both", "high"))
-        progress(0, items * len(study_options.get("methods") or DEFAULT_METHODS), "simulating")
+        progress(0, _fits_per_data_set(case, seeds, study_options), "simulating")
     system = make_system(system_name, seed=seed, noise=noise, size=size, **system_options)
     study = run_study(system, case=case, seeds=seeds, progress=progress, ablation=ablation, **study_options)
     return replace(study, config={**study.config, "noise": noise, "size": size, "system_seed": seed})
+
+
+def _fits_per_data_set(case, seeds: int, study_options: dict) -> int:
+    subsets = (seeds if case in ("both", "low") else 0) + (case in ("both", "high"))
+    return subsets * len(study_options.get("methods") or DEFAULT_METHODS)
 
 
 def _tagged(progress, prefix: str, done: int, total: int, description: str) -> None:
