@@ -2,7 +2,7 @@
 side by side in one run as child processes (wall time and CPU time of the process and its children), against
 the targets. Writes benchmarks/speed.json and benchmarks/speed.md (quoted by docs/performance.md).
 
-    python benchmarks/speed.py                 # everything (the main job takes about a minute on a quiet machine)
+    python benchmarks/speed.py                 # everything (the main job: about 250 s of CPU over the cores)
     python benchmarks/speed.py --no-main-job   # the quick three only
 
 Run it on a quiet machine: wall times of a loaded machine say little (the load average is recorded).

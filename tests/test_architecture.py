@@ -255,7 +255,6 @@ LONG_FUNCTIONS = {
     ("dualid.estimators.newton.interior_point", "run_interior_point"),
     ("dualid.estimators.quadratic_fit", "fit_quadratic"),
     ("dualid.model.urdf", "identified_urdf"),
-    ("dualid.paper.study", "run_study"),
 }
 
 

@@ -189,7 +189,7 @@ def _lines(log: list, done: int, total: int, description: str) -> None:
 
 def test_data_sets_in_worker_processes_pool_to_the_same_study():
     """workers=2 simulates and studies the data sets in two processes: the pooled fits are one process's, in the
-    same order, and the progress callback runs in the workers (a sequential run calls it here)."""
+    same order (the pool calls the progress callback here as its jobs finish)."""
     from functools import partial
 
     from dualid.paper.seeds import run_data_seeds

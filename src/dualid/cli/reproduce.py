@@ -10,7 +10,7 @@ import typer
 from dualid.cli.app import FLAG, app
 from dualid.cli.common import console, fail, output_dir
 
-QUICK = {"data_seeds": 2, "seeds": 3}  # the default: about a quarter of the full study's fits
+QUICK = {"data_seeds": 1, "seeds": 6}  # the default: one data set, its fits spread over the cores
 FULL = {"data_seeds": 5, "seeds": 5}  # --full: the study of docs/results.md
 
 
@@ -33,7 +33,7 @@ def reproduce(
                                         f"(default {QUICK['seeds']}; {FULL['seeds']} with --full)"),
     data_seeds: Optional[int] = typer.Option(None, "--data-seeds", help="simulated data sets (seeds 0..N-1), pooled "
                                              f"(default {QUICK['data_seeds']}; {FULL['data_seeds']} with --full)"),
-    workers: Optional[int] = typer.Option(None, "--workers", help="processes, one data set each at a time "
+    workers: Optional[int] = typer.Option(None, "--workers", help="processes, one fit each at a time "
                                           "(default: the usable cores)"),
     base_drag: bool = typer.Option(False, "--base-drag", metavar=FLAG,
                                    help="crazyflie: identify the base's linear (rotor) drag too"),
@@ -74,7 +74,7 @@ def reproduce(
                               ("--workers", workers, "processes")):
         if value is not None and value < 1:
             fail(f"{flag}: expected a positive number of {what}, got {value}")
-    workers = min(workers or _cores(), data_seeds)
+    workers = workers or _cores()
     out = out or Path("results") / system
     output_dir(out, force)  # before the study, not after it
     start = time.perf_counter()

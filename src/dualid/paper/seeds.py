@@ -10,15 +10,16 @@ is ahead) says how much of a difference is the method's.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, replace
 from functools import partial
+import multiprocessing
 
 import numpy as np
 
 from dualid.errors import ConfigError
 from dualid.paper.results import FitRecord, StudyResult, Summary
-from dualid.paper.study import DEFAULT_METHODS, Case, run_study
+from dualid.paper.study import DEFAULT_METHODS, Case, StudyPlan, StudyProgress, run_study
 from dualid.systems.base import make_system
 
 
@@ -88,24 +89,63 @@ def run_data_seeds(
 ) -> StudyResult:
     """Simulate one data set per seed, run the study on each and pool them (see ``pool``).
 
-    workers > 1: the data sets are simulated and studied in that many processes at once (the pooled result
-    is the same as one process's); ``progress`` must then be a picklable callable (done, total, description)
-    (a module-level function or a ``functools.partial`` of one), called in the worker processes, with the
-    description prefixed by the data set."""
+    workers > 1: the data sets are simulated and their plans built here, then every (data set, training set,
+    method) fit is one job of a pool of that many forked processes, the costliest first (``dm``, then the
+    high-data case), so the cores stay busy to the end; the pooled result is the same as one process's and
+    ``progress`` (a callback (done, total, description) or a rich Progress) is called here as jobs finish."""
     data_list = list(range(data_seeds)) if isinstance(data_seeds, (int, np.integer)) else [int(s) for s in data_seeds]
     if not data_list:
         raise ConfigError(f"data_seeds: expected at least one data-set seed, got {data_seeds!r}")
     if workers < 1:
         raise ConfigError(f"workers: expected a positive number of processes, got {workers!r}")
     kw = ({} if methods is None else {"methods": methods}) | ({} if margin is None else {"margin": margin})
-    one = partial(_one_data_set, system_name, case=case, seeds=seeds, noise=noise, size=size, ablation=ablation,
-                  progress=progress, tag=len(data_list) > 1, study_options=kw, system_options=system_options)
-    if workers == 1 or len(data_list) == 1:
-        studies = [one(seed) for seed in data_list]
-    else:
-        with ProcessPoolExecutor(max_workers=min(workers, len(data_list))) as pool_:
-            studies = list(pool_.map(one, data_list))
+    if workers == 1:
+        one = partial(_one_data_set, system_name, case=case, seeds=seeds, noise=noise, size=size, ablation=ablation,
+                      progress=progress, tag=len(data_list) > 1, study_options=kw, system_options=system_options)
+        return pool([one(seed) for seed in data_list], data_list)
+    plans = []
+    for seed in data_list:
+        if callable(progress) and not hasattr(progress, "add_task"):
+            progress(0, len(data_list) * _fits_per_data_set(case, seeds, kw), f"data set {seed}: simulating")
+        system = make_system(system_name, seed=seed, noise=noise, size=size, **system_options)
+        plans.append(StudyPlan.of(system, case=case, seeds=seeds, ablation=ablation, **kw))
+    studies = _fit_in_pool(plans, data_list, workers, progress)
+    studies = [replace(s, config={**s.config, "noise": noise, "size": size, "system_seed": seed})
+               for s, seed in zip(studies, data_list)]
     return pool(studies, data_list)
+
+
+_PLANS: list[StudyPlan] = []  # the plans a forked worker inherits (set just before the pool forks)
+
+
+def _run_job(d: int, job: tuple[int, str]):
+    return _PLANS[d].fit(job)
+
+
+def _cost_rank(plan: StudyPlan, job: tuple[int, str]) -> tuple:
+    """Longest first: dualid's cross-validated ``dm``, then the paper's ``dm-paper``; high data before low."""
+    return (job[1] != "dm", job[1] != "dm-paper", plan.trains[job[0]][0] != "high")
+
+
+def _fit_in_pool(plans: list[StudyPlan], data_list: list[int], workers: int, progress) -> list[StudyResult]:
+    global _PLANS
+    jobs = sorted(((d, j) for d, plan in enumerate(plans) for j in plan.jobs),
+                  key=lambda dj: _cost_rank(plans[dj[0]], dj[1]))
+    tracker = StudyProgress(progress, len(jobs))
+    fits: dict = {}
+    _PLANS = plans
+    try:
+        with ProcessPoolExecutor(max_workers=min(workers, len(jobs)),
+                                 mp_context=multiprocessing.get_context("fork")) as pool_:
+            futures = {pool_.submit(_run_job, d, j): (d, j) for d, j in jobs}
+            for future in as_completed(futures):
+                d, j = futures[future]
+                fits[d, j] = future.result()
+                prefix = f"data set {data_list[d]}: " if len(plans) > 1 else ""
+                tracker.step(prefix + plans[d].describe(j))
+    finally:
+        _PLANS = []
+    return [plan.assemble([fits[d, j] for j in plan.jobs]) for d, plan in enumerate(plans)]
 
 
 def _one_data_set(system_name: str, seed: int, *, case, seeds, noise, size, ablation, progress, tag: bool,
@@ -114,11 +154,15 @@ def _one_data_set(system_name: str, seed: int, *, case, seeds, noise, size, abla
     if callback and tag:
         progress = partial(_tagged, progress, f"data set {seed}")
     if callback:
-        items = (seeds if case in ("both", "low") else 0) + (case in ("both", "high"))
-        progress(0, items * len(study_options.get("methods") or DEFAULT_METHODS), "simulating")
+        progress(0, _fits_per_data_set(case, seeds, study_options), "simulating")
     system = make_system(system_name, seed=seed, noise=noise, size=size, **system_options)
     study = run_study(system, case=case, seeds=seeds, progress=progress, ablation=ablation, **study_options)
     return replace(study, config={**study.config, "noise": noise, "size": size, "system_seed": seed})
+
+
+def _fits_per_data_set(case, seeds: int, study_options: dict) -> int:
+    subsets = (seeds if case in ("both", "low") else 0) + (case in ("both", "high"))
+    return subsets * len(study_options.get("methods") or DEFAULT_METHODS)
 
 
 def _tagged(progress, prefix: str, done: int, total: int, description: str) -> None:

@@ -84,7 +84,7 @@ def _ablation_chart(ablation, problem: IdentificationProblem) -> np.ndarray | No
 
 
 # --- progress -------------------------------------------------------------------------------
-class _Progress:
+class StudyProgress:
     """Either a callback progress(done, total, description) or a rich.progress.Progress."""
 
     def __init__(self, progress, total: int):
@@ -183,12 +183,124 @@ def run_study(
     margin: ε of the chart-invariant margin C_b(θ) ⪰ ε·C_b(θ_WLS) on every method (dualid.estimators.margin),
     against a constrained WLS pilot on each training set in the simulated chart (before an ablation's chart).
     """
-    cases = {"both": ("low", "high"), "low": ("low",), "high": ("high",)}.get(case)
-    if cases is None:
-        raise ConfigError(f"case: expected 'both', 'low' or 'high', got {case!r}")
-    seed_list = list(range(seeds)) if isinstance(seeds, (int, np.integer)) else [int(s) for s in seeds]
-    if "low" in cases and not seed_list:
-        raise ConfigError(f"seeds: the low-data case needs at least one seed, got {seeds!r}")
+    plan = StudyPlan.of(system, case, seeds, methods, ablation, trace_run, margin)
+    tracker = StudyProgress(progress, len(plan.jobs))
+    fits = []
+    for job in plan.jobs:
+        fits.append(plan.fit(job))
+        tracker.step(plan.describe(job))
+    return plan.assemble(fits)
+
+
+@dataclass(frozen=True)
+class StudyPlan:
+    """One study's shared inputs, built once (training problem, rank, low-data subsets, the test runs'
+    prediction data and true metrics) and its jobs, one per (training set, method): ``fit`` runs one job
+    (in any process that holds the plan), ``assemble`` turns every job's output, in job order, into the study."""
+
+    system: SystemData
+    problem: IdentificationProblem
+    cases: tuple[str, ...]
+    seed_list: list[int]
+    estimators: dict
+    trains: list[tuple[str, int | None, IdentificationProblem]]
+    subsets: dict[str, list[int]]
+    jobs: list[tuple[int, str]]  # (index into trains, method)
+    evaluation: tuple
+    max_shift: int
+    trace_run: int
+    config: dict
+
+    @classmethod
+    def of(cls, system: SystemData, case: Case = "both", seeds: int | Sequence[int] = 5,
+           methods: Sequence[str] | Mapping[str, Any] = DEFAULT_METHODS, ablation=None, trace_run: int = 0,
+           margin: float | None = None) -> "StudyPlan":
+        cases = {"both": ("low", "high"), "low": ("low",), "high": ("high",)}.get(case)
+        if cases is None:
+            raise ConfigError(f"case: expected 'both', 'low' or 'high', got {case!r}")
+        seed_list = list(range(seeds)) if isinstance(seeds, (int, np.integer)) else [int(s) for s in seeds]
+        if "low" in cases and not seed_list:
+            raise ConfigError(f"seeds: the low-data case needs at least one seed, got {seeds!r}")
+        estimators = _estimators(methods, system)
+        if not system.test:
+            raise ConfigError(f"system {system.name!r} has no test runs to predict")
+        if not 0 <= trace_run < len(system.test):
+            raise ConfigError(f"trace_run: expected an index in [0, {len(system.test) - 1}], got {trace_run}")
+        t0 = time.perf_counter()
+        problem = build_problem(system.model, list(system.train))
+        rank = problem.identifiability().rank
+        B = _ablation_chart(ablation, problem)
+        dt = float(np.median(np.diff(system.test[0].t)))
+        max_shift = shift_window(system.slowest_period, dt)
+        forward = [PredictionData.of(system.model, run.q, run.v, run.tau) for run in system.test]
+        evaluation = ([fd.metric.evaluate(system.theta_true) for fd in forward], forward)  # built once per run
+        trains, subsets = [], {}
+        for case_name, seed in [("low", s) for s in seed_list if "low" in cases] + [("high", None)] * ("high" in cases):
+            train = problem
+            if case_name == "low":
+                idx = low_data_subset(problem, system.low_data_samples, seed, rank)
+                subsets[str(seed)] = idx.tolist()
+                train = problem.subset(idx)
+            if margin is not None:
+                train = with_margin(train, margin, "wls")
+            trains.append((case_name, seed, train if B is None else train.in_coordinates(B)))
+        config = {
+            "seeds": seed_list if "low" in cases else [],
+            "low_data_samples": system.low_data_samples if "low" in cases else None,
+            "low_data_subsets": subsets, "training_samples": problem.N, "regressor_rank": rank,
+            "n_params": problem.p, "slowest_period": system.slowest_period, "dt": dt, "max_shift": max_shift,
+            "gamma": system.gamma,
+            "ablation": None if ablation is None else (ablation if isinstance(ablation, str) else "chart"),
+            "ablation_B_diag": None if B is None else np.diag(B).tolist(), "margin_epsilon": margin,
+            "setup_s": time.perf_counter() - t0, "description": system.description,
+        }
+        jobs = [(k, m) for k in range(len(trains)) for m in estimators]
+        return cls(system, problem, tuple(cases), seed_list, estimators, trains, subsets, jobs, evaluation,
+                   max_shift, trace_run, config)
+
+    def describe(self, job: tuple[int, str]) -> str:
+        case_name, seed, _ = self.trains[job[0]]
+        return f"{case_name}{'' if seed is None else f' seed {seed}'}: {job[1]}"
+
+    def fit(self, job: tuple[int, str]) -> tuple[FitRecord, np.ndarray | None, float]:
+        """One job: its record, the trace run's prediction (kept for the first subset and the high case only)
+        and its wall time [s]."""
+        k, method = job
+        case_name, seed, train = self.trains[k]
+        t0 = time.perf_counter()
+        rec, preds = _fit_one(self.estimators[method], train, self.system, case_name, method, seed, self.max_shift,
+                              self.evaluation)
+        keep = preds is not None and (seed is None or seed == self.seed_list[0])
+        return rec, preds[self.trace_run] if keep else None, time.perf_counter() - t0
+
+    def assemble(self, fits: Sequence[tuple[FitRecord, np.ndarray | None, float]]) -> StudyResult:
+        system, problem, run = self.system, self.problem, self.system.test[self.trace_run]
+        measured_trace = measured_signal(system.model, run)
+        records = [rec for rec, _, _ in fits]
+        traces = [Trace(rec.case, rec.method, run.name, run.t, measured_trace, pred)
+                  for (k, _), (rec, pred, _) in zip(self.jobs, fits)
+                  if self.trains[k][1] is None or self.trains[k][1] == self.seed_list[0]]
+        n = problem.n
+        summaries = tuple(Summary.of(c, m, [r for r in records if r.case == c and r.method == m], n)
+                          for c in self.cases for m in self.estimators)
+        truth_rec, truth_pred = _fit_one(_Fixed(system.theta_true), problem, system, "truth", "truth", None,
+                                         self.max_shift, self.evaluation)
+        if truth_pred is not None:
+            traces.extend(Trace(c, "truth", run.name, run.t, measured_trace, truth_pred[self.trace_run])
+                          for c in self.cases)
+        config = {**self.config, "elapsed_s": self.config["setup_s"] + sum(t for _, _, t in fits)}
+        return StudyResult(
+            system=system.name, kind=problem.kind,
+            signal="acceleration" if problem.kind == "inertia" else "velocity",
+            coordinates=tuple(problem.coordinates), shape_coordinates=tuple(system.shape_coordinates),
+            parameter_names=tuple(problem.parameters.names), methods=tuple(self.estimators), cases=self.cases,
+            test_runs=tuple(r.name for r in system.test), records=tuple(records), summaries=summaries,
+            truth=Summary.of("truth", "truth", [truth_rec], n), truth_records=(truth_rec,), traces=tuple(traces),
+            config=config,
+        )
+
+
+def _estimators(methods, system: SystemData) -> dict:
     if isinstance(methods, Mapping):
         estimators = dict(methods)
     else:
@@ -197,93 +309,7 @@ def run_study(
         estimators = {m: make_estimator(m, system) for m in methods}
     if not estimators:
         raise ConfigError("methods: expected at least one method")
-    if not system.test:
-        raise ConfigError(f"system {system.name!r} has no test runs to predict")
-    if not 0 <= trace_run < len(system.test):
-        raise ConfigError(f"trace_run: expected an index in [0, {len(system.test) - 1}], got {trace_run}")
-
-    problem = build_problem(system.model, list(system.train))
-    rank = problem.identifiability().rank
-    B = _ablation_chart(ablation, problem)
-    dt = float(np.median(np.diff(system.test[0].t)))
-    max_shift = shift_window(system.slowest_period, dt)
-    forward = [PredictionData.of(system.model, run.q, run.v, run.tau) for run in system.test]
-    evaluation = ([fd.metric.evaluate(system.theta_true) for fd in forward], forward)  # built once per run
-    coords = tuple(problem.coordinates)
-
-    plan: list[tuple[str, int | None]] = [("low", s) for s in seed_list if "low" in cases]
-    if "high" in cases:
-        plan.append(("high", None))
-    tracker = _Progress(progress, len(plan) * len(estimators))
-
-    records: list[FitRecord] = []
-    traces: list[Trace] = []
-    subsets: dict[str, list[int]] = {}
-    run = system.test[trace_run]
-    measured_trace = measured_signal(system.model, run)
-    t0 = time.perf_counter()
-    for case_name, seed in plan:
-        if case_name == "low":
-            idx = low_data_subset(problem, system.low_data_samples, seed, rank)
-            subsets[str(seed)] = idx.tolist()
-            train = problem.subset(idx)
-        else:
-            train = problem
-        if margin is not None:
-            train = with_margin(train, margin, "wls")
-        if B is not None:
-            train = train.in_coordinates(B)
-        for method, estimator in estimators.items():
-            rec, preds = _fit_one(estimator, train, system, case_name, method, seed, max_shift, evaluation)
-            records.append(rec)
-            if seed is None or seed == seed_list[0]:
-                traces.append(Trace(case_name, method, run.name, run.t, measured_trace,
-                                    None if preds is None else preds[trace_run]))
-            tracker.step(f"{case_name}{'' if seed is None else f' seed {seed}'}: {method}")
-
-    n = problem.n
-    summaries = tuple(
-        Summary.of(c, m, [r for r in records if r.case == c and r.method == m], n) for c in cases for m in estimators
-    )
-    truth_rec, truth_pred = _fit_one(_Fixed(system.theta_true), problem, system, "truth", "truth", None, max_shift,
-                                     evaluation)
-    if truth_pred is not None:
-        for c in cases:
-            traces.append(Trace(c, "truth", run.name, run.t, measured_trace, truth_pred[trace_run]))
-    config = {
-        "seeds": seed_list if "low" in cases else [],
-        "low_data_samples": system.low_data_samples if "low" in cases else None,
-        "low_data_subsets": subsets,
-        "training_samples": problem.N,
-        "regressor_rank": rank,
-        "n_params": problem.p,
-        "slowest_period": system.slowest_period,
-        "dt": dt,
-        "max_shift": max_shift,
-        "gamma": system.gamma,
-        "ablation": None if ablation is None else (ablation if isinstance(ablation, str) else "chart"),
-        "ablation_B_diag": None if B is None else np.diag(B).tolist(),
-        "margin_epsilon": margin,
-        "elapsed_s": time.perf_counter() - t0,
-        "description": system.description,
-    }
-    return StudyResult(
-        system=system.name,
-        kind=problem.kind,
-        signal="acceleration" if problem.kind == "inertia" else "velocity",
-        coordinates=coords,
-        shape_coordinates=tuple(system.shape_coordinates),
-        parameter_names=tuple(problem.parameters.names),
-        methods=tuple(estimators),
-        cases=cases,
-        test_runs=tuple(r.name for r in system.test),
-        records=tuple(records),
-        summaries=summaries,
-        truth=Summary.of("truth", "truth", [truth_rec], n),
-        truth_records=(truth_rec,),
-        traces=tuple(traces),
-        config=config,
-    )
+    return estimators
 
 
 @dataclass(frozen=True)
