@@ -17,7 +17,6 @@ No file is written here.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from importlib import metadata
 from pathlib import Path
 
 import mujoco
@@ -26,7 +25,8 @@ import pinocchio as pin
 
 from dualid.data.preprocessing import differentiate, trim
 from dualid.data.trajectory import Trajectory
-from dualid.errors import ConfigError, MissingFileError, ModelError
+from dualid.bench.urdf_arm import example_robot_urdf
+from dualid.errors import ConfigError, ModelError
 from dualid.model.joint_terms import JointTermsModel, with_joint_terms
 from dualid.model.rigid_body import RigidBodyModel
 
@@ -37,22 +37,13 @@ ROBOTS = {
     "xarm7": ("xarm_description/urdf/xarm7.urdf", ()),
     "ur5": ("ur_description/urdf/ur5_robot.urdf", ()),
 }
-_ROBOTS_DIR = "cmeel.prefix/share/example-robot-data/robots"
 
 
 def robot_urdf(name: str) -> Path:
     """The URDF file of a ``ROBOTS`` arm inside the installed example-robot-data package."""
     if name not in ROBOTS:
         raise ConfigError(f"robot: expected one of {sorted(ROBOTS)}, got {name!r}")
-    try:
-        dist = metadata.distribution("example-robot-data")
-    except metadata.PackageNotFoundError:
-        raise MissingFileError("robot URDFs: the package example-robot-data is not installed "
-                               "(pip install 'dualid[bench]')") from None
-    path = Path(str(dist.locate_file(f"{_ROBOTS_DIR}/{ROBOTS[name][0]}")))
-    if not path.is_file():
-        raise MissingFileError(f"robot {name!r}: {path} not found in the example-robot-data package")
-    return path
+    return example_robot_urdf(ROBOTS[name][0])
 
 
 def robot_model(name: str) -> pin.Model:
