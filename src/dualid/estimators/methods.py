@@ -12,8 +12,6 @@ import numpy as np
 
 from dualid.errors import ConfigError
 from dualid.estimators.dual_metric import DualMetric
-from dualid.estimators.fixed_point import BoundedFixedPoint
-from dualid.estimators.gls import FeasibleGLS
 from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS
 from dualid.estimators.noise_dm import NoiseModelDM
 
@@ -54,17 +52,11 @@ _TABLE = (
     Method("pullback", "pullback_wls", "pullback WLS", "#ff7f0e", "WLS + constant pullback prior",
            _regularized("pullback"), True),
     Method("dm", "dm", "DM", "#d62728",
-           "dual-metric GLS: one weighted LS with residual covariance Σ + κ M(θ_pilot), no feedback (the default)",
-           lambda **kw: FeasibleGLS(**_common(kw))),
+           "dual-metric fit with a physical noise model Σ_τ + M(θ)Σ_aM(θ), its levels estimated from the data "
+           "(the default)", lambda **kw: NoiseModelDM(**_common(kw))),
     Method("dm-paper", "dual_metric", "DM (paper)", "#17becf",
            "the paper's dual-metric objective Σ rᵀ M(θ)⁻¹ r (biased under torque noise; see docs/estimators.md)",
            lambda **kw: DualMetric(**_common(kw))),
-    Method("dm-noise", "dm-noise", "DM (noise model)", "#e6ab02",
-           "dual-metric fit with a physical noise model Σ_τ + M(θ)Σ_aM(θ), its levels estimated from the data",
-           lambda **kw: NoiseModelDM(**_common(kw))),
-    Method("dm-bfp", "dm-bfp", "DM (bounded fixed point)", "#e377c2",
-           "experimental: the fixed point of the dual-metric weight with its eigenvalues bounded around a pilot",
-           lambda **kw: BoundedFixedPoint(**_common(kw))),
 )
 METHODS: dict[str, Method] = {m.key: m for m in _TABLE}
 TRUTH = Method("truth", "fixed", "true θ", "#000000", "the true parameters (simulation only)", lambda **kw: None)

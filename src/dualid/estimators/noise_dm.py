@@ -67,7 +67,7 @@ class NoiseModelDM:
     tol: float = 1e-9
     max_iter: int = 100
     chunk: int = field(default=CHUNK, kw_only=True)
-    name = "dm-noise"  # the result's method
+    name = "dm"  # the result's method
 
     def __post_init__(self) -> None:
         if (self.sigma_tau is None) != (self.sigma_a is None):
