@@ -36,8 +36,7 @@ import pinocchio as pin
 
 from dualid.errors import DualidError
 from dualid.estimators.dual_metric import DualMetric
-from dualid.estimators.fixed_point import BoundedFixedPoint
-from dualid.estimators.gls import FeasibleGLS
+from dualid.estimators.noise_dm import NoiseModelDM
 from dualid.estimators.guards import guard_info
 from dualid.estimators.least_squares import OLS, WLS
 from dualid.model.joint_terms import with_joint_terms
@@ -49,11 +48,8 @@ METHODS = {
     "ols": OLS(allow_unidentifiable=True),
     "wls": WLS(allow_unidentifiable=True),
     "dm-paper": DualMetric(allow_unidentifiable=True),
-    "dm (GLS, ML)": FeasibleGLS(allow_unidentifiable=True),
-    "dm (GLS, moments)": FeasibleGLS(covariance_model="moments", allow_unidentifiable=True),
-    "dm (GLS, DM pilot)": FeasibleGLS(pilot="dm-paper", allow_unidentifiable=True),
+    "dm": NoiseModelDM(allow_unidentifiable=True),
 }
-BFP = {"dm-bfp (c=10)": BoundedFixedPoint(bound=10.0, allow_unidentifiable=True)}  # --with-bfp (slow: ≤ 30 WLS per fit)
 RATE = 100.0
 
 
@@ -231,10 +227,7 @@ def main():
     ap.add_argument("--durations", type=float, nargs="+", default=[20.0])
     ap.add_argument("--families", nargs="+", default=["noise", "model"])
     ap.add_argument("--out", default=None)
-    ap.add_argument("--with-bfp", action="store_true", help="also the bounded fixed point (about 6× slower)")
     args = ap.parse_args()
-    if args.with_bfp:
-        METHODS.update(BFP)
     cases = []
     if "noise" in args.families:
         cases += [("noise", lv) for lv in (0.0, 0.02, 0.05, 0.10)]

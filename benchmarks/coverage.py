@@ -4,7 +4,7 @@ A random 3-joint arm of dualid.bench.arms (true viscous/Coulomb friction and arm
 model has the same terms, so Y θ_true is the noise-free torque exactly). One excitation (fixed design, exact
 q, v, a: the intervals are about torque noise, not about differentiation), and in each repetition a new draw
 of the torque noise. Each method is fitted (physically consistent, allow_unidentifiable) and the intervals of
-dualid.estimators.uncertainty are checked against the true base parameters β = C θ_true.
+dualid.evaluation.uncertainty are checked against the true base parameters β = C θ_true.
 
 Cases:
 - white: Gaussian noise, σ_j = NOISE × rms(τ_j), independent samples; sandwich with one sample per block,
@@ -47,7 +47,7 @@ sys.path.insert(0, str(ROOT / "src"))
 from dualid.bench import arms  # noqa: E402
 from dualid.data.trajectory import Trajectory  # noqa: E402
 from dualid.estimators.methods import make_estimator  # noqa: E402
-from dualid.estimators.uncertainty import base_uncertainty, bootstrap  # noqa: E402
+from dualid.evaluation.uncertainty import base_uncertainty, bootstrap  # noqa: E402
 from dualid.problem import build_problem  # noqa: E402
 
 NOISE = 0.05

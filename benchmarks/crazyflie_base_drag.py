@@ -1,7 +1,7 @@
 """Crazyflie–pendulum: does modelling the base's linear drag remove the dual-metric ghost fit?
 
 For each data-set seed: the study's high-data and low-data fits (reproduce.run_study) of
-WLS, the paper's DM (``dm-paper``) and the feasible-GLS ``dm`` (estimators/gls.py), with the
+WLS, the paper's DM (``dm-paper``) and ``dm`` (estimators/noise_dm.py), with the
 plain rigid-body model and with ``with_base_drag`` (3 parameters d ≥ 0 on vx, vy, vz). Every fit
 carries the metric guard (estimators/guards.py) against the truth and against the high-data WLS
 fit of the same model. Prints a markdown table and writes JSON.
@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 from dualid.estimators.dual_metric import DualMetric
-from dualid.estimators.gls import FeasibleGLS
+from dualid.estimators.noise_dm import NoiseModelDM
 from dualid.estimators.guards import generalized_eigenvalues
 from dualid.estimators.least_squares import WLS
 from dualid.model.extra_terms import with_base_drag
@@ -31,7 +31,7 @@ from dualid.systems.crazyflie import CrazyflieNoise, make
 METHODS = {
     "wls": WLS(allow_unidentifiable=True),
     "dm-paper": DualMetric(allow_unidentifiable=True),
-    "dm": FeasibleGLS(allow_unidentifiable=True),
+    "dm": NoiseModelDM(allow_unidentifiable=True),
 }
 
 

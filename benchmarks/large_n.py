@@ -22,7 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 
-METHODS = ("ols", "ols_unconstrained", "wls", "energy", "logdet", "pullback", "dm", "dm-paper", "dm-bfp")
+METHODS = ("ols", "ols_unconstrained", "wls", "energy", "logdet", "pullback", "dm", "dm-paper")
 SIZES = (10_000, 100_000, 1_000_000)
 
 

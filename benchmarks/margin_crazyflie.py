@@ -49,7 +49,7 @@ def barely_swinging(swing_scale: float):
     return lambda seed, size: make(seed=seed, noise=noise, size=size)
 
 
-KEYS = ("ols", "wls", "energy", "logdet", "pullback", "dm-paper", "dm", "dm-bfp")
+KEYS = ("ols", "wls", "energy", "logdet", "pullback", "dm-paper", "dm")
 
 
 def main():

@@ -3,7 +3,7 @@
 System: ``dualid.bench.arms.random_arm(rng, 7)`` (random axes and boxes, friction and armature). Prior:
 every body's 10 parameters scaled by one factor 1 ± U(0.2, 0.3) (a density error: a CAD-like prior that
 is consistent but wrong); joint terms from the fit, floored and rounded as ``dualid fit`` does
-(``robot.prior.prior_theta``, ``estimators.plausible_newton.rounded_prior``). Two data cases per seed:
+(``robot.prior.prior_theta``, ``evaluation.plausible_newton.rounded_prior``). Two data cases per seed:
 - exact: 4 s at the commanded states, noise-free τ, every 8th sample (100 samples): the data fix the
   identifiable combinations exactly; the null space is all that is unknown;
 - noisy: 8 s as logged (16-bit encoder, Savitzky–Golay v and a, 2 % torque noise), every 2nd sample,
@@ -33,10 +33,10 @@ from dualid.bench.arms import make_run, random_arm
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DualidError
 from dualid.estimators.methods import make_estimator
-from dualid.estimators.plausible import PRIOR
-from dualid.estimators.plausible_newton import rounded_prior, torque_weights
-from dualid.estimators.plausible_region import plausible_in_region, training_rmse
-from dualid.estimators.uncertainty import base_uncertainty
+from dualid.evaluation.plausible import PRIOR
+from dualid.evaluation.plausible_newton import rounded_prior, torque_weights
+from dualid.evaluation.plausible_region import plausible_in_region, training_rmse
+from dualid.evaluation.uncertainty import base_uncertainty
 from dualid.problem import build_problem
 from dualid.robot.uncertainty import training_blocks
 

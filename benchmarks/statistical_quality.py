@@ -2,7 +2,7 @@
 
     python benchmarks/statistical_quality.py --quick          # smoke run, ~2 minutes
     python benchmarks/statistical_quality.py                  # full run (≤ ~20 minutes on 2 cores)
-    python benchmarks/statistical_quality.py --methods ols,wls,dm-paper,dualid.estimators.gls:FeasibleGLS
+    python benchmarks/statistical_quality.py --methods ols,wls,dm-paper,dm
 
 Writes benchmarks/statistical_quality/results.json and results.md (or --out DIR). Data and metrics are
 defined in dualid.bench.arms (random 3–7-DoF arms simulated with Pinocchio). Two families:

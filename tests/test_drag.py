@@ -364,16 +364,16 @@ def test_the_drag_workflow_parses_each_log_once(monkeypatch):
     assert sorted(parsed) == sorted(logs)  # the first log: column map, default preprocessing, loading — parsed once
 
 
-def test_the_drag_report_states_dms_weight_choice(tmp_path, monkeypatch):
-    """dm's weight choice (estimators.weight_cv) is in the drag report's fit notes, as in the robot's (the choice is
-    fixed here, so the test does not pay for the folds)."""
-    from dualid.estimators import gls as gls_module
+def test_the_drag_report_and_parameters_state_dms_noise_model(tmp_path):
+    """dm's estimated noise model (estimators.noise_dm) is in the drag report's fit notes and in parameters.yaml, as
+    in the robot's: the levels, their shares of the residual, and what dm returned."""
+    import yaml
 
-    monkeypatch.setattr(gls_module, "choose_weight", lambda sensor, fit_pair, folds, select: {
-        "weight_choice": "gls", "cv_score": {"pilot": 0.5, "gls": 0.25}, "cv_folds": folds, "cv_samples": sensor.N,
-        "cv_criteria": "torque+motion", "cv_motion_score": {"pilot": 1.5, "gls": 0.5}})
     out = tmp_path / "out"
     result = CliRunner().invoke(app, ["fit", "--config", str(EXAMPLE / "drag.yaml"), "--method", "dm", "--out", str(out)])
     assert result.exit_code == 0, result.output
-    assert ("dm: weight: the GLS fit Σ + κM(θ_ref), chosen by 5-fold cross-validation (torque and motion) on "
-            in (out / "report.md").read_text())
+    record = yaml.safe_load((out / "parameters.yaml").read_text())["methods"]["dm"]["noise_model"]
+    assert record["source"] == "estimated" and record["torque_share"] + record["acceleration_share"] == pytest.approx(1)
+    report = (out / "report.md").read_text()
+    assert "dm: noise model (estimated): torque noise sd [" in report
+    assert f"shares of the residual: torque {record['torque_share']:.2f}" in report

@@ -6,7 +6,6 @@ import scipy.linalg
 
 from dualid import OLS, WLS, DualMetric
 from dualid.errors import ConfigError, MetricError
-from dualid.estimators.gls import FeasibleGLS
 from dualid.estimators.guards import DEFAULT_BOUND, Guarded, generalized_eigenvalues, guard_info, with_guard
 from tests.factories import drag_problem, random_chart
 from tests.test_newton import crazyflie_like, rigid_body_problem
@@ -66,12 +65,3 @@ def test_singular_reference_and_bad_bound_are_errors(crazyflie_problem):
         guard_info(problem, theta, theta, bound=0.5)
     with pytest.raises(ConfigError, match="Guarded: estimator must have a fit"):
         Guarded(object())
-
-
-def test_gls_records_a_singular_pilot_instead_of_failing():
-    rng = np.random.default_rng(2)
-    problem, theta = drag_problem(rng, N=40, n=3, noise=0.3)
-    ref = theta.copy()
-    ref[:] = 0.0  # M_i(θ_ref) = 0: no reference metric; Σ ≻ 0 keeps the weights defined
-    fit = FeasibleGLS(theta_ref=ref).fit(problem)
-    assert fit.info["degenerate"] is True and "reference metric" in fit.info["metric_guard_error"]

@@ -60,19 +60,3 @@ def test_the_guard_reference_solves_the_same_wls_problem_as_cvxpy(arm7):
     expected = guard_info(arm7, fit.theta, cvx.theta)
     for k in ("metric_ratio_min", "metric_ratio_max"):  # the reference to 1e-6 in f moves the ratios by ~3e-4 here;
         assert fit.info[k] == pytest.approx(expected[k], rel=1e-2)  # the guard's bound is a factor 100
-
-
-def test_dm_bfp_pencil_and_damping_kernels_match_their_definitions():
-    from dualid.estimators.fixed_point import _in_basis, _pencil
-
-    rng = np.random.default_rng(2)
-    M_ref = np.stack([_spd(rng, 5) for _ in range(6)])
-    M = np.stack([_spd(rng, 5) for _ in range(6)])
-    L, lam, U = _pencil(M_ref, M)
-    for i in range(6):  # the generalised eigenvalues of (M_i, M_ref,i), by scipy
-        np.testing.assert_allclose(lam[i], scipy.linalg.eigh(M[i], M_ref[i], eigvals_only=True), rtol=1e-10)
-    U_new = np.linalg.qr(rng.standard_normal((6, 5, 5)))[0]
-    w = rng.uniform(0.5, 2.0, (6, 5))
-    expected = np.einsum("nji,njk,nk,nlk,nli->ni", U_new, U, w, U, U_new)  # diag(U_newᵀ U diag(w) Uᵀ U_new)
-    V = np.swapaxes(U, 1, 2) @ U_new  # the new basis in the old one
-    np.testing.assert_allclose(_in_basis(V, w), expected, rtol=1e-12)

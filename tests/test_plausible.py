@@ -19,7 +19,7 @@ from dualid.bench.arms import make_run, random_arm
 from dualid.data.trajectory import Trajectory
 from dualid.errors import ConfigError, ConsistencyError
 from dualid.estimators import OLS
-from dualid.estimators.plausible import DATA, PRIOR, plausible_parameters
+from dualid.evaluation.plausible import DATA, PRIOR, plausible_parameters
 from dualid.model.joint_terms import with_joint_terms
 from dualid.model.pan_tilt import PanTilt
 from dualid.model.rigid_body import RigidBodyModel

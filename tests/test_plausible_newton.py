@@ -1,4 +1,4 @@
-"""The scale-aware prior of the plausible parameters and its interior-point solve (estimators.plausible_newton).
+"""The scale-aware prior of the plausible parameters and its interior-point solve (evaluation.plausible_newton).
 
 Specifications: (1) rounding a prior body keeps its mass and centre of mass, keeps it consistent and bounds the
 ratio of its principal moments; (2) a massless prior body becomes the documented regularised body; (3) the joint-term
@@ -17,8 +17,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from dualid.estimators.plausible_newton import MASSLESS_SHARE, ROUNDING, rounded_body, rounded_prior, torque_weights
-from dualid.estimators.plausible_region import plausible_in_region
+from dualid.evaluation.plausible_newton import MASSLESS_SHARE, ROUNDING, rounded_body, rounded_prior, torque_weights
+from dualid.evaluation.plausible_region import plausible_in_region
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_plausible_region import _fit, _pendubot_problem  # noqa: E402 - its small pendubot problems

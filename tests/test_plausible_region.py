@@ -19,9 +19,9 @@ from dualid.bench.arms import make_run, random_arm
 from dualid.data.trajectory import Trajectory
 from dualid.errors import ConfigError
 from dualid.estimators import OLS
-from dualid.estimators.plausible import PRIOR, plausible_parameters
-from dualid.estimators.plausible_region import check_level, plausible_in_region
-from dualid.estimators.uncertainty import base_uncertainty
+from dualid.evaluation.plausible import PRIOR, plausible_parameters
+from dualid.evaluation.plausible_region import check_level, plausible_in_region
+from dualid.evaluation.uncertainty import base_uncertainty
 from dualid.model.joint_terms import with_joint_terms
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.problem import build_problem

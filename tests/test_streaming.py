@@ -115,13 +115,6 @@ def test_parquet_source_streams_the_same_samples(data, tmp_path):
     assert _rel(st.H, ref.H) < 1e-12 and _rel(st.g, ref.g) < 1e-12
 
 
-def test_fixed_point_needs_the_data_in_memory(data):
-    from dualid.errors import DataError
-
-    with pytest.raises(DataError, match="keeps a weight per sample between its iterations, so it needs the data"):
-        make_estimator("dm-bfp").fit(_chunked(data))
-
-
 def test_fit_stream_cli_prints_the_fit_and_its_passes(tmp_path):
     import pandas as pd
     from typer.testing import CliRunner

@@ -45,7 +45,7 @@ def _good(r) -> bool:
 def test_every_method_and_solver_is_optimal_and_agrees_with_its_reference(corpus_rows):
     case, rows = corpus_rows
     rows = [r for r in rows if "floor off" not in r["variant"]]
-    assert {r["method"] for r in rows} == {"ols", "wls", "energy", "logdet", "pullback", "dm", "dm-paper", "dm-bfp"}
+    assert {r["method"] for r in rows} == {"ols", "wls", "energy", "logdet", "pullback", "dm", "dm-paper"}
     assert {r["solver_choice"] for r in rows if r["method"] == "dm-paper"} == {"newton", "sdp_clarabel"}
     for r in rows:
         key = (case, r["method"], r["variant"], r["solver_choice"])

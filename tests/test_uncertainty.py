@@ -4,10 +4,10 @@ dual-metric objective and the log-det prior, active constraints, the bootstrap, 
 import numpy as np
 import pytest
 
-from dualid import OLS, WLS, BaseUncertainty, DualMetric, FeasibleGLS, RegularizedWLS, base_uncertainty, bootstrap
+from dualid import OLS, WLS, BaseUncertainty, DualMetric, NoiseModelDM, RegularizedWLS, base_uncertainty, bootstrap
 from dualid.errors import ConfigError, SolverError
-from dualid.estimators import BoundedFixedPoint
-from dualid.estimators.uncertainty import block_labels, derivatives, run_segments
+from dualid.evaluation.objective_terms import derivatives
+from dualid.evaluation.uncertainty import block_labels, run_segments
 from dualid.model.consistency import regularizer_value
 from dualid.model.metric import AffineMetric
 from dualid.model.parameters import ParameterBlock, ParameterSpace
@@ -106,13 +106,31 @@ def test_logdet_prior_adds_its_hessian():
     np.testing.assert_allclose((H - H0) / result.info["gamma"], fd, rtol=1e-4, atol=1e-4 * np.abs(fd).max())
 
 
-def test_fixed_weight_dm_equals_wls_with_the_same_covariance():
+def test_dm_without_acceleration_noise_has_wls_intervals_with_the_same_covariance():
     problem, _ = drag_problem(np.random.default_rng(3), N=200, noise=0.1)
     S = np.diag([0.01, 0.02, 0.03])
-    wls, dm = WLS(covariance=S), FeasibleGLS(sigma=np.diag(S), kappa=0.0)
+    wls, dm = WLS(covariance=S), NoiseModelDM(sigma_tau=S, sigma_a=np.zeros((3, 3)))
     u_wls = base_uncertainty(problem, wls.fit(problem), wls)
     u_dm = base_uncertainty(problem, dm.fit(problem), dm)
     np.testing.assert_allclose(u_dm.covariance, u_wls.covariance, rtol=1e-5)
+
+
+def test_dm_per_sample_gradients_sum_to_its_objective_gradient():
+    """The sandwich's per-sample gradients of dm's objective (noise model fixed) add up to the gradient of
+    Σ r_iᵀ(Σ_τ + M_i(θ)Σ_aM_i(θ))⁻¹r_i, checked by central differences at a point away from the optimum."""
+    from dualid.estimators.newton.noise_objective import noise_model_objective
+    from dualid.evaluation.objective_terms import derivatives
+
+    problem, theta = drag_problem(np.random.default_rng(5), N=60, noise=0.1)
+    S, A = np.diag([0.01, 0.02, 0.03]), np.diag([0.2, 0.1, 0.3])
+    est = NoiseModelDM(sigma_tau=S, sigma_a=A)
+    fit = est.fit(problem)
+    at = type(fit)("dm", theta * 1.1, fit.parameters, 0.0, "", "", 0.0, noise=fit.noise)
+    _, G, _ = derivatives(problem, at, est, np.zeros(problem.N, dtype=int))
+    h = 1e-6 * np.maximum(np.abs(at.theta), 1.0)
+    fd = [(noise_model_objective(problem, at.theta + h[k] * e, S, A) - noise_model_objective(problem, at.theta - h[k] * e, S, A))
+          / (2 * h[k]) for k, e in enumerate(np.eye(problem.p))]
+    np.testing.assert_allclose(G[0], fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
 
 
 def test_active_bound_makes_the_interval_conditional():
@@ -168,12 +186,14 @@ def test_error_messages():
         base_uncertainty(problem, result, est, blocks=0)
     with pytest.raises(ConfigError, match=r"^kind: expected 'sandwich' or 'model' \(bootstrap: "):
         base_uncertainty(problem, result, est, kind="jackknife")
-    bfp = BoundedFixedPoint()
-    with pytest.raises(ConfigError, match=r"^uncertainty: no sandwich for estimator BoundedFixedPoint \(method 'x'\); "
-                                          r"supported: OLS, WLS, EnergyLS, RegularizedWLS, FeasibleGLS \(dm\), DualMetric "
+    class Custom:
+        pass
+
+    with pytest.raises(ConfigError, match=r"^uncertainty: no sandwich for estimator Custom \(method 'x'\); "
+                                          r"supported: OLS, WLS, EnergyLS, RegularizedWLS, NoiseModelDM \(dm\), DualMetric "
                                           r"\(dm-paper\); use the block bootstrap \(dualid\.bootstrap; in a fit config: "
                                           r"uncertainty: \{method: bootstrap\}\)$"):
-        base_uncertainty(problem, type(result)("x", result.theta, result.parameters, 0.0, "", "", 0.0), bfp)
+        base_uncertainty(problem, type(result)("x", result.theta, result.parameters, 0.0, "", "", 0.0), Custom())
     with pytest.raises(ConfigError, match=r"^resamples: expected an integer ≥ 10, got 5$"):
         bootstrap(problem, result, est, resamples=5)
 

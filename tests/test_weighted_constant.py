@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 
 from dualid.errors import MetricError
-from dualid.estimators.gls import FeasibleGLS
 from dualid.estimators.least_squares import residual_covariance
 from dualid.estimators.newton import weighted
 from dualid.estimators.newton.weighted import fit_weighted_newton, weighted_objective
@@ -102,34 +101,6 @@ def test_constant_weight_not_positive_definite_names_every_sample():
     assert str(err.value) == ("the test weight must be positive definite at every sample, but it is not at 40 of 40 "
                               "samples (smallest eigenvalue -2); give a positive-definite Σ or a pilot with a "
                               "positive-definite metric")
-
-
-def test_dm_pilots_and_kappa_zero_take_the_constant_path(cholesky_calls):
-    rng = np.random.default_rng(6)
-    problem, _ = drag_problem(rng, N=400, n=3, noise=0.3)
-    newton = {"constrained": True, "solver": "newton", "solver_options": {}, "allow_unidentifiable": False}
-    for pilot in ("ols", "wls"):
-        cholesky_calls.clear()
-        theta = FeasibleGLS(pilot=pilot)._newton_pilot(problem, newton)[0].fit.theta
-        assert _batched(cholesky_calls, problem.n) == [], pilot
-        # the same pilot by the per-sample path: an (N, n, n) identity
-        eye = np.broadcast_to(np.eye(3), (problem.N, 3, 3))
-        ols = fit_weighted(problem, eye, "ols", newton, {})
-        assert ols.info["weight"] == "per-sample"
-        if pilot == "ols":
-            assert rel(theta, ols.theta) < 1e-10
-        else:  # WLS with Σ̂ of the OLS residuals, per sample
-            S = residual_covariance(problem, ols.theta)
-            wls = fit_weighted(problem, np.broadcast_to(S, (problem.N, 3, 3)), "wls", newton, {})
-            assert wls.info["weight"] == "per-sample" and rel(theta, wls.theta) < 1e-8
-    # the final fit with κ = 0 (Σ given): C_i = Σ at every sample
-    S = _spd(rng, 3)
-    cholesky_calls.clear()
-    result = FeasibleGLS(sigma=S, kappa=0.0).fit(problem)
-    assert result.info["weight"] == "constant"
-    assert _batched(cholesky_calls, problem.n) == []
-    # κ > 0: C_i = Σ + κ M_i(θ_ref) differs per sample
-    assert FeasibleGLS(sigma=S, kappa=0.5).fit(problem).info["weight"] == "per-sample"
 
 
 def test_weighted_info_names_the_diverging_direction(monkeypatch):

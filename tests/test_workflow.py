@@ -173,7 +173,7 @@ def test_config_rejects_unknown_and_missing_keys():
         FitConfig.from_dict({"train": ["a.csv"]})
     with pytest.raises(ConfigError, match=r"joint_terms: unknown keys \['damping'\]"):
         FitConfig.from_dict(small_config(joint_terms={"damping": True}))
-    with pytest.raises(ConfigError, match="unknown method 'lasso'; known methods: ols, ols_unconstrained, wls, energy, logdet, pullback, dm, dm-paper, dm-noise, dm-bfp"):
+    with pytest.raises(ConfigError, match="unknown method 'lasso'; known methods: ols, ols_unconstrained, wls, energy, logdet, pullback, dm, dm-paper"):
         FitConfig.from_dict(small_config(methods=["ols", "lasso"]))
 
 
@@ -251,14 +251,12 @@ def test_a_fit_parses_each_log_once_and_hands_out_read_only_arrays(monkeypatch):
     assert parsed == ["trajectory_04.csv"]  # outside the block every call parses the file
 
 
-def test_report_says_which_weight_dm_used(written):
+def test_report_says_what_dms_noise_model_estimated(written):
     text = (written / "report.md").read_text()
-    # on these 4 s of DFKI data the cross-validation prefers the WLS pilot (NRMSE 0.394 vs 0.404): the report says
-    # which weight was used, not the covariance model of the GLS fit it did not return
-    assert "dm: weight: its pilot's weighted fit (κ = 0), chosen by 5-fold cross-validation" in text
-    assert "dm: torque-noise covariance estimated from: the sample covariance of the OLS residuals (the WLS pilot's " \
-           "weight)" in text
-    assert "dm: sigma structure" not in text
+    # the report says which noise levels dm estimated, the share of the residual each explains, and what it returned
+    record = yaml.safe_load((written / "parameters.yaml").read_text())["methods"]["dm"]["noise_model"]
+    assert f"dm: noise model (estimated): torque noise sd [{np.sqrt(record['sigma_tau'][0][0]):.3g}, " in text
+    assert f"result: {record['choice']}" in text
     # Link 1 turns about a fixed axis: its mass only loosens its consistency block and the infimum is approached as
     # it grows (estimators.newton.closure); the report names the completed value instead of hiding it
     assert re.search(r"dm: Joint1\.m = [0-9.e+-]+: set to the smallest value consistent", text)

@@ -51,10 +51,10 @@ _LAZY = {
     **dict.fromkeys(("BaseParameters", "BaseParameter"), "dualid.identifiability"),
     **dict.fromkeys(("OLS", "WLS", "EnergyLS", "RegularizedWLS"), "dualid.estimators.least_squares"),
     "DualMetric": "dualid.estimators.dual_metric",
-    "FeasibleGLS": "dualid.estimators.gls",
+    "NoiseModelDM": "dualid.estimators.noise_dm",
     **dict.fromkeys(("Guarded", "guard_info"), "dualid.estimators.guards"),
     "IdentificationResult": "dualid.estimators.result",
-    **dict.fromkeys(("BaseUncertainty", "base_uncertainty", "bootstrap"), "dualid.estimators.uncertainty"),
+    **dict.fromkeys(("BaseUncertainty", "base_uncertainty", "bootstrap"), "dualid.evaluation.uncertainty"),
     **dict.fromkeys(("METHODS", "Method", "make_estimator"), "dualid.estimators.methods"),
     **dict.fromkeys(("predict", "forward_dynamics"), "dualid.evaluation.prediction"),
     **dict.fromkeys(("max_normalized_xcorr", "metric_rmse", "rmse", "score_run"), "dualid.evaluation.scores"),
@@ -73,7 +73,7 @@ __all__ = [
     # problem
     "IdentificationProblem", "Identifiability", "BaseParameters", "BaseParameter", "build_problem",
     # estimators
-    "OLS", "WLS", "EnergyLS", "RegularizedWLS", "DualMetric", "FeasibleGLS", "Guarded", "guard_info",
+    "OLS", "WLS", "EnergyLS", "RegularizedWLS", "DualMetric", "NoiseModelDM", "Guarded", "guard_info",
     "IdentificationResult", "BaseUncertainty", "base_uncertainty", "bootstrap",
     "METHODS", "Method", "make_estimator",
     # evaluation
@@ -106,12 +106,12 @@ if TYPE_CHECKING:  # static checkers and editors see the names without the runti
     from dualid.data.preprocessing import differentiate, filter_lowpass, preprocess, resample, trim
     from dualid.data.trajectory import Trajectory
     from dualid.estimators.dual_metric import DualMetric
-    from dualid.estimators.gls import FeasibleGLS
     from dualid.estimators.guards import Guarded, guard_info
     from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS
     from dualid.estimators.methods import METHODS, Method, make_estimator
+    from dualid.estimators.noise_dm import NoiseModelDM
     from dualid.estimators.result import IdentificationResult
-    from dualid.estimators.uncertainty import BaseUncertainty, base_uncertainty, bootstrap
+    from dualid.evaluation.uncertainty import BaseUncertainty, base_uncertainty, bootstrap
     from dualid.evaluation.prediction import forward_dynamics, predict
     from dualid.evaluation.scores import max_normalized_xcorr, metric_rmse, rmse, score_run
     from dualid.evaluation.validation import Validation, validate

@@ -63,7 +63,7 @@ class IdentificationProblem:
     coordinates: tuple[str, ...] = field(default=())  # names of the n coordinates
     # B_s (N, n, n) = ∂q_sensor/∂q: the chart the forces were measured in, as seen from this one
     # (τ = B_sᵀ τ_sensor); None: this problem is in its sensor chart. ``in_coordinates`` composes it,
-    # so a sensor covariance Σ travels as Σ_i = B_sᵢᵀ Σ B_sᵢ (see estimators/gls.py).
+    # so a sensor covariance Σ travels as Σ_i = B_sᵢᵀ Σ B_sᵢ (estimators fitted in the sensor chart: dm).
     sensor_chart: np.ndarray | None = None
 
     def __post_init__(self) -> None:

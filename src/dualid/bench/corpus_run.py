@@ -4,11 +4,11 @@ Runs per problem (``fits``):
 - ols, wls, energy: the library default (Clarabel, dualid's interior point as recorded fallback);
 - logdet, pullback: with a CAD-like prior, and with a prior on the consistency boundary (the constrained
   OLS fit), the latter also with the prior floor off (``prior_floor=0``: the behaviour before the lift);
-- dm, dm-bfp: solver "newton" and "CLARABEL";
+- dm: dualid's interior point (its only solver);
 - dm-paper: Newton and the SDP through Clarabel, each without fallback, so a failure shows.
 
 The reference of each run (``ref_objective``, ``rel_gap`` = (f − f_ref)/|f_ref|, ``pred_diff`` = ‖Y(θ − θ_ref)‖/‖Yθ_ref‖):
-dm-paper: the SDP (Clarabel) when it is optimal; dm, dm-bfp: the lower of the two solvers' objectives;
+dm-paper: the SDP (Clarabel) when it is optimal; dm: its own objective (its noise levels are estimated from the data);
 quadratic and regularized fits: dualid's interior-point method run directly on the same sufficient statistics
 (``quadratic_newton``; where it fails, SCS to 1e-9 when it says optimal, else SCS's end point polished by the interior
 point), or the fit itself if lower.
@@ -119,7 +119,7 @@ def fits(problem, theta_true, sdp: bool = True, prior_seed: int = 0, sdp_max_n: 
         return r
 
     kw = dict(allow_unidentifiable=True)
-    run = set(methods or ("ols", "wls", "energy", "logdet", "pullback", "dm", "dm-bfp", "dm-paper"))
+    run = set(methods or ("ols", "wls", "energy", "logdet", "pullback", "dm", "dm-paper"))
     ols = quad("ols", "", make_estimator("ols", **kw)) if "ols" in run else None
     for m in ("wls", "energy"):
         if m in run:
@@ -134,20 +134,12 @@ def fits(problem, theta_true, sdp: bool = True, prior_seed: int = 0, sdp_max_n: 
             quad(m, label, make_estimator(m, theta0=th0, **kw))
             if label != "prior CAD-like":
                 quad(m, label + ", floor off", make_estimator(m, theta0=th0, options={"prior_floor": 0.0}, **kw))
-    for m in ("dm", "dm-bfp"):
-        if m not in run:
-            continue
-        pair = []
-        for solver in ("newton", "CLARABEL") if methods is None else ("newton",):
-            r, row = _record(make_estimator(m, options={"solver": solver}, **kw), problem)
-            row.update(method=m, variant="", solver_choice=solver)
-            rows.append(row)
-            pair.append((r, row))
-        ok = [(row["objective"], r) for r, row in pair if r is not None]
-        if ok:
-            f_ref, r_ref = min(ok, key=lambda x: x[0])
-            for r, row in pair:
-                _agreement(row, r, f_ref, np.asarray(r_ref.theta), problem)
+    if "dm" in run:
+        r, row = _record(make_estimator("dm", **kw), problem)
+        row.update(method="dm", variant="", solver_choice="newton")
+        rows.append(row)
+        if r is not None:
+            _agreement(row, r, row["objective"], np.asarray(r.theta), problem)
     if "dm-paper" not in run:
         return _sized(rows, problem)
     newton, nrow = _record(DualMetric(solver="newton", fallback=(), **kw), problem)

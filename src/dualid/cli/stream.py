@@ -43,7 +43,7 @@ def fit_stream(
     from dualid.robot.stream_source import log_source
     from dualid.streaming import ArraySource, ChunkedProblem, ParquetSource
 
-    if method in ("logdet", "pullback", "dm-bfp"):
+    if method in ("logdet", "pullback"):
         fail(f"--method {method}: not available for streamed data (needs a prior θ₀ or a weight per sample); "
              "use ols, ols_unconstrained, wls, energy, dm or dm-paper")
     if chunk < 1:

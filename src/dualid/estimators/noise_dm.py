@@ -30,6 +30,7 @@ from dualid.estimators.base import check_identifiable
 from dualid.estimators.least_squares import WLS
 from dualid.estimators.metric_guard import reference_guard
 from dualid.estimators.newton.fit import fit_dual_metric_newton
+from dualid.estimators.newton.closure import on_closure
 from dualid.estimators.newton.interior_point import run_interior_point
 from dualid.estimators.newton.noise_objective import (
     noise_model_derivatives,
@@ -43,6 +44,9 @@ from dualid.estimators.noise_level import PRIOR_SAMPLES, PRIOR_SHARE, NoiseLevel
 from dualid.estimators.result import IdentificationResult, NoiseRecord
 from dualid.model.consistency import feasible_set
 from dualid.problem import IdentificationProblem
+
+
+CHECK_SAMPLES = 20_000  # streamed data: the noise levels and the held-out check from a strided subsample of this size
 
 
 @dataclass(frozen=True)
@@ -87,6 +91,7 @@ class NoiseModelDM:
         if not self.allow_unidentifiable:
             check_identifiable(problem)
         sensor = problem.in_sensor_chart()
+        sample = _in_memory(sensor)  # the noise levels and the check read sample subsets
         cons = feasible_set(sensor.parameters, self.constrained)
         pilot, start = self._pilot(sensor)
         theta = np.asarray(pilot.theta)
@@ -99,7 +104,7 @@ class NoiseModelDM:
         iterations, history = 0, []
         for k in range(1 if fixed else self.rounds):
             if not fixed:
-                noise = estimate_noise(sensor, theta, prior_samples=self.prior_samples, prior_share=self.prior_share,
+                noise = estimate_noise(sample, theta, prior_samples=self.prior_samples, prior_share=self.prior_share,
                                        start=noise, structure=self.structure)
             theta, info = self._solve(sensor, cons, theta, noise)
             iterations += info["iterations"]
@@ -108,7 +113,7 @@ class NoiseModelDM:
         wls = pilot if start.endswith("wls") else WLS(constrained=self.constrained, allow_unidentifiable=True).fit(sensor)
         check, choice = None, "noise model"
         if self.check:
-            check = self._check(sensor, cons, theta, noise, wls)
+            check = self._check(sample, cons, theta, noise, wls)
             if check is not None and check.rejected:
                 theta, f = np.asarray(wls.theta), float(wls.objective)
                 choice = (f"wls: the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's "
@@ -119,9 +124,10 @@ class NoiseModelDM:
                              np.nan if check is None else check.measured_gap,
                              np.nan if check is None else check.predicted_gap)
         guard = reference_guard(sensor, theta, np.asarray(pilot.theta), f"pilot ({start})")
+        closure = _closure_info(info if choice == "noise model" else wls.info)
         return IdentificationResult(self.name, theta, problem.parameters, f, "optimal", "newton",
                                     time.perf_counter() - t0, iterations, self.constrained,
-                                    {"rounds": len(history), "start": start, **guard}, noise=record)
+                                    {"rounds": len(history), "start": start, **guard, **closure}, noise=record)
 
     def _check(self, sensor, cons, theta, noise, wls) -> NoiseCheck | None:
         Sigma = np.asarray(wls.info["covariance_matrix"])
@@ -153,6 +159,10 @@ class NoiseModelDM:
         return WLS(constrained=self.constrained, allow_unidentifiable=True).fit(problem), why + "wls"
 
     def _solve(self, problem, cons, theta, noise: NoiseLevels):
+        """θ minimising f with the noise levels fixed, from θ, on the closed feasible set: a parameter that neither Y
+        nor M(θ) sees (f's row of it vanishes) only loosens its consistency block, so f's infimum would be approached
+        as it grows without bound; it is projected out and completed to the smallest consistent value
+        (``newton.closure``), as the quadratic fits do."""
         S, A = noise.sigma_tau, noise.sigma_a
 
         def objective(th, order):
@@ -160,11 +170,26 @@ class NoiseModelDM:
 
         try:
             scale = noise_model_scale(problem, theta, S, A, self.chunk)
+            der = objective(theta, 2)
         except NotPositiveDefinite:
             raise MetricError("dm: the noise model's covariance is not positive definite at the start") from None
-        theta, _, _, info = run_interior_point(problem, cons, theta, None, None, self.tol, self.max_iter, self.chunk,
-                                            False, objective=objective, f_scale=scale)
-        return theta, info
+        closed, done = on_closure(cons, 0.5 * der.hess, scale, problem.parameters.names, enabled=self.constrained)
+        theta, _, _, info = run_interior_point(problem, closed, theta, None, None, self.tol, self.max_iter, self.chunk,
+                                               False, der=der, objective=objective, f_scale=scale)
+        return done(theta, info)
+
+
+def _in_memory(problem, samples: int = CHECK_SAMPLES):
+    """The problem itself when it is in memory; for data streamed from disk (``streaming.ChunkedProblem``), an evenly
+    strided in-memory subsample of at most ``samples`` samples, in time order (one pass)."""
+    if isinstance(problem, IdentificationProblem):
+        return problem
+    return problem.subset(slice(0, None, max(1, -(-problem.N // samples))))
+
+
+def _closure_info(info: dict) -> dict:
+    """What the closed-set completion said of the parameters the data do not determine (``newton.closure``)."""
+    return {k: info[k] for k in ("projected_parameters", "projected_names", "projected_note") if k in info}
 
 
 __all__ = ["NoiseModelDM"]

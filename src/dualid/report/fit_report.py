@@ -44,17 +44,14 @@ SCORES = (("tau_rmse", "τ RMSE [N m]"), ("tau_ncc", "τ NCC"), ("a_ncc", "a NCC
 SCORE_NOTE = ("τ: inverse dynamics τ̂ = Y(q, v, a)θ̂ from measured q, v and differentiated a, against the measured "
               "effort. a: forward dynamics â = M̂⁻¹(τ − ĥ) from measured q, v, τ, against the differentiated "
               "accelerations. NCC: normalized cross-correlation, maximum over shifts within ±{window} s.")
-SOLVER_NOTES = ("fallback_reason", "solver_warnings", "fallback", "sigma_kappa_fallback", "covariance_model",
-                "sigma_structure", "pilot", "projected_parameters", "projected_note", "diverging_direction")  # the last three: an
+SOLVER_NOTES = ("fallback_reason", "solver_warnings", "fallback", "pilot", "projected_parameters", "projected_note",
+                "diverging_direction")  # the last three: an
 # infimum approached only as parameters grow (estimators.newton.closure; dm-paper's optimum at infinity)
 
 
 NOTE_LABELS = {  # SOLVER_NOTES keys in a reader's words
     "fallback_reason": "why the first solver was not used",
     "solver_warnings": "solver warnings",
-    "sigma_kappa_fallback": "weight fallback",
-    "covariance_model": "torque-noise covariance estimated from",
-    "sigma_structure": "torque-noise covariance structure",
     "pilot": "first fitted with",
     "diverging_direction": "the objective keeps improving along",
 }
@@ -71,19 +68,14 @@ def notes_once(notes: list[str]) -> list[str]:
     return [f"{', '.join(w for w in who if w)}: {text}" if any(who) else text for text, who in grouped.items()]
 
 
-def weight_note(m: str, info: dict) -> str:
-    """dm's weight: the GLS fit or its pilot's, chosen by cross-validation (estimators.weight_cv)."""
-    choice = info["weight_choice"]
-    if "cv_score" in info:
-        sc = info["cv_score"]
-        which = "the GLS fit Σ + κM(θ_ref)" if choice == "gls" else "its pilot's weighted fit (κ = 0)"
-        motion = info.get("cv_motion_score")
-        moved = f"; motion error, relative: GLS {motion['gls']:.4g}, pilot {motion['pilot']:.4g}" if motion else ""
-        judged = " (torque and motion)" if info.get("cv_criteria") == "torque+motion" else ""
-        return (f"{m}: weight: {which}, chosen by {info['cv_folds']}-fold cross-validation{judged} on "
-                f"{info['cv_samples']} samples (held-out torque NRMSE: GLS {sc['gls']:.4g}, pilot {sc['pilot']:.4g}"
-                f"{moved})")
-    return f"{m}: weight: {choice}" + (f"; {info['cv_fallback']}" if "cv_fallback" in info else "")
+def noise_note(m: str, noise) -> str:
+    """dm's noise model (estimators.noise_dm): the levels it estimated, the share of the residual each explains,
+    and what it returned."""
+    sd_tau = ", ".join(f"{x:.3g}" for x in np.sqrt(np.diag(noise.sigma_tau)))
+    sd_a = ", ".join(f"{x:.3g}" for x in np.sqrt(np.diag(noise.sigma_a)))
+    return (f"{m}: noise model ({noise.source}): torque noise sd [{sd_tau}], acceleration noise sd [{sd_a}] (sensor "
+            f"chart); shares of the residual: torque {noise.torque_share:.2f}, acceleration "
+            f"{noise.acceleration_share:.2f}; result: {noise.choice}")
 
 
 def slug(s: str) -> str:
@@ -209,7 +201,7 @@ def margin_note(method: str, info: dict) -> str:
 
 def fit_notes(m: str, r) -> list[str]:
     """What a reader should know about how method m's fit r was obtained: a solver chain that was not a fallback,
-    the SOLVER_NOTES keys it recorded, dm's weight choice, a margin."""
+    the SOLVER_NOTES keys it recorded, dm's noise model, a margin."""
     chain = str(r.info.get("solver_chain", r.solver))
     notes = [f"{m}: solver chain: {chain}"] if "→" in chain and not r.info.get("fallback_used") else []
     for k in SOLVER_NOTES:
@@ -220,7 +212,7 @@ def fit_notes(m: str, r) -> list[str]:
             notes.append(f"{m}: {values}: {PROJECTED}")
         elif k in r.info:
             notes.append(f"{m}: {NOTE_LABELS.get(k, k.replace('_', ' '))}: {fmt_value(r.info[k])}")
-    notes += [weight_note(m, r.info)] if "weight_choice" in r.info else []
+    notes += [noise_note(m, r.noise)] if getattr(r, "noise", None) is not None else []
     return notes + ([margin_note(m, r.info)] if "margin_epsilon" in r.info else [])
 
 

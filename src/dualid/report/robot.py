@@ -32,11 +32,6 @@ from dualid.robot.fit import FitOutcome
 __all__ = ["parameters_record", "score_table", "write_fit", "write_validation"]
 
 
-WEIGHT_KEYS = ("weight_choice", "cv_score", "cv_motion_score", "cv_folds", "cv_samples", "cv_criteria", "cv_fallback",
-               "pilot", "covariance_model", "sigma_structure", "kappa", "kappa_share", "sigma_diag", "sigma",
-               "estimated_covariance", "feedback")  # a weighted fit's choice of weight and its noise parameters
-
-
 def method_entry_record(m: str, f, P) -> dict:
     """What parameters.yaml says of every fitted method, rigid-body or drag (``f``: a robot.fit.MethodFit, ``P``
     the parameter space): status, solver and fallback, objective, consistency, parameters with standard
@@ -51,8 +46,7 @@ def method_entry_record(m: str, f, P) -> dict:
         "solver_chain": r.info.get("solver_chain", r.solver),
         "fallback_used": bool(r.info.get("fallback_used", False)),
         "solver_warnings": [w for w in str(r.info.get("solver_warnings", "")).split(" | ") if w],
-        **({"weight": {k: r.info[k] for k in WEIGHT_KEYS if k in r.info}}
-           if any(k in r.info for k in WEIGHT_KEYS) else {}),
+        **({"noise_model": r.noise.as_dict()} if r.noise is not None else {}),
         "solve_time_s": r.solve_time,
         "objective": r.objective,
         "physically_consistent": bool(r.is_consistent),

@@ -38,9 +38,9 @@ from dualid.estimators import IdentificationResult
 from dualid.estimators.guards import guard_info
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.methods import method as method_entry
-from dualid.estimators.plausible import PlausibleParameters
-from dualid.estimators.plausible_newton import ball_prior
-from dualid.estimators.uncertainty import BaseUncertainty
+from dualid.evaluation.plausible import PlausibleParameters
+from dualid.evaluation.plausible_newton import ball_prior
+from dualid.evaluation.uncertainty import BaseUncertainty
 from dualid.evaluation.validation import Validation, validate
 from dualid.model.external_wrench import apply_wrenches
 from dualid.model.joint_terms import JointTermsModel, with_joint_terms

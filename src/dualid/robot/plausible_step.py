@@ -2,10 +2,10 @@
 
 ``prior.plausible``: true (default) | false | {level: 0.95, joint: false}. With a prior and the method's
 uncertainty of the base parameters, the model files carry θ closest to the prior whose base parameters
-lie in the fit's confidence region (``estimators.plausible_region``: radius² χ²₁(level), every linear
+lie in the fit's confidence region (``evaluation.plausible_region``: radius² χ²₁(level), every linear
 combination of β within its own interval; ``joint: true``: χ²_r(level), the joint region). level 0, or a
 method without uncertainty (uncertainty.method: none, or its computation failed), falls back to the
-exact-prediction choice (``estimators.plausible``), and the result's ``note`` says why.
+exact-prediction choice (``evaluation.plausible``), and the result's ``note`` says why.
 """
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ from collections.abc import Mapping
 import numpy as np
 
 from dualid.errors import ConfigError, ModelFileWarning, PlausibleWarning
-from dualid.estimators.plausible import PlausibleParameters, plausible_parameters
-from dualid.estimators.plausible_newton import MASSLESS_SHARE, ball_prior, rounded_prior
-from dualid.estimators.plausible_region import LEVEL, check_level, plausible_in_region, training_rmse
-from dualid.estimators.uncertainty import BaseUncertainty
+from dualid.evaluation.plausible import PlausibleParameters, plausible_parameters
+from dualid.evaluation.plausible_newton import MASSLESS_SHARE, ball_prior, rounded_prior
+from dualid.evaluation.plausible_region import LEVEL, check_level, plausible_in_region, training_rmse
+from dualid.evaluation.uncertainty import BaseUncertainty
 from dualid.problem import IdentificationProblem
 
 PLAUSIBLE_LEVEL = LEVEL
@@ -53,7 +53,7 @@ def choose_plausible(problem: IdentificationProblem, theta_hat: np.ndarray, thet
                      base: BaseUncertainty | None, base_error: str, level: float,
                      joint: bool) -> PlausibleParameters:
     """θ_plausible of one method (module docstring); raises what the estimators raise. The prior's rigid bodies are
-    made at most 10 % rounder first (``estimators.plausible_newton.rounded_prior``: a thin CAD link would make the
+    made at most 10 % rounder first (``evaluation.plausible_newton.rounded_prior``: a thin CAD link would make the
     divergence 1/λ² stiff along one direction and push the fit's disagreement into that link's mass)."""
     theta0, ball = ball_prior(problem, theta0)
     if ball:  # no prior body at all: a regularised one at the data's scale (said: a fallback that is used)

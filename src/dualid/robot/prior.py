@@ -8,7 +8,7 @@ import numpy as np
 
 from dualid.data.files import read_mapping
 from dualid.errors import DataError
-from dualid.estimators.plausible_newton import torque_weights
+from dualid.evaluation.plausible_newton import torque_weights
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.problem import IdentificationProblem
 from dualid.robot.config import FitConfig
@@ -20,7 +20,7 @@ def prior_theta(config: FitConfig, rigid: RigidBodyModel, model, ols_theta: np.n
 
     "urdf": the URDF's inertials; joint terms (absent from a URDF's inertials) take the given estimate
     (``ols_theta``: the method's own fit, or OLS's) floored at 1e-3 × the value that alone would explain its
-    joint's measured torque (``estimators.plausible_newton.torque_weights``; a log-det prior needs θ₀ > 0, and a
+    joint's measured torque (``evaluation.plausible_newton.torque_weights``; a log-det prior needs θ₀ > 0, and a
     floor relative to the data keeps it at the data's scale, whatever the units).
     A file: a parameters.json/yaml written by a previous fit ("file#method" picks the method, default
     its first fitted one), or any file with a 'parameters' list of {name, value}; matched by name.

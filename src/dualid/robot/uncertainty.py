@@ -1,6 +1,6 @@
 """The uncertainty step of ``fit_robot``: 95 % intervals of the base parameters for every method.
 
-The covariance is dualid.estimators.uncertainty's sandwich H⁻¹BH⁻¹ with the gradients summed over
+The covariance is dualid.evaluation.uncertainty's sandwich H⁻¹BH⁻¹ with the gradients summed over
 contiguous segments of the training runs (BLOCKS_PER_PARAMETER × the number of base parameters in all,
 at least MIN_BLOCKS, split evenly over the runs), so residuals correlated over less than a segment
 (filtering, unmodelled slow effects) do not shrink the intervals the way one-sample blocks would.
@@ -24,7 +24,7 @@ import numpy as np
 
 from dualid.errors import ConfigError, DualidError
 from dualid.estimators.result import IdentificationResult
-from dualid.estimators.uncertainty import BaseUncertainty, base_uncertainty, bootstrap, run_segments
+from dualid.evaluation.uncertainty import BaseUncertainty, base_uncertainty, bootstrap, run_segments
 from dualid.identifiability import BaseParameters
 from dualid.problem import IdentificationProblem
 

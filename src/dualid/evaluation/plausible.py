@@ -73,7 +73,7 @@ class PlausibleParameters:
     consistent: bool  # θ_p physically consistent (tolerance 1e-7, as IdentificationResult)
     divergence_hat: float  # Σ_b D(C_b(θ̂) ‖ C_b(θ₀)) (inf when θ̂ is on the consistency boundary)
     divergence: float  # Σ_b D(C_b(θ_p) ‖ C_b(θ₀))
-    # the noise-aware choice (estimators.plausible_region): "exact" (θ̂'s predictions) or "confidence" (β(θ) in
+    # the noise-aware choice (evaluation.plausible_region): "exact" (θ̂'s predictions) or "confidence" (β(θ) in
     # the fit's confidence ellipsoid at ``level``: (β − β̂)ᵀΣ⁻¹(β − β̂) ≤ χ²_r(level) = radius2)
     form: str = "exact"
     level: float = 0.0

@@ -1,14 +1,14 @@
 """Noise-aware plausible parameters: the θ closest to a prior θ₀ among those the data do not reject.
 
-``plausible_parameters`` (estimators.plausible) keeps θ̂'s training predictions exactly. On noisy data
+``plausible_parameters`` (evaluation.plausible) keeps θ̂'s training predictions exactly. On noisy data
 that is too strict: directions the rank rule counts as determined may be determined only to far below
 the noise, and the fit's absurd values along them (a 60× link mass) cannot be touched. Here the slice
 is widened to the fit's confidence region of the base parameters β = C θ (dualid.identifiability):
 
     θ_p = argmin_θ  R(θ)   subject to   (Cθ − β̂)ᵀ Σ_β⁻¹ (Cθ − β̂) ≤ c²,   C_b(θ) ⪰ 0, bounds,
 
-with Σ_β the method's covariance of β̂ (estimators.uncertainty: the sandwich, or a bootstrap's) and R the
-scale-aware prior term of ``estimators.plausible_newton`` (the log-det divergence of the pseudo-inertias,
+with Σ_β the method's covariance of β̂ (evaluation.uncertainty: the sandwich, or a bootstrap's) and R the
+scale-aware prior term of ``evaluation.plausible_newton`` (the log-det divergence of the pseudo-inertias,
 torque-weighted squares on joint terms), which also solves it. The radius:
 c² = χ²₁(level) by default — the ellipsoid is then exactly the set of β for which *every* linear
 combination aᵀβ (each base parameter, each predicted torque) stays within its own ``level`` interval
@@ -39,7 +39,7 @@ import scipy.linalg
 import scipy.stats
 
 from dualid.errors import ConfigError, DataError, SolverError
-from dualid.estimators.plausible import (
+from dualid.evaluation.plausible import (
     DATA,
     PREDICTION_RTOL,
     PRIOR,
@@ -49,8 +49,8 @@ from dualid.estimators.plausible import (
     checked_prior,
     plausible_parameters,
 )
-from dualid.estimators.plausible_newton import prior_divergence, solve_region
-from dualid.estimators.uncertainty import BaseUncertainty
+from dualid.evaluation.plausible_newton import prior_divergence, solve_region
+from dualid.evaluation.uncertainty import BaseUncertainty
 from dualid.problem import IdentificationProblem
 
 LEVEL = 0.95  # default confidence level of the region (chosen in benchmarks/plausible_arm.md)
@@ -101,7 +101,7 @@ def plausible_in_region(problem: IdentificationProblem, theta_hat, theta0, uncer
                         level: float = LEVEL, joint: bool = False, solver: str = "CLARABEL",
                         solver_options: dict | None = None) -> PlausibleParameters:
     """θ_p closest to θ₀ with β(θ_p) in the fit's ``level`` confidence ellipsoid (module docstring), solved by
-    dualid's interior point (``estimators.plausible_newton``); ``solver``/``solver_options`` serve level 0 only."""
+    dualid's interior point (``evaluation.plausible_newton``); ``solver``/``solver_options`` serve level 0 only."""
     level = check_level(level)
     P = problem.parameters
     theta_hat = np.asarray(theta_hat, dtype=float)

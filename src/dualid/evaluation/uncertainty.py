@@ -13,10 +13,13 @@ inverse of the Schur complement (the prior's profile). Blocks (contiguous segmen
 residuals be correlated within a block; one sample per block is the heteroscedasticity-robust form.
 The Hessian and per-sample gradients are:
 
-- quadratic (ols, wls, energy, dm = FeasibleGLS, logdet/pullback data term): f_i = r_iᵀW_i r_i,
+- quadratic (ols, wls, energy, logdet/pullback data term): f_i = r_iᵀW_i r_i,
   ∇f_i = 2 Y_iᵀW_i r_i, H = 2 Σ Y_iᵀW_i Y_i, with the weight the estimator used (recorded in its result);
 - dm-paper: f_i = r_iᵀM_i(θ)⁻¹r_i, ∇f_i = 2 Y_iᵀw_i − [w_iᵀM_ik w_i]_k (w_i = M_i⁻¹r_i), H the exact
   Hessian 2 Σ D_iᵀM_i⁻¹D_i, D_i = Y_i − [M_ik w_i]_k (estimators.newton.objective);
+- dm: f_i = r_iᵀC_i(θ)⁻¹r_i with its estimated noise model C_i = Σ_τ + M_iΣ_aM_i (held fixed),
+  ∇f_i = 2 Y_iᵀw_i − 2 [u_iᵀM_ik w_i]_k (w_i = C_i⁻¹r_i, u_i = Σ_aM_iw_i), H the Hessian of
+  estimators.newton.noise_objective; where dm returned WLS (its noise check), WLS's quadratic form;
 - logdet: + γ tr(C⁻¹V_k C⁻¹V_l) per block; pullback: + 2γ g_b; the data term's per-sample gradients are
   taken at its own (unregularised) minimiser, where the residuals are the noise: at θ̂ they would also
   carry the prior's systematic pull, which is not sampling variation for a fixed design.
@@ -44,16 +47,12 @@ import numpy as np
 import scipy.linalg
 import scipy.stats
 
-from dualid.errors import ConfigError, DualidError, MetricError, SolverError
-from dualid.estimators.dual_metric import DualMetric
-from dualid.estimators.gls import FeasibleGLS
-from dualid.estimators.guards import Guarded
-from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS, covariance_weight
-from dualid.estimators.newton.objective import NotPositiveDefinite, dual_metric_derivatives
+from dualid.errors import ConfigError, DualidError, SolverError
 from dualid.estimators.result import IdentificationResult
+from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS
+from dualid.evaluation.objective_terms import derivatives, unwrap
 from dualid.identifiability import BaseParameters
 from dualid.linalg import pinv_psd
-from dualid.model.consistency import prior_blocks, pullback_metric
 from dualid.problem import IdentificationProblem
 
 LEVEL = 0.95
@@ -140,110 +139,6 @@ def run_segments(lengths, per_run: int) -> list[np.ndarray]:
         out += [start + seg for seg in np.array_split(np.arange(int(n_run)), k)]
         start += int(n_run)
     return out
-
-
-# --- derivatives --------------------------------------------------------------------------------
-def _unwrap(estimator):
-    return estimator.estimator if isinstance(estimator, Guarded) else estimator
-
-
-def _weights(problem: IdentificationProblem, result: IdentificationResult, est):
-    """(problem in the chart of the fit, W (n, n) or per-sample C_i⁻¹ as Cholesky factors, energy flag)."""
-    if isinstance(est, OLS):
-        return problem, np.eye(problem.n), None
-    if isinstance(est, EnergyLS):
-        return problem, None, None
-    if isinstance(est, (WLS, RegularizedWLS)):
-        S = result.info.get("covariance_matrix")
-        if S is None:
-            W, _ = covariance_weight(problem, est.covariance, est)
-        else:
-            W = np.linalg.inv(np.asarray(S, dtype=float))
-        return problem, 0.5 * (W + W.T), None
-    if isinstance(est, FeasibleGLS):
-        sensor = problem.in_sensor_chart()
-        C = np.broadcast_to(np.asarray(result.info["sigma"], dtype=float), (sensor.N, sensor.n, sensor.n)).copy()
-        if result.info.get("kappa", 0.0) > 0:
-            if result.info.get("theta_ref") is None:
-                raise ConfigError(f"uncertainty: the {result.method!r} result records κ = {result.info['kappa']:.3g} "
-                                  "but not its θ_ref (info['theta_ref']), so its weight cannot be rebuilt")
-            C += result.info["kappa"] * sensor.metric.evaluate(np.asarray(result.info["theta_ref"]))
-        return sensor, None, np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 1, 2)))
-    raise ConfigError(f"uncertainty: no sandwich for estimator {type(est).__name__} (method {result.method!r}); "
-                           "supported: OLS, WLS, EnergyLS, RegularizedWLS, FeasibleGLS (dm), DualMetric (dm-paper); "
-                           "use the block bootstrap (dualid.bootstrap; in a fit config: "
-                           "uncertainty: {method: bootstrap})")
-
-
-def derivatives(problem: IdentificationProblem, result: IdentificationResult, estimator,
-                labels: np.ndarray, chunk: int = 8192) -> tuple[np.ndarray, np.ndarray, float]:
-    """(H (p, p) the Hessian of the estimator's objective at θ̂, G (K, p) the per-block sums of the data
-    term's per-sample gradients, f the data term at θ̂)."""
-    est = _unwrap(estimator)
-    theta = np.asarray(result.theta, dtype=float)
-    K = int(labels.max()) + 1
-    G = np.zeros((K, problem.p))
-    if isinstance(est, DualMetric):
-        try:
-            d = dual_metric_derivatives(problem, theta, order=2, chunk=chunk)
-        except NotPositiveDefinite:
-            raise MetricError("uncertainty (dm-paper): M_i(θ̂) is not positive definite at some sample") from None
-        for start in range(0, problem.N, chunk):
-            rows = slice(start, start + chunk)
-            r = problem.Y[rows] @ theta - problem.tau[rows]
-            w = np.linalg.solve(problem.metric.evaluate(theta, rows), r[..., None])[..., 0]
-            g = 2.0 * np.einsum("nap,na->np", problem.Y[rows], w) - problem.metric.quad(w, rows)
-            np.add.at(G, labels[rows], g)
-        return d.hess, G, d.f
-    chart, W, L = _weights(problem, result, est)
-    H, f = _quadratic_pass(chart, W, L, theta, labels, G, chunk)
-    if isinstance(est, RegularizedWLS):
-        # the per-sample gradients at the data term's own minimiser (one Newton step on the quadratic): there the
-        # residuals are the noise, whereas at θ̂ they also carry the prior's systematic pull (fixed design)
-        theta_data = theta - pinv_psd(H)[0] @ G.sum(axis=0)
-        G[:] = 0.0
-        _quadratic_pass(chart, W, L, theta_data, labels, G, chunk)
-        H = H + float(result.info["gamma"]) * _regularizer_hessian(est, problem, theta)
-    return 0.5 * (H + H.T), G, f
-
-
-def _quadratic_pass(chart, W, L, theta, labels, G, chunk) -> tuple[np.ndarray, float]:
-    """(H = 2 Σ Y_iᵀW_iY_i, f = Σ r_iᵀW_i r_i) at θ; the per-sample gradients 2 Y_iᵀW_i r_i added to G by block."""
-    H = np.zeros((chart.p, chart.p))
-    f = 0.0
-    for start in range(0, chart.N, chunk):
-        rows = slice(start, start + chunk)
-        Y, r = chart.Y[rows], chart.Y[rows] @ theta - chart.tau[rows]
-        if W is None and L is None:  # energy: W_i = v_i v_iᵀ
-            e = np.einsum("nap,na->np", Y, chart.v[rows])
-            y = np.einsum("na,na->n", r, chart.v[rows])
-            H += 2.0 * e.T @ e
-            g = 2.0 * e * y[:, None]
-            f += float(y @ y)
-        else:
-            if L is not None:  # whiten: C_i = L_i L_iᵀ
-                Y = np.linalg.solve(L[rows], Y)
-                r = np.linalg.solve(L[rows], r[..., None])[..., 0]
-                WY, Wr = Y, r
-            else:
-                WY, Wr = np.einsum("ab,nbp->nap", W, Y), r @ W
-            H += 2.0 * np.einsum("nap,naq->pq", Y, WY)
-            g = 2.0 * np.einsum("nap,na->np", Y, Wr)
-            f += float(np.sum(r * Wr))
-        np.add.at(G, labels[rows], g)
-    return H, f
-
-
-def _regularizer_hessian(est: RegularizedWLS, problem: IdentificationProblem, theta: np.ndarray) -> np.ndarray:
-    """∇²R at θ: logdet Σ_b tr(C_b⁻¹V_k C_b⁻¹V_l) (its trace term is linear); pullback 2 g_b."""
-    Hr = np.zeros((problem.p, problem.p))
-    for idx, V, C0 in prior_blocks(est.regularizer, problem.parameters, np.asarray(est.theta0)):
-        if est.regularizer == "logdet":
-            Hb = pullback_metric(V, np.tensordot(theta[idx], V, axes=1))
-        else:
-            Hb = 2.0 * pullback_metric(V, C0)
-        Hr[np.ix_(idx, idx)] += Hb
-    return Hr
 
 
 # --- active constraints -------------------------------------------------------------------------
@@ -355,9 +250,9 @@ def base_uncertainty(problem: IdentificationProblem, result: IdentificationResul
     scale[scale == 0] = 1.0
     values = base.values(theta)
     if kind == "model":
-        if isinstance(_unwrap(estimator), (DualMetric, RegularizedWLS)):
+        if not isinstance(unwrap(estimator), (OLS, WLS, EnergyLS)) or isinstance(unwrap(estimator), RegularizedWLS):
             raise ConfigError(f"uncertainty: kind='model' is for the quadratic estimators, not {result.method!r}")
-        dof = (problem.N if isinstance(_unwrap(estimator), EnergyLS) else problem.N * problem.n) - r
+        dof = (problem.N if isinstance(unwrap(estimator), EnergyLS) else problem.N * problem.n) - r
         cov = 2.0 * f / max(dof, 1) * sandwich(H, None, base, scale, A)
         lo, hi = _intervals(values, cov, dof, level)
         return BaseUncertainty(result.method, base, values, cov, lo, hi, kind, problem.N, level, active, conditional)
