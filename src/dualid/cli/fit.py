@@ -13,6 +13,7 @@ from dualid.cli.common import (
     StageClock,
     console,
     fail,
+    one_blas_thread,
     output_dir,
     print_error,
     progress_status,
@@ -91,6 +92,7 @@ def fit(
     """Identify a robot's inertial parameters, joint friction and armature from a URDF and logs (or a drag
     model's drag and damping: model.kind: drag in the config)."""
     clock = StageClock(_stage)
+    one_blas_thread()  # before numpy loads: small products, a second thread only spins (docs/performance.md)
     import warnings
     from dataclasses import replace
 
