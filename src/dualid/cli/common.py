@@ -83,6 +83,13 @@ def one_blas_thread() -> None:
         os.environ[v] = "1"
 
 
+def no_mujoco_rendering() -> None:
+    """MUJOCO_GL=disable unless set: a command that only writes MJCF files does not load MuJoCo's OpenGL backend
+    (glfw, about 0.1 s of CPU at import)."""
+    if "mujoco" not in sys.modules:
+        os.environ.setdefault("MUJOCO_GL", "disable")
+
+
 def progress_line(message: str, start: float | None = None) -> None:
     """One plain progress line on stderr ('[  12.3 s] message'), flushed: what a redirected log keeps."""
     elapsed = "" if start is None else f"[{time.perf_counter() - start:7.1f} s] "
