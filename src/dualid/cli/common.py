@@ -75,8 +75,8 @@ BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 def one_blas_thread() -> None:
     """Run BLAS on one thread in this process unless the user chose a thread count (any of BLAS_THREADS set).
     A fit's products are small (N·n × p with p a few dozen): a second BLAS thread saves no time there but
-    spins, so it costs CPU (the DFKI fit: 10 s of CPU with the default threads, 6 s with one; its ``dm``
-    alone 19 s against 1.4 s on a loaded 2-core machine). Takes effect only before numpy is imported."""
+    spins, so it costs CPU (AᵀA of 8,000 × 26: 7 ms of CPU with two OpenBLAS threads, 0.4 ms with one; the
+    DFKI fit's ``dm`` 14-19 s against 1.5 s on a 2-core machine). Takes effect only before numpy is imported."""
     if "numpy" in sys.modules or any(v in os.environ for v in BLAS_THREADS):
         return
     for v in BLAS_THREADS:
