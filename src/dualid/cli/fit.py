@@ -13,6 +13,8 @@ from dualid.cli.common import (
     StageClock,
     console,
     fail,
+    no_mujoco_rendering,
+    one_blas_thread,
     output_dir,
     print_error,
     progress_status,
@@ -21,7 +23,7 @@ from dualid.cli.common import (
 from dualid.cli.fit_summary import print_summary
 
 _STAGES = {"loading": "logs", "margin": "margin", "uncertainty": "uncertainty", "validating": "validation",
-           "choosing": "plausible", "scoring": "training scores", "writing": "report"}
+           "choosing": "plausible", "scoring": "training scores", "writing": "files", "drawing": "report"}
 
 
 def _stage(message: str) -> str:
@@ -91,6 +93,8 @@ def fit(
     """Identify a robot's inertial parameters, joint friction and armature from a URDF and logs (or a drag
     model's drag and damping: model.kind: drag in the config)."""
     clock = StageClock(_stage)
+    one_blas_thread()  # before numpy loads: small products, a second thread only spins (docs/performance.md)
+    no_mujoco_rendering()
     import warnings
     from dataclasses import replace
 
@@ -128,7 +132,7 @@ def fit(
             with progress_status() as status:
                 outcome = fit_robot(cfg, progress=say)
                 say(f"writing {cfg.out}")
-                written = write_fit(outcome, cfg.out, force, command=_command_line(), config_file=config)
+                written = write_fit(outcome, cfg.out, force, command=_command_line(), config_file=config, progress=say)
         finally:  # also when an error follows: a warning may explain it
             show_warnings(caught)
     failed = print_summary(outcome, written, cfg.out)

@@ -21,7 +21,7 @@ import numpy as np
 
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError, MetricError
-from dualid.evaluation.prediction import forward_dynamics, measured_signal
+from dualid.evaluation.prediction import PredictionData, forward_dynamics, measured_signal
 from dualid.evaluation.scores import max_normalized_xcorr, rmse
 from dualid.model.base import Model
 
@@ -99,9 +99,7 @@ class Validation:
         }
 
 
-def validate_run(model: Model, theta: np.ndarray, traj: Trajectory, xcorr_window: float = 0.02) -> RunValidation:
-    """Effort and acceleration predictions of θ̂ on one run (which must carry accelerations; for a drag
-    model: effort and velocity predictions)."""
+def _check_run(model: Model, traj: Trajectory) -> None:
     if model.kind == "inertia" and traj.a is None:
         raise DataError(
             f"validate: run {traj.name!r} has no accelerations; differentiate it first (preprocessing step "
@@ -109,14 +107,69 @@ def validate_run(model: Model, theta: np.ndarray, traj: Trajectory, xcorr_window
         )
     if tuple(traj.coordinates) != tuple(model.coordinates):
         raise DataError(f"validate: run {traj.name!r} has coordinates {traj.coordinates}, the model {model.coordinates}")
+
+
+@dataclass(frozen=True, eq=False)
+class PreparedRun:
+    """A run with what its validation needs that does not depend on θ: the regressor Y(q, v, a) and the forward
+    dynamics' metric and bias regressor (``PredictionData``). Built once per run (``prepare_runs``), then validated
+    for every θ: the Pinocchio passes are not repeated per fit."""
+
+    traj: Trajectory
+    Y: np.ndarray  # (T, n, p)
+    prediction: PredictionData
+
+    @staticmethod
+    def of(model: Model, traj: Trajectory) -> "PreparedRun":
+        _check_run(model, traj)
+        return PreparedRun(traj, model.regressor(traj.q, traj.v, traj.a),
+                           PredictionData.of(model, traj.q, traj.v, traj.tau))
+
+
+PREPARED_MAX_FLOATS = 25_000_000  # prepare_runs keeps at most this many regressor entries (200 MB) in memory
+
+
+def prepare_runs(model: Model, trajectories: list[Trajectory]) -> tuple[PreparedRun, ...] | list[Trajectory]:
+    """``PreparedRun.of`` every run, for ``validate`` of several θ on the same runs; the runs as given when their
+    regressors together would exceed PREPARED_MAX_FLOATS (then each validation rebuilds them, one run at a time)."""
+    if sum(len(t.t) for t in trajectories) * len(model.coordinates) * model.parameters.p > PREPARED_MAX_FLOATS:
+        return list(trajectories)
+    return tuple(PreparedRun.of(model, t) for t in trajectories)
+
+
+def validate_each(model: Model, thetas: dict[str, np.ndarray], trajectories: list[Trajectory],
+                  xcorr_window: float = 0.02) -> dict[str, Validation]:
+    """``validate`` of every labelled θ on the same runs, each run prepared once (one run in memory at a time)."""
+    if not trajectories and thetas:
+        raise DataError("validate: no held-out runs given")
+    runs: dict[str, list[RunValidation]] = {label: [] for label in thetas}
+    for traj in trajectories if thetas else ():
+        prepared = PreparedRun.of(model, traj)
+        for label, theta in thetas.items():
+            runs[label].append(validate_run(model, theta, prepared, xcorr_window))
+    return {label: Validation(label, tuple(model.coordinates), tuple(r)) for label, r in runs.items()}
+
+
+def validate_run(model: Model, theta: np.ndarray, traj: Trajectory | PreparedRun,
+                 xcorr_window: float = 0.02) -> RunValidation:
+    """Effort and acceleration predictions of θ̂ on one run (which must carry accelerations; for a drag
+    model: effort and velocity predictions); ``traj`` may be a ``PreparedRun`` of the same model."""
+    prepared = traj if isinstance(traj, PreparedRun) else None
+    if prepared is not None:
+        traj = prepared.traj
+    else:
+        _check_run(model, traj)
     theta = np.asarray(theta, dtype=float)
     dt = float(np.median(np.diff(traj.t)))
     max_shift = int(round(xcorr_window / dt))
-    tau_pred = model.regressor(traj.q, traj.v, traj.a) @ theta
+    tau_pred = (model.regressor(traj.q, traj.v, traj.a) if prepared is None else prepared.Y) @ theta
     signal = measured_signal(model, traj)  # a (inertia) or v (drag)
     note = ""
     try:
-        a_pred = forward_dynamics(model, theta, traj.q, traj.v, traj.tau)
+        if prepared is None:
+            a_pred = forward_dynamics(model, theta, traj.q, traj.v, traj.tau)
+        else:
+            a_pred = prepared.prediction.predict(theta)
         a_rmse, a_ncc = rmse(a_pred, signal), _ncc(a_pred, signal, max_shift)
     except MetricError as exc:
         a_pred, note = None, str(exc)
@@ -137,9 +190,10 @@ def validate_run(model: Model, theta: np.ndarray, traj: Trajectory, xcorr_window
 
 
 def validate(
-    model: Model, theta: np.ndarray, trajectories: list[Trajectory], label: str = "", xcorr_window: float = 0.02
+    model: Model, theta: np.ndarray, trajectories: list[Trajectory] | tuple[PreparedRun, ...], label: str = "",
+    xcorr_window: float = 0.02,
 ) -> Validation:
-    """``validate_run`` on every run."""
+    """``validate_run`` on every run (Trajectory, or PreparedRun to validate several θ on the same runs)."""
     if not trajectories:
         raise DataError("validate: no held-out runs given")
     runs = tuple(validate_run(model, theta, t, xcorr_window) for t in trajectories)

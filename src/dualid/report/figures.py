@@ -3,9 +3,10 @@
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
-from matplotlib import colormaps
+from matplotlib import colormaps, rc_context
 from matplotlib.figure import Figure
 
 
@@ -15,9 +16,23 @@ def new_figure(nrows: int = 1, ncols: int = 1, *, figsize: tuple[float, float], 
     return fig, fig.subplots(nrows, ncols, squeeze=False, **subplots)
 
 
+# Unhinted glyphs: text is most of a figure's drawing time (matplotlib 3.11 lays out and renders every glyph), and
+# FreeType's hinting adds about 15 % to it at the report's 80 dpi; the difference is not visible at that size.
+DRAWING = {"text.hinting": "none"}
+
+
+def png(fig: Figure, dpi: int = 80) -> bytes:
+    """The figure as a PNG (Agg; the figures lay themselves out, so no second 'tight' drawing pass)."""
+    buf = io.BytesIO()
+    with rc_context(DRAWING):
+        fig.savefig(buf, format="png", dpi=dpi)
+    return buf.getvalue()
+
+
 def save_figure(fig: Figure, path: str | Path, dpi: int = 120, **kw) -> Path:
     path = Path(path)
-    fig.savefig(path, dpi=dpi, **kw)
+    with rc_context(DRAWING):
+        fig.savefig(path, dpi=dpi, **kw)
     return path
 
 

@@ -7,13 +7,11 @@ in order, so a new section (e.g. base parameters with intervals) is one function
 
 from __future__ import annotations
 
-import io
 import re
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
-from matplotlib.figure import Figure
 
 from dualid.evaluation.validation import Validation
 from dualid.report.base_parameters import base_section
@@ -31,6 +29,7 @@ from dualid.report.document import (
     mean_cell,
     runs_phrase,
 )
+from dualid.report.figures import png
 from dualid.report.metadata import metadata_items
 from dualid.report.model_figures import body_section, friction_section
 from dualid.report.model_files import ModelFiles, model_files_section, plausible_section
@@ -80,13 +79,6 @@ def noise_note(m: str, noise) -> str:
 
 def slug(s: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", s)
-
-
-def png(fig: Figure, dpi: int = 80) -> bytes:
-    """The figure as a PNG (Agg; the figures lay themselves out, so no second 'tight' drawing pass)."""
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
-    return buf.getvalue()
 
 
 # --- shared tables ------------------------------------------------------------------------------

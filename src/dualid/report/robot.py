@@ -15,6 +15,7 @@ Files in the output folder of a fit:
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Callable
 
 import yaml
 
@@ -125,16 +126,17 @@ def input_files(outcome: FitOutcome, config_file: str | Path | None = None) -> d
 
 
 def write_fit(outcome: FitOutcome, out: str | Path, force: bool = False, command: str | None = None,
-              config_file: str | Path | None = None) -> dict[str, Path]:
+              config_file: str | Path | None = None, progress: Callable[[str], None] | None = None) -> dict[str, Path]:
     """parameters.yaml/json, <method>.urdf, identifiability.txt, report.md, report.html and figures in
     ``out`` (under the output-directory policy of dualid.report.outdir; force = --force). ``command``: the
     command line recorded in the run metadata (default: this process's argv); ``config_file``: hashed with
-    the other inputs."""
+    the other inputs; ``progress(message)``: called before the model files and before the report."""
     meta = run_metadata(input_files(outcome, config_file), command)
-    return write_output(out, force, lambda d: _write_fit(outcome, d, meta))
+    return write_output(out, force, lambda d: _write_fit(outcome, d, meta, progress or (lambda _: None)))
 
 
-def _write_fit(outcome: FitOutcome, out: Path, meta: dict) -> dict[str, Path]:
+def _write_fit(outcome: FitOutcome, out: Path, meta: dict, progress: Callable[[str], None]) -> dict[str, Path]:
+    progress(f"writing the model files and parameters.yaml to {out}")
     model_files = write_model_files(outcome, out)
     written, files = model_files.written, model_files.record()
     urdfs = {m: e["urdf"] for m, e in files.items()}
@@ -145,6 +147,7 @@ def _write_fit(outcome: FitOutcome, out: Path, meta: dict) -> dict[str, Path]:
     written["parameters.yaml"], written["parameters.json"] = out / "parameters.yaml", out / "parameters.json"
     (out / "identifiability.txt").write_text(outcome.identifiability_text() + "\n")
     written["identifiability.txt"] = out / "identifiability.txt"
+    progress("drawing the report (report.md, report.html and their figures)")
     write_report(fit_report(data), out, written)
     return written
 

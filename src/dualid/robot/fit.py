@@ -41,7 +41,7 @@ from dualid.estimators.methods import method as method_entry
 from dualid.evaluation.plausible import PlausibleParameters
 from dualid.evaluation.plausible_newton import ball_prior
 from dualid.evaluation.uncertainty import BaseUncertainty
-from dualid.evaluation.validation import Validation, validate
+from dualid.evaluation.validation import Validation, prepare_runs, validate, validate_each
 from dualid.model.external_wrench import apply_wrenches
 from dualid.model.joint_terms import JointTermsModel, with_joint_terms
 from dualid.model.rigid_body import RigidBodyModel
@@ -336,6 +336,7 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
         problem = apply_margin(problem, config.margin, lambda: prior_theta(
             config, rigid, model, None if model is rigid else estimator("ols").fit(problem).theta, problem)[0])
     ident = problem.identifiability()
+    held_out = prepare_runs(model, test)  # each run's regressor and forward-dynamics data, once for every θ
 
     fits: dict[str, MethodFit] = {}
     ols_theta = None
@@ -364,7 +365,7 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
         validation = None
         if test:
             _say(progress, f"validating {method} on {len(test)} held-out runs")
-            validation = validate(model, result.theta, test, method, config.xcorr_window)
+            validation = validate(model, result.theta, held_out, method, config.xcorr_window)
         plausible, plausible_error = None, ""
         if config.prior.plausible:
             _say(progress, f"choosing {method}'s plausible parameters (closest to the prior, in the confidence region)")
@@ -372,7 +373,7 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
                                                     base_error)
         plausible_validation = validation  # the exact form keeps θ̂'s predictions
         if test and plausible is not None and plausible.form != "exact":
-            plausible_validation = validate(model, plausible.theta, test, method, config.xcorr_window)
+            plausible_validation = validate(model, plausible.theta, held_out, method, config.xcorr_window)
         fits[method] = MethodFit(method, result, parameter_errors(base_unc, ident.base), validation, base=base_unc,
                                  base_error=base_error, plausible=plausible, plausible_error=plausible_error,
                                  plausible_validation=plausible_validation,
@@ -382,9 +383,9 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
     for label, path in config.references:
         _say(progress, f"validating the reference parameters {label}")
         theta_ref = reference_theta(path, model)
-        references[label] = (theta_ref, validate(model, theta_ref, test, label, config.xcorr_window) if test else None)
+        references[label] = (theta_ref, validate(model, theta_ref, held_out, label, config.xcorr_window) if test else None)
     _say(progress, "scoring every fit on the training runs")
     thetas = {m: f.result.theta for m, f in fits.items() if f.ok} | {lab: th for lab, (th, _) in references.items()}
-    training = {lab: validate(model, th, train, lab, config.xcorr_window) for lab, th in thetas.items()}
+    training = validate_each(model, thetas, train, config.xcorr_window)
     return FitOutcome(config, rigid, model, cmap, tuple(train), tuple(test), problem, ident, fits, references, prior_text,
                       preprocessing_note=steps_note, training=training)
