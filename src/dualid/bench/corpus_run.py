@@ -152,6 +152,8 @@ def fits(problem, theta_true, sdp: bool = True, prior_seed: int = 0, sdp_max_n: 
         if s is not None and s.status == "optimal":
             _agreement(nrow, newton, srow["objective"], np.asarray(s.theta), problem)
             _agreement(srow, s, srow["objective"], np.asarray(s.theta), problem)
+        else:  # no reference: said, so the row is not taken for an agreement
+            nrow["ref_error"] = f"the SDP reference ended {srow['status'] if s is not None else 'with an error'}"
     return _sized(rows, problem)
 
 
