@@ -46,6 +46,9 @@ def reproduce(
 ) -> None:
     """Simulate SYSTEM, fit every estimator in the low- and high-data cases and write
     results.json, results.md and the score and trajectory figures. Progress: one line per fit on stderr."""
+    from dualid.cli.common import one_blas_thread
+
+    one_blas_thread()  # before numpy loads; the pool's workers inherit it (one process per core, small products)
     import time
     from functools import partial
     from typing import get_args
