@@ -8,8 +8,8 @@ alarm is raised):
 
 for a window of w samples (consecutive, non-overlapping). The alarm is z above the (1 − α) quantile of χ²(n·w), so
 on data without a change a window alarms with probability α, i.e. at a rate of α·f_s/w per second for samples at
-f_s Hz (``false_alarm_rate``). An alarm *event* is a run of alarming windows; the fit's memory is shortened at its
-first window (``RecursiveFit``). The χ² law assumes independent Gaussian innovations with covariance Ŝ: correlated
+f_s Hz (``false_alarm_rate``). An alarming window starts an alarm *event*: the fit's memory is shortened
+(``RecursiveFit``), the test pauses while the fit re-converges and Ŝ is learnt afresh (``hold``, ``warmup``). The χ² law assumes independent Gaussian innovations with covariance Ŝ: correlated
 noise or model error that the fit has not absorbed raise z, so the false-alarm rate is measured, not only stated.
 """
 
@@ -25,21 +25,23 @@ from dualid.errors import ConfigError
 
 @dataclass
 class ChiSquareDetector:
-    """Windowed χ² test of normalised innovations (module doc). ``warmup``: samples before the first test (Ŝ is
-    learnt from them); ``hold``: windows after an alarm event in which Ŝ is not updated (the fit re-converges)."""
+    """Windowed χ² test of normalised innovations (module doc). ``warmup``: samples from which Ŝ is learnt before the
+    first test; ``hold``: samples after the start of an alarm event that are neither tested nor learnt from (the fit
+    re-converges), after which Ŝ is learnt afresh from ``warmup`` samples: a change of the system can change the
+    innovations' covariance too (on an arm with noisy accelerations it is Σ_τ + M Σ_a M, and a payload changes M)."""
 
     n: int
     window: int = 50
     alpha: float = 1e-6
     memory: float = 5000.0
     warmup: int = 1000
-    hold: int = 10
+    hold: int = 2000
     S: np.ndarray | None = None  # running innovation covariance (n, n)
-    _z: float = field(default=0.0, repr=False)
     _count: int = field(default=0, repr=False)
     _seen: int = field(default=0, repr=False)
-    _quiet: int = field(default=0, repr=False)  # windows since the last alarming one (large: none yet)
-    _pending: list = field(default_factory=list, repr=False)  # r r_ᵀ sums of the current window
+    _blind_until: int = field(default=0, repr=False)  # windows ending at or before this sample are skipped
+    _learn_until: int = field(default=0, repr=False)  # ... and up to this one only learnt from
+    _pending: list = field(default_factory=list, repr=False)  # the current window's innovations
 
     def __post_init__(self) -> None:
         if not (isinstance(self.window, (int, np.integer)) and self.window >= 1):
@@ -49,19 +51,14 @@ class ChiSquareDetector:
         if not self.memory >= self.window:
             raise ConfigError(f"ChiSquareDetector: memory must be ≥ the window ({self.window}), got {self.memory!r}")
         self.threshold = float(chi2.isf(self.alpha, self.n * self.window))
-        self._quiet = 1 << 30
+        self._learn_until = self.warmup
 
     def false_alarm_rate(self, rate_hz: float) -> float:
         """Alarming windows per second expected on data without a change, at ``rate_hz`` samples per second."""
         return self.alpha * rate_hz / self.window
 
-    @property
-    def alarming(self) -> bool:
-        """True while the last window tested alarmed."""
-        return self._quiet == 0
-
     def push(self, r: np.ndarray) -> list[tuple[int, float, bool]]:
-        """Feed innovations r (B, n); returns (sample index at the window's end, z, new event) per completed window."""
+        """Feed innovations r (B, n); returns (sample index at the window's end, z, new event) per tested window."""
         out = []
         for row in np.atleast_2d(r):
             self._seen += 1
@@ -74,19 +71,22 @@ class ChiSquareDetector:
         return out
 
     def _test(self, block: np.ndarray) -> list[tuple[int, float, bool]]:
+        if self._seen <= self._blind_until:
+            return []
         outer = block.T @ block / len(block)
-        if self.S is None or self._seen <= self.warmup:
+        if self.S is None or self._seen <= self._learn_until:
             self._learn(outer, len(block))
             return []
         L = np.linalg.cholesky(self.S + 1e-12 * np.trace(self.S) / self.n * np.eye(self.n))
         w = np.linalg.solve(L, block.T)
         z = float(np.sum(w * w))
-        alarm = z > self.threshold
-        event = alarm and self._quiet > 0
-        self._quiet = 0 if alarm else self._quiet + 1
-        if not alarm and self._quiet > self.hold:
-            self._learn(outer, len(block))
-        return [(self._seen - 1, z, event)]
+        if z > self.threshold:  # an event: skip `hold` samples, then learn Ŝ afresh
+            self._blind_until = self._seen + self.hold
+            self._learn_until = self._blind_until + self.warmup
+            self.S = None
+            return [(self._seen - 1, z, True)]
+        self._learn(outer, len(block))
+        return [(self._seen - 1, z, False)]
 
     def _learn(self, outer: np.ndarray, count: int) -> None:
         if self.S is None:

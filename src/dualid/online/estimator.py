@@ -27,7 +27,8 @@ measured in docs/online.md. Σ_τ and Σ_a are given ((n, n), the sensor chart o
 
 Change detection: ``detector.ChiSquareDetector`` on the innovations of each batch before it updates the fit; at the
 start of an alarm event the memory is cut to ``reset_samples`` effective samples (the statistics scaled down), so
-the fit re-converges on the data after the change at the speed of a fresh fit.
+the fit re-converges on the data after the change at the speed of a fresh fit; no second cut follows within one
+memory length (the time constant or the window) of the last.
 """
 
 from __future__ import annotations
@@ -102,6 +103,10 @@ class RecursiveFit:
         self.project_every, self.ridge, self.projection_tol = int(project_every), float(ridge), float(projection_tol)
         self.detector, self._n = detector, n
         self.reset_on_alarm, self.reset_samples = reset_on_alarm, float(reset_samples)
+        # no second cut within one memory length of the last: the data after a cut re-converge the fit, and their
+        # larger innovations (a short memory) would otherwise alarm and cut again
+        self.refractory = window if window is not None else (1.0 / (1.0 - self.lam) if self.lam < 1.0 else 0.0)
+        self._last_reset = -np.inf
         pf = len(self.idx)
         self.H, self.g, self.c, self.count = np.zeros((pf, pf)), np.zeros(pf), 0.0, 0.0
         self._batches: deque = deque()
@@ -148,9 +153,9 @@ class RecursiveFit:
         windows, reset = (), False
         if self.detector is not None:
             windows = tuple(self.detector.push(tau - Y @ self._free))
-            if self.reset_on_alarm and any(w[2] for w in windows) and self.count > self.reset_samples:
+            if self.reset_on_alarm and any(w[2] for w in windows) and self.samples >= self._last_reset + self.refractory:
                 self.reset(self.reset_samples)
-                reset = True
+                self._last_reset, reset = self.samples, True
         A, t = self._whitened(sub)
         B = len(tau)
         w = np.sqrt(self.lam ** np.arange(B - 1, -1, -1.0))  # sample weights: λ^(age) within the batch
