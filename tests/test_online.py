@@ -135,7 +135,7 @@ def test_the_detector_flags_a_payload_and_the_fit_follows_it():
     fit = _tracker(before)
     steps = _run(fit, samples)
     events = [w[0] for s in steps for w in s.windows if w[2]]
-    assert events and 3000 <= events[0] < 3100
+    assert len(events) == 1 and 3000 <= events[0] < 3100  # one event: the fit re-converges, Ŝ is re-learnt
     assert any(s.reset for s in steps)
     assert abs(fit.theta[20] - after.nominal[20]) < 0.05  # the last link's mass: 1.2 kg → 2.2 kg
 
@@ -153,6 +153,20 @@ def test_the_detector_threshold_is_the_chi_square_quantile():
     d = ChiSquareDetector(n=7, window=20, alpha=1e-4)
     assert d.threshold == pytest.approx(chi2.isf(1e-4, 140))
     assert d.false_alarm_rate(1000.0) == pytest.approx(1e-4 * 1000 / 20)
+
+
+def test_after_an_event_the_detector_pauses_and_relearns_the_covariance():
+    rng = np.random.default_rng(5)
+    d = ChiSquareDetector(n=2, window=20, alpha=1e-6, memory=4000, warmup=400, hold=300)
+    assert d.push(rng.normal(size=(400, 2))) == []  # learning Ŝ ≈ I
+    quiet = d.push(rng.normal(size=(400, 2)))
+    assert len(quiet) == 20 and not any(e for _, _, e in quiet)
+    louder = d.push(3.0 * rng.normal(size=(2000, 2)))  # the innovations' covariance ×9 from now on
+    events = [i for i, _, e in louder if e]
+    assert events == [819]  # the first window of the louder data
+    assert louder[1][0] >= 819 + 300 + 400  # nothing tested in the pause (hold) and the re-learning (warmup)
+    assert all(z < d.threshold for _, z, _ in louder[1:])
+    assert abs(np.median([z for _, z, _ in louder[1:]]) - 40) < 6  # Ŝ learnt afresh: z ~ χ²(n·w = 40) again
 
 
 def test_the_dm_weight_is_the_noise_model_at_the_frozen_estimate(data):
@@ -179,3 +193,71 @@ def test_bad_settings_are_config_errors(data):
         RecursiveFit(model.parameters, model.nominal, weight="dm")
     with pytest.raises(ModelError):
         RecursiveFit(model.parameters, model.nominal, free=["j2.m"])  # part of a block
+
+
+# --- dualid track ---------------------------------------------------------------------------------------------------
+
+def _track_log(tmp_path, drop: str | None = None):
+    import pandas as pd
+
+    from tests.test_bad_inputs import URDF
+
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(URDF)
+    model = RigidBodyModel.from_urdf(urdf)
+    q, v, a, tau = _samples(1, 600, model, noise=0.01)
+    cols = {f"q_{j}": q[:, j] for j in range(model.nq)}
+    for name, x in (("v", v), ("a", a), ("tau", tau)):
+        cols.update({f"{name}_{c}": x[:, k] for k, c in enumerate(model.coordinates)})
+    cols.pop(drop, None)
+    pd.DataFrame(cols).to_parquet(tmp_path / "run.parquet", index=False)
+    return ["track", "--model", str(urdf), "--data", str(tmp_path / "run.parquet"), "--out", str(tmp_path / "t.csv"),
+            "--batch", "20", "--project-every", "100"], model
+
+
+def _invoke(args):
+    from typer.testing import CliRunner
+
+    from dualid.cli import app
+
+    return CliRunner().invoke(app, args)
+
+
+def test_track_writes_theta_over_time_and_never_overwrites_without_force(tmp_path):
+    import pandas as pd
+
+    args, model = _track_log(tmp_path)
+    result = _invoke(args)
+    assert result.exit_code == 0, result.output
+    table = pd.read_csv(tmp_path / "t.csv")
+    assert len(table) == 30 and list(table["samples"])[-1] == 600
+    assert {"alarm", "memory_reset", *model.parameters.names} <= set(table.columns)
+    assert np.isfinite(table[f"consistent.{model.parameters.names[0]}"].iloc[-1])
+    before = (tmp_path / "t.csv").read_bytes()
+    again = _invoke(args)
+    assert again.exit_code == 2 and "--force" in again.output and len(again.output.strip().splitlines()) == 1
+    assert (tmp_path / "t.csv").read_bytes() == before
+    assert _invoke(args + ["--force"]).exit_code == 0
+
+
+def test_track_with_a_missing_column_is_one_line_exit_2(tmp_path):
+    args, _ = _track_log(tmp_path, drop="tau_Joint2")
+    result = _invoke(args)
+    assert result.exit_code == 2
+    assert len(result.output.strip().splitlines()) == 1 and "tau_Joint2" in result.output
+    assert not (tmp_path / "t.csv").exists()
+
+
+def test_track_reads_a_csv_log_as_fit_does(tmp_path):
+    import pandas as pd
+
+    from tests.test_bad_inputs import URDF, write_log
+
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(URDF)
+    out = tmp_path / "t.parquet"
+    result = _invoke(["track", "--model", str(urdf), "--data", str(write_log(tmp_path)), "--out", str(out),
+                      "--free", "Joint2"])
+    assert result.exit_code == 0, result.output
+    table = pd.read_parquet(out)
+    assert len(table) >= 5 and table["Joint1.m"].nunique() == 1  # held at the URDF's value
