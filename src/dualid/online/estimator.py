@@ -148,16 +148,16 @@ class RecursiveFit:
 
     def update_problem(self, block: IdentificationProblem) -> Step:
         """One batch given as a problem in the full parameters (its samples in time order)."""
-        sub = restrict(block, self.idx, self.theta0)
-        Y, tau = sub.Y, sub.tau
+        sub = restrict(block, self.idx, self.theta0, metric=False)
+        A, t = self._whitened(sub, block)
         windows, reset = (), False
-        if self.detector is not None:
-            windows = tuple(self.detector.push(tau - Y @ self._free))
+        if self.detector is not None:  # dm: innovations whitened by C_i (their modelled covariance varies with q)
+            r = t - A @ self._free if self.weight == "dm" else sub.tau - sub.Y @ self._free
+            windows = tuple(self.detector.push(r))
             if self.reset_on_alarm and any(w[2] for w in windows) and self.samples >= self._last_reset + self.refractory:
                 self.reset(self.reset_samples)
                 self._last_reset, reset = self.samples, True
-        A, t = self._whitened(sub)
-        B = len(tau)
+        B = len(t)
         w = np.sqrt(self.lam ** np.arange(B - 1, -1, -1.0))  # sample weights: λ^(age) within the batch
         A, t = A * w[:, None, None], t * w[:, None]
         Af, tf = A.reshape(-1, A.shape[2]), t.reshape(-1)
@@ -171,8 +171,8 @@ class RecursiveFit:
             projected = self.project()
         return Step(self.samples, self.theta, self.consistent, projected, windows, reset)
 
-    def _whitened(self, sub: IdentificationProblem) -> tuple[np.ndarray, np.ndarray]:
-        """(L_i⁻¹ Y_i, L_i⁻¹ τ_i) with W_i = L_i⁻ᵀ L_i⁻¹ the batch's frozen weight."""
+    def _whitened(self, sub: IdentificationProblem, block: IdentificationProblem) -> tuple[np.ndarray, np.ndarray]:
+        """(L_i⁻¹ Y_i, L_i⁻¹ τ_i) of sub (block restricted) with W_i = L_i⁻ᵀ L_i⁻¹ the batch's frozen weight."""
         Y, tau = sub.Y, sub.tau
         if self.weight == "ols":
             return Y, tau
@@ -186,7 +186,7 @@ class RecursiveFit:
             return np.matmul(F.T, Y), tau @ F
         sigma_tau, sigma_a = self.sigma
         at = self._consistent if self._consistent is not None else self.theta0[self.idx]
-        M = sub.metric.evaluate(at)
+        M = block.metric.evaluate(self._full(at))
         C = sigma_tau + M @ sigma_a @ M
         L = np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 1, 2)))
         return np.linalg.solve(L, Y), np.linalg.solve(L, tau[..., None])[..., 0]

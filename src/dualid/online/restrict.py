@@ -57,8 +57,10 @@ def free_space(parameters: ParameterSpace, idx: np.ndarray) -> ParameterSpace:
     return ParameterSpace(names, units, blocks, lower, upper)
 
 
-def restrict(problem: IdentificationProblem, idx: np.ndarray, theta_fixed: np.ndarray) -> IdentificationProblem:
-    """The problem in θ[idx], every other parameter held at theta_fixed's value (module doc)."""
+def restrict(problem: IdentificationProblem, idx: np.ndarray, theta_fixed: np.ndarray,
+             metric: bool = True) -> IdentificationProblem:
+    """The problem in θ[idx], every other parameter held at theta_fixed's value (module doc). metric=False: the
+    metric of the result is a placeholder (the identity), for callers that do not read it (cheaper)."""
     if len(idx) == problem.p:
         return problem
     theta_fixed = np.asarray(theta_fixed, dtype=float)
@@ -67,6 +69,11 @@ def restrict(problem: IdentificationProblem, idx: np.ndarray, theta_fixed: np.nd
     held = theta_fixed.copy()
     held[idx] = 0.0
     tau = problem.tau - problem.Y @ held
+    if not metric:
+        placeholder = AffineMetric(len(idx), (), np.broadcast_to(np.eye(problem.n), (problem.N, problem.n, problem.n)))
+        return IdentificationProblem(owned(problem.Y[:, :, idx]), tau, placeholder, problem.v,
+                                     free_space(problem.parameters, idx), problem.kind, problem.coordinates,
+                                     problem.sensor_chart)
     M0 = problem.metric.evaluate(held)  # M_i0 + Σ_fixed θ_k M_ik
     where = {int(i): k for k, i in enumerate(idx)}
     terms = []
