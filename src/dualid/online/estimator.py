@@ -14,18 +14,18 @@ B samples costs O(B n p²) for the statistics and one p×p Cholesky solve (p³/3
 i.e. O(n p²) per sample once B ≥ p / (3n). Every ``project_every`` samples the physically consistent estimate is the
 minimiser of the same quadratic over the feasible set (pseudo-inertia ⪰ 0, …): the unconstrained estimate itself
 where it is strictly consistent, else dualid's interior point on the statistics (``estimators.quadratic_newton``);
-between projections the
-unconstrained θ̂ is the fast estimate and the consistent one is held.
+between projections the unconstrained θ̂ is the fast estimate and the consistent one is held.
 
 Weights W_i: ``"ols"`` the identity; ``"wls"`` a given covariance's inverse, or the inverse of the running innovation
 covariance Ŝ of the change detector, frozen for each batch (the identity until Ŝ exists); ``"dm"`` the noise model of
-``estimators.noise_dm``, C_i(θ) = Σ_τ + M_i(θ) Σ_a M_i(θ), with θ **frozen at the latest consistent estimate for each
-batch**: the batch fit minimises Σ r_iᵀ C_i(θ)⁻¹ r_i with C depending on θ; here each batch is weighted with C_i at the
+``estimators.noise_dm``, C_i(θ) = Σ_τ + M_i(θ) Σ_a M_i(θ), with θ **frozen at the latest consistent estimate (θ₀
+before the first projection) for each batch**: the batch fit minimises Σ r_iᵀ C_i(θ)⁻¹ r_i with C depending on θ; here each batch is weighted with C_i at the
 estimate before it and never re-weighted (iteratively reweighted recursive least squares). The ∂C/∂θ term of the
 batch fit and the re-weighting of old samples at the final θ are both left out; the cost of that approximation is
 measured in docs/online.md. Σ_τ and Σ_a are given ((n, n), the sensor chart of the forces).
 
-Change detection: ``detector.ChiSquareDetector`` on the innovations of each batch before it updates the fit; at the
+Change detection: ``detector.ChiSquareDetector`` on the innovations of each batch before it updates the fit (with
+``"dm"`` whitened by C_i, whose variation with the configuration would otherwise fatten the χ² tail); at the
 start of an alarm event the memory is cut to ``reset_samples`` effective samples (the statistics scaled down), so
 the fit re-converges on the data after the change at the speed of a fresh fit; no second cut follows within one
 memory length (the time constant or the window) of the last.
