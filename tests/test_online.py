@@ -67,6 +67,20 @@ def test_without_forgetting_the_recursive_estimate_is_the_batch_ols(data):
     assert np.array_equal(fit.theta[:20], fit.theta0[:20])  # the held parameters stay at θ₀
 
 
+def test_the_held_parameters_are_subtracted_and_the_metric_is_the_full_one(data):
+    model, (q, v, a, _), whole = data
+    exact = model.regressor(q, v, a) @ model.nominal  # noise-free: the free block is recovered exactly
+    start = model.nominal.copy()
+    start[20:30] *= 1.5
+    fit = RecursiveFit(model.parameters, start, model=model, free=["j2"])
+    _run(fit, (q, v, a, exact))
+    assert _rel(fit.theta, model.nominal) < 1e-9
+    sub = restrict(whole, fit.idx, start)
+    theta = start.copy()
+    theta[20:30] = model.nominal[20:30]
+    assert np.allclose(sub.metric.evaluate(theta[20:30]), whole.metric.evaluate(theta), rtol=1e-12, atol=1e-14)
+
+
 def test_with_a_given_covariance_it_is_the_batch_wls(data):
     model, samples, whole = data
     S = np.array([[1.0, 0.2, 0.0], [0.2, 2.0, 0.1], [0.0, 0.1, 0.5]])
