@@ -19,7 +19,7 @@ LAYERS = {
     "dualid.model": 2,
     "dualid.problem": 3, "dualid.identifiability": 3, "dualid.streaming": 3, "dualid.distributed": 3,
     "dualid.estimators": 4,
-    "dualid.evaluation": 5,
+    "dualid.evaluation": 5, "dualid.online": 5,
     "dualid.systems": 6,
     "dualid.paper": 7, "dualid.robot": 7, "dualid.bench": 7, "dualid.excite": 7,
     "dualid.report": 8,

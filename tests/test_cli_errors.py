@@ -21,7 +21,7 @@ def _text(result) -> str:
     return " ".join((result.output + (result.stderr if result.stderr_bytes is not None else "")).split())
 
 
-@pytest.mark.parametrize("command", ["fit", "validate", "simulate", "reproduce", "bench"])
+@pytest.mark.parametrize("command", ["fit", "validate", "simulate", "reproduce", "bench", "track"])
 def test_help_shows_flags_without_a_bool_metavar(command):
     text = runner.invoke(app, [command, "--help"]).output
     assert "--force" in text and "--force <bool>" not in " ".join(text.split())

@@ -66,5 +66,5 @@ def schema() -> None:
     typer.echo(json.dumps(json_schema(), indent=2, ensure_ascii=False))
 
 
-for _module in ("simulate", "reproduce", "fit", "bench", "excite", "stream", "inspect"):
+for _module in ("simulate", "reproduce", "fit", "bench", "excite", "stream", "track", "inspect"):
     importlib.import_module(f"dualid.cli.{_module}")

@@ -37,11 +37,8 @@ def fit_stream(
     """Fit without loading the data: every pass reads the file chunk by chunk and builds the regressor on the
     fly, so memory holds one chunk. Prints the identified parameters, the objective and the passes made. With
     --workers or --scheduler the passes run on a Dask cluster, one task per file, and only sums travel."""
-    from dualid.data.bags import is_bag
     from dualid.model.rigid_body import RigidBodyModel
-    from dualid.robot.config import FitConfig
-    from dualid.robot.stream_source import log_source
-    from dualid.streaming import ArraySource, ChunkedProblem, ParquetSource
+    from dualid.streaming import ChunkedProblem
 
     if method in ("logdet", "pullback"):
         fail(f"--method {method}: not available for streamed data (needs a prior θ₀ or a weight per sample); "
@@ -55,18 +52,28 @@ def fit_stream(
     if len(data) != 1:
         fail(f"--data: {len(data)} files given; several files are read by a Dask cluster (--workers N or --scheduler)")
     data = data[0]
-    if config is not None or is_bag(data):  # a log: columns (or bag topics) and preprocessing as dualid fit's
-        cfg = None if config is None else FitConfig.from_yaml(config)
-        source = log_source(rb, [data], None if cfg is None else cfg.columns, None if cfg is None else cfg.preprocessing,
-                            chunk=chunk)
-    elif data.is_dir():
-        source = ArraySource.from_npy(data, chunk=chunk)
-    else:
-        source = ParquetSource(data, rb.coordinates, rb.nq, chunk=chunk)
+    source = open_source(rb, data, config, chunk)
     if source.N < 2 or source.N * rb.nv < rb.parameters.p:
         fail(f"--data {data}: {source.N} sample{'s' * (source.N != 1)} × {rb.nv} coordinates = {source.N * rb.nv} "
              f"equations for {rb.parameters.p} parameters; a fit needs more samples")
     _fit_and_print(rb, method, allow_unidentifiable, lambda report: ChunkedProblem(rb, source, report))
+
+
+def open_source(rb, data: Path, config: Optional[Path], chunk: int, log_suffixes: tuple[str, ...] = ()):
+    """The samples of ``data`` for ``rb``: a log read as ``dualid fit`` reads it (with ``config``, a bag, or a file
+    whose suffix is in ``log_suffixes``), a directory of .npy arrays, or a Parquet file of q_/v_/a_/tau_ columns."""
+    from dualid.data.bags import is_bag
+    from dualid.robot.config import FitConfig
+    from dualid.robot.stream_source import log_source
+    from dualid.streaming import ArraySource, ParquetSource
+
+    if config is not None or is_bag(data) or data.suffix.lower() in log_suffixes:
+        cfg = None if config is None else FitConfig.from_yaml(config)
+        return log_source(rb, [data], None if cfg is None else cfg.columns, None if cfg is None else cfg.preprocessing,
+                          chunk=chunk)
+    if data.is_dir():
+        return ArraySource.from_npy(data, chunk=chunk)
+    return ParquetSource(data, rb.coordinates, rb.nq, chunk=chunk)
 
 
 def _fit_spread(rb, data: list[Path], method: str, chunk: int, allow_unidentifiable: bool, workers: int,
