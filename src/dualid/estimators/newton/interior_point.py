@@ -19,6 +19,17 @@ from dualid.model.consistency import (
     _repair_psd,
 )
 
+RESTART = 1.0  # non-convex f only: after a step that lowered f by Δf > the duality gap, the barrier restarts at
+# μ = RESTART · Δf / ν with the dual re-centred (Z_b = μ C_b⁻¹, z = μ / s). For convex f the gap bounds f − f*, so
+# no later step can lower f by more than it; on the noise-model objective (``dm``, exact Hessian indefinite, the
+# Gauss–Newton part used) the paper's optimum it starts from is not a local minimum: by iteration 4 the gap was
+# 2e-4 (μ ≈ 1e-5), then f found descent and, with that μ and a dual fitted to the old point (centrality 1e-7), the
+# steps crawled along the block boundaries (10⁻⁵…10⁻², 95 iterations, f 636.19 → 635.51, no convergence). The
+# restart follows the barrier update of Nocedal & Wright §19.3 and IPOPT's monotone μ (not below the optimality error),
+# with the observed decrease as that error's size. Measured on tests/test_margin.py's binding-margin Crazyflie
+# (N = 80, noise 0.3), seeds 2–8: 5 failures (max iterations; seeds 5, 8: 94, 46 iterations) before → 1 failure
+# (seed 6: θ runs off, now reported as an optimum at infinity) and 32–98 iterations after (seeds 5, 8: 32, 40);
+# RESTART = 1 (gap := Δf) is the smallest reset the bound motivates. The ``dm-paper`` path (convex) never restarts.
 DIVERGENCE_RATIO = 0.95  # each of the last primal steps at least this times the one before (not shrinking) …
 DIVERGENCE_STEPS = 5  # … this many in a row, along one direction, |θ| growing and f falling: optimum at infinity
 CENTRALITY_MIN = 0.0075  # below this × μ, the smallest eigenvalue of C_b^½ Z_b C_b^½ (or s_j z_j) calls for a centring
@@ -80,6 +91,15 @@ def diverging_iterates(thetas: list[np.ndarray], f_history: list[float]) -> dict
     return out
 
 
+def barrier_restart(decrease, gap, floor, nu, Cinv, s):
+    """The dual re-centred at μ = RESTART · decrease / ν (Z_b = μ C_b⁻¹, z = μ / s) when the last step lowered f by
+    more than the duality gap (and more than ``floor``, the stopping tolerance in units of f); else None."""
+    if not decrease > max(gap, floor):
+        return None
+    mu = RESTART * decrease / nu
+    return [mu * Ci for Ci in Cinv], (mu / s if len(s) else np.zeros(0))
+
+
 def _dual_direction(cons: FeasibleSet, Z, z, Cinv, s, d, target):
     """HKM direction: ΔZ = σμ C⁻¹ − Z − sym(Z ΔC C⁻¹); Δz = σμ/s − z − (z/s) G d."""
     dZ = []
@@ -136,12 +156,16 @@ def _barrier(cons: FeasibleSet, theta) -> float:
 
 
 def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chunk, verbose, der=None, gap0=1.0,
-                    objective=None, f_scale=None, levenberg=1e-12, balance: float = GAP_BALANCE):
+                    objective=None, f_scale=None, levenberg=1e-12, balance: float = GAP_BALANCE, convex: bool = True):
     """Primal–dual iterations from a strictly feasible θ (and dual Z, z, or None: centred at θ, gap0·f).
 
     Returns (θ, Z, z, info) at relative gap ≤ tol; raises SolverError otherwise. objective(θ, order) → Derivatives
     (raising NotPositiveDefinite outside its domain) replaces the dual-metric f, with f_scale its size
-    (then problem is unused): the same method for any smooth convex f under these constraints.
+    (then problem is unused): the same method for any smooth convex f under these constraints. convex=False (an
+    objective whose Hessian is indefinite somewhere, handed as a PSD part such as Gauss–Newton) lets the barrier
+    parameter restart when f falls by more than the duality gap in one step (RESTART); the stopping test is the
+    same — gap plus the Lagrangian's squared Newton decrement in the metric of the handed Hessian ≤ tol · f, i.e. a
+    KKT point of f's PSD model, as small relative to f as in the convex case.
     """
     p = len(theta)
     dual_metric = objective is None  # the candidate direction below is for fit_dual_metric_newton (fit.pushed_out)
@@ -166,6 +190,12 @@ def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, c
         f, grad, K = der.f, der.grad, der.hess.copy()
         Cinv = [np.linalg.inv(c.C(theta)) for c in cons.lmis]
         s = cons.G @ theta + cons.h
+        if not convex and it and nu:
+            restarted = barrier_restart(history[-1] - f, gap, tol * abs(f), nu, Cinv, s)
+            if restarted is not None:
+                Z, z = restarted
+                if verbose:
+                    print(f"            barrier restart: f fell {history[-1] - f:.3g} > gap {gap:.3g}")
         r_dual = grad.copy()  # ∇f − A*(Z), the Lagrangian's gradient
         barrier_grad = np.zeros(p)  # A*(C⁻¹) = −∇(barrier)
         for c, Zb, Ci in zip(cons.lmis, Z, Cinv):
