@@ -4,12 +4,14 @@ Specifications: on the noise-model objective of ``dm`` (exact Hessian indefinite
 under a binding margin constraint, the fit converges to the tolerance well inside the iteration limit although the
 start (the paper's optimum) is not a local minimum, and ends strictly lower than it started; the barrier restarts
 only after a step that lowered f by more than the duality gap and the stopping tolerance, at gap = that decrease,
-with the dual re-centred (Z_b = μ C_b⁻¹, z = μ / s).
+with the dual re-centred (Z_b = μ C_b⁻¹, z = μ / s); the secant correction of the handed Hessian meets the
+secant equation for indefinite curvature and badly scaled parameters.
 """
 
 import numpy as np
 
 from dualid.estimators.newton.interior_point import RESTART, barrier_restart
+from dualid.estimators.newton.linalg import SecantCorrection
 from dualid.estimators.noise_dm import NoiseModelDM
 from tests.test_margin import binding_reference, margined
 from tests.test_newton import crazyflie_like, rigid_body_problem
@@ -35,3 +37,19 @@ def test_the_barrier_restarts_only_after_a_decrease_beyond_the_gap():
     mu = RESTART * 0.3 / 3
     assert np.allclose(Z[0], mu * Cinv[0]) and np.allclose(z, mu / s)
     assert np.isclose(np.sum(np.linalg.inv(Cinv[0]) * Z[0]) + 0.5 * z[0], 0.3)  # the new gap is the decrease
+
+
+def test_the_secant_correction_meets_the_secant_equation_and_stays_symmetric():
+    rng = np.random.default_rng(0)
+    p = 5
+    B = rng.normal(size=(p, p))
+    H = B @ B.T + np.diag([1.0, 1e3, 1e-3, 10.0, 1.0])  # the handed (PSD) part, badly scaled
+    N = rng.normal(size=(p, 2))
+    N = N @ N.T  # the curvature it leaves out is −N (indefinite ∇²f = H − N)
+    sec = SecantCorrection(p)
+    for _ in range(3):
+        s = rng.normal(size=p)
+        sec.update(s, (H - N) @ s, H)  # a quadratic f: y = ∇²f s
+        assert np.allclose(sec.A @ s, -N @ s) and np.allclose(sec.A, sec.A.T)
+    sec.update(np.zeros(p), np.zeros(p), H)  # a zero step changes nothing
+    assert np.all(np.isfinite(sec.A))
