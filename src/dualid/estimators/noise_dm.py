@@ -175,7 +175,7 @@ class NoiseModelDM:
             raise MetricError("dm: the noise model's covariance is not positive definite at the start") from None
         closed, done = on_closure(cons, 0.5 * der.hess, scale, problem.parameters.names, enabled=self.constrained)
         theta, _, _, info = run_interior_point(problem, closed, theta, None, None, self.tol, self.max_iter, self.chunk,
-                                               False, der=der, objective=objective, f_scale=scale)
+                                               False, der=der, objective=objective, f_scale=scale, convex=False)
         return done(theta, info)
 
 

@@ -49,3 +49,37 @@ class _NewtonSystem:
         else:
             x = self.U @ ((self.U.T @ bs) / self.lam)
         return x / self.d
+
+
+def positive_definite(K: np.ndarray, rtol: float = 1e-10) -> bool:
+    """Is K (Jacobi-scaled) positive definite with a margin of rtol? A Cholesky attempt: the inertia test."""
+    d = _jacobi(K)
+    try:
+        np.linalg.cholesky(K / np.outer(d, d) - rtol * np.eye(len(K)))
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
+class SecantCorrection:
+    """A ≈ ∇²f − H, the curvature that the handed Hessian H leaves out (e.g. the indefinite second-order part of a
+    Gauss–Newton H), learnt from the gradients along the steps: the structured secant update of NL2SOL (Dennis,
+    Gay & Welsch; Nocedal & Wright §10.3), A₊ s = y# with y# = ∇f₊ − ∇f − H₊ s and s the step, as the symmetric
+    rank-2 (PSB) correction of least change in the metric W = diag(H) (Jacobi, so that it does not depend on the
+    parameters' units, and defined where f's curvature along s is negative, unlike the y-weighted DGW/BFGS form),
+    A first sized by min(1, |sᵀy#| / |sᵀAs|) as in NL2SOL."""
+
+    def __init__(self, p: int):
+        self.A = np.zeros((p, p))
+
+    def update(self, s: np.ndarray, y: np.ndarray, hess_new: np.ndarray) -> None:
+        y_sharp = y - hess_new @ s
+        v = _jacobi(hess_new) ** 2 * s  # W s
+        vs = float(v @ s)
+        if not vs > 0:  # a zero step
+            return
+        sAs = float(s @ self.A @ s)
+        if sAs:
+            self.A *= min(1.0, abs(float(s @ y_sharp)) / abs(sAs))
+        r = y_sharp - self.A @ s
+        self.A += (np.outer(r, v) + np.outer(v, r)) / vs - float(r @ s) * np.outer(v, v) / vs**2
