@@ -19,6 +19,7 @@ from dualid.errors import MetricError, SolverError
 from dualid.estimators.base import (
     captured_warnings,
     check_identifiable,
+    check_solver,
     cvxpy_solver,
     parameter_scale,
     solve_cvxpy,
@@ -45,6 +46,7 @@ def fit_quadratic(
     info: dict | None = None,
 ) -> IdentificationResult:
     """min θᵀHθ − 2gᵀθ + c (+ γ R(θ)) under the problem's constraints, by ``solver`` ("newton" | "cvxpy")."""
+    check_solver(solver, f"{method} fit")
     info = dict(info or {})
     rank = gram_rank(stats.H)
     info["rank"] = rank
