@@ -9,11 +9,15 @@ torque noise; this objective is consistent under both when the noise levels are 
 
 The fit, in the problem's sensor chart (so every chart the problem records, configuration-dependent ones too, gives
 the same fit; the objective is invariant when Σ_τ, Σ_a are carried covariantly):
-1. pilot: WLS under the physical-consistency constraints, moved strictly inside them;
-2. ``rounds`` times: the noise levels from the residuals at the current θ (``noise_level.estimate_noise``: full
-   covariances, regularised likelihood, equivariant), then θ by dualid's primal–dual interior point on f with those
-   levels, under the same constraints (the objective's gradient and Hessian of ``newton.noise_objective``);
-3. the result records the noise levels (sensor chart), their residual shares and the rounds in ``result.noise``.
+1. pilot: WLS under the physical-consistency constraints;
+2. the noise levels from its residuals (``noise_level.estimate_noise``: Σ_τ per joint, Σ_a = σ_a² diag(mean v²),
+   equivariant under per-coordinate units). When the likelihood does not support acceleration noise, Σ_a = 0 and
+   the noise model is WLS's: ``dm`` returns the pilot;
+3. ROUNDS times: θ by dualid's primal–dual interior point on f (gradient and Hessian of ``newton.noise_objective``)
+   under the same constraints, from the pilot moved strictly inside them, then from the last θ with the levels
+   re-estimated at it;
+4. the held-out check (``noise_check``): WLS when the residual is not the modelled noise;
+5. the result records the noise levels (sensor chart), their residual shares and the rounds in ``result.noise``.
 """
 
 from __future__ import annotations
@@ -23,13 +27,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-import warnings
-
-from dualid.errors import ConfigError, MetricError, OptimumAtInfinityWarning, SolverError
+from dualid.errors import ConfigError, MetricError
 from dualid.estimators.base import check_identifiable
-from dualid.estimators.least_squares import WLS
 from dualid.estimators.metric_guard import reference_guard
-from dualid.estimators.newton.fit import fit_dual_metric_newton
 from dualid.estimators.newton.interior_point import run_interior_point
 from dualid.estimators.newton.noise_objective import (
     noise_model_derivatives,
@@ -39,10 +39,12 @@ from dualid.estimators.newton.noise_objective import (
 from dualid.estimators.newton.objective import CHUNK, NotPositiveDefinite
 from dualid.estimators.newton.start import central_point
 from dualid.estimators.noise_check import NoiseCheck, check_noise_model
-from dualid.estimators.noise_level import PRIOR_SAMPLES, PRIOR_SHARE, NoiseLevels, estimate_noise
+from dualid.estimators.noise_level import NoiseLevels, estimate_noise
 from dualid.estimators.result import IdentificationResult, NoiseRecord
 from dualid.model.consistency import feasible_set
 from dualid.problem import IdentificationProblem
+
+ROUNDS = 2  # noise levels at the pilot, θ; the levels at that θ, θ again (unless the first round finds Σ_a = 0)
 
 
 @dataclass(frozen=True)
@@ -50,20 +52,13 @@ class NoiseModelDM:
     """Σ r_iᵀ (Σ_τ + M_i(θ) Σ_a M_i(θ))⁻¹ r_i with Σ_τ, Σ_a estimated from the data (module doc).
 
     sigma_tau, sigma_a: fix the noise levels ((n, n), in the sensor chart: force² and acceleration² units) instead
-    of estimating them; rounds: noise-level / θ alternations; prior_samples, prior_share: the noise-level prior
-    (``noise_level``); tol, max_iter: the interior point's.
+    of estimating them; tol, max_iter: the interior point's.
     """
 
     constrained: bool = True
     allow_unidentifiable: bool = False
-    rounds: int = 3
-    pilot: str = "dm-paper"  # "dm-paper" | "wls"
     sigma_tau: tuple | None = None
     sigma_a: tuple | None = None
-    prior_samples: float = PRIOR_SAMPLES
-    prior_share: float = PRIOR_SHARE
-    check: bool = True  # the held-out check of the noise model against WLS (estimators.noise_check)
-    structure: str = "pooled"  # "pooled" | "diagonal" | "highpass" | "full" (noise_level.estimate_noise)
     tol: float = 1e-9
     max_iter: int = 100
     chunk: int = field(default=CHUNK, kw_only=True)
@@ -79,8 +74,6 @@ class NoiseModelDM:
                 if a.ndim != 2 or a.shape[0] != a.shape[1] or not np.all(np.isfinite(a)):
                     raise ConfigError(f"NoiseModelDM: {key} must be a finite (n, n) matrix, got shape {a.shape}")
                 object.__setattr__(self, key, tuple(tuple(float(x) for x in row) for row in a))
-        if not (isinstance(self.rounds, (int, np.integer)) and self.rounds >= 1):
-            raise ConfigError(f"NoiseModelDM: rounds must be a positive integer, got {self.rounds!r}")
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
         t0 = time.perf_counter()
@@ -88,69 +81,55 @@ class NoiseModelDM:
             check_identifiable(problem)
         sensor = problem.in_sensor_chart()
         cons = feasible_set(sensor.parameters, self.constrained)
-        pilot, start = self._pilot(sensor)
-        theta = np.asarray(pilot.theta)
+        theta = np.linalg.lstsq(sensor.Y.reshape(-1, sensor.p), sensor.tau.reshape(-1), rcond=None)[0]
         if self.constrained and not cons.margin(theta) > 0:
             theta = central_point(theta, cons)
+        n = sensor.n
+        # the pilot: WLS in weights 1/mean τ_j² (covariant per coordinate, unlike OLS's), by the interior point
+        pilot = NoiseLevels(np.diag(np.mean(sensor.tau**2, axis=0) + 1e-300), np.zeros((n, n)), 1.0, 0.0, 0)
+        theta, info = self._solve(sensor, cons, theta, pilot)
+        iterations, rounds, theta_pilot = info["iterations"], 0, theta
         fixed = self.sigma_tau is not None
-        noise = None
         if fixed:
             noise = NoiseLevels(np.asarray(self.sigma_tau), np.asarray(self.sigma_a), np.nan, np.nan, 0)
-        iterations, history = 0, []
-        for k in range(1 if fixed else self.rounds):
+        for k in range(1 if fixed else ROUNDS):
             if not fixed:
-                noise = estimate_noise(sensor, theta, prior_samples=self.prior_samples, prior_share=self.prior_share,
-                                       start=noise, structure=self.structure)
+                noise = estimate_noise(sensor, theta, start=noise if k else None)
             theta, info = self._solve(sensor, cons, theta, noise)
-            iterations += info["iterations"]
-            history.append((noise.torque_share, noise.acceleration_share, info["objective"]))
+            iterations, rounds = iterations + info["iterations"], rounds + 1
+            if not noise.acceleration_share > 0:  # no acceleration noise: the noise model is WLS's
+                break
         f = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk)
-        wls = pilot if start.endswith("wls") else WLS(constrained=self.constrained, allow_unidentifiable=True).fit(sensor)
-        check, choice = None, "noise model"
-        if self.check:
-            check = self._check(sensor, cons, theta, noise, wls)
-            if check is not None and check.rejected:
-                theta, f = np.asarray(wls.theta), float(wls.objective)
-                choice = (f"wls: the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's "
-                          f"beyond the noise model's prediction, standard error {check.standard_error:.2g})")
+        choice = "noise model"
+        if not noise.acceleration_share > 0:
+            choice = f"no acceleration noise (2 log-likelihood ratio {noise.likelihood_ratio:.3g}): WLS"
+            return self._result(problem, theta, f, noise, rounds, theta_pilot, None, choice, iterations, t0)
+        check = self._check(sensor, theta, noise)
+        if check is not None and check.rejected:
+            wls = NoiseLevels(np.diag(np.mean(sensor.residual(theta) ** 2, axis=0)), np.zeros((n, n)), 1.0, 0.0, 0)
+            theta, info = self._solve(sensor, cons, theta_pilot, wls)
+            f = noise_model_objective(sensor, theta, wls.sigma_tau, wls.sigma_a, self.chunk)
+            choice = (f"wls: the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's "
+                      f"beyond the noise model's prediction, standard error {check.standard_error:.2g})")
+        return self._result(problem, theta, f, noise, rounds, theta_pilot, check, choice, iterations, t0)
+
+    def _result(self, problem, theta, f, noise, rounds, theta_pilot, check, choice, iterations, t0):
         record = NoiseRecord(noise.sigma_tau, noise.sigma_a, noise.torque_share, noise.acceleration_share,
-                             "fixed" if fixed else "estimated", len(history), float(pilot.objective), choice,
-                             np.nan if check is None else check.excess,
+                             "fixed" if self.sigma_tau is not None else "estimated", rounds, np.nan,
+                             choice, np.nan if check is None else check.excess,
                              np.nan if check is None else check.measured_gap,
                              np.nan if check is None else check.predicted_gap)
-        guard = reference_guard(sensor, theta, np.asarray(pilot.theta), f"pilot ({start})")
+        guard = reference_guard(problem.in_sensor_chart(), theta, theta_pilot, "pilot (wls)")
         return IdentificationResult(self.name, theta, problem.parameters, f, "optimal", "newton",
                                     time.perf_counter() - t0, iterations, self.constrained,
-                                    {"rounds": len(history), "start": start, **guard}, noise=record)
+                                    {"rounds": rounds, "start": "wls", **guard}, noise=record)
 
-    def _check(self, sensor, cons, theta, noise, wls) -> NoiseCheck | None:
-        Sigma = np.asarray(wls.info["covariance_matrix"])
-
-        def fit_wls(train):
-            return np.asarray(WLS(covariance=Sigma, constrained=self.constrained, allow_unidentifiable=True)
-                              .fit(train).theta)
-
-        def fit_dm(train, start):
-            return self._solve(train, cons, start, noise)[0]
-
+    def _check(self, sensor, theta, noise) -> NoiseCheck | None:
+        W = np.diag(1.0 / np.mean(sensor.residual(theta) ** 2, axis=0))
         try:
-            return check_noise_model(sensor, theta, noise.sigma_tau, noise.sigma_a, np.linalg.inv(Sigma),
-                                     fit_wls, fit_dm)
-        except (SolverError, MetricError, NotPositiveDefinite):
+            return check_noise_model(sensor, theta, noise.sigma_tau, noise.sigma_a, W, self.chunk)
+        except (MetricError, NotPositiveDefinite, np.linalg.LinAlgError):
             return None
-
-    def _pilot(self, problem) -> tuple[IdentificationResult, str]:
-        """The paper's dual-metric optimum (the same θ in every chart, hand-made ones too); WLS where it fails."""
-        if self.pilot == "dm-paper":
-            try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", OptimumAtInfinityWarning)
-                    return fit_dual_metric_newton(problem, constrained=self.constrained, chunk=self.chunk), "dm-paper"
-            except (SolverError, MetricError) as exc:
-                why = f"dm-paper pilot failed ({str(exc)[:120]}); "
-        else:
-            why = ""
-        return WLS(constrained=self.constrained, allow_unidentifiable=True).fit(problem), why + "wls"
 
     def _solve(self, problem, cons, theta, noise: NoiseLevels):
         S, A = noise.sigma_tau, noise.sigma_a
