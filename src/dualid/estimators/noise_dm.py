@@ -9,13 +9,13 @@ torque noise; this objective is consistent under both when the noise levels are 
 
 The fit, in the problem's sensor chart (so every chart the problem records, configuration-dependent ones too, gives
 the same fit; the objective is invariant when Σ_τ, Σ_a are carried covariantly):
-1. pilot: WLS under the physical-consistency constraints;
+1. pilot: least squares in weights 1/mean τ_j² (unconstrained; constrained where M(θ) is not positive definite);
 2. the noise levels from its residuals (``noise_level.estimate_noise``: Σ_τ per joint, Σ_a = σ_a² diag(mean v²),
    equivariant under per-coordinate units). When the likelihood does not support acceleration noise, Σ_a = 0 and
    the noise model is WLS's: ``dm`` returns the pilot;
 3. ROUNDS times: θ by dualid's primal–dual interior point on f (gradient and Hessian of ``newton.noise_objective``)
-   under the same constraints, from the pilot moved strictly inside them, then from the last θ with the levels
-   re-estimated at it;
+   under the physical-consistency constraints, from the pilot moved strictly inside them, then from the last θ
+   with the levels re-estimated at it;
 4. the held-out check (``noise_check``): WLS when the residual is not the modelled noise;
 5. the result records the noise levels (sensor chart), their residual shares and the rounds in ``result.noise``.
 """
@@ -81,20 +81,17 @@ class NoiseModelDM:
             check_identifiable(problem)
         sensor = problem.in_sensor_chart()
         cons = feasible_set(sensor.parameters, self.constrained)
-        theta = np.linalg.lstsq(sensor.Y.reshape(-1, sensor.p), sensor.tau.reshape(-1), rcond=None)[0]
-        if self.constrained and not cons.margin(theta) > 0:
-            theta = central_point(theta, cons)
-        n = sensor.n
-        # the pilot: WLS in weights 1/mean τ_j² (covariant per coordinate, unlike OLS's), by the interior point
-        pilot = NoiseLevels(np.diag(np.mean(sensor.tau**2, axis=0) + 1e-300), np.zeros((n, n)), 1.0, 0.0, 0)
-        theta, info = self._solve(sensor, cons, theta, pilot)
-        iterations, rounds, theta_pilot = info["iterations"], 0, theta
+        theta_pilot, iterations, rounds = self._pilot(sensor, cons), 0, 0
+        start = theta_pilot
+        if self.constrained and not cons.margin(start) > 0:
+            start = central_point(start, cons)
+        theta = start
         fixed = self.sigma_tau is not None
         if fixed:
             noise = NoiseLevels(np.asarray(self.sigma_tau), np.asarray(self.sigma_a), np.nan, np.nan, 0)
         for k in range(1 if fixed else ROUNDS):
             if not fixed:
-                noise = estimate_noise(sensor, theta, start=noise if k else None)
+                noise = estimate_noise(sensor, theta_pilot if k == 0 else theta, start=noise if k else None)
             theta, info = self._solve(sensor, cons, theta, noise)
             iterations, rounds = iterations + info["iterations"], rounds + 1
             if not noise.acceleration_share > 0:  # no acceleration noise: the noise model is WLS's
@@ -106,8 +103,9 @@ class NoiseModelDM:
             return self._result(problem, theta, f, noise, rounds, theta_pilot, None, choice, iterations, t0)
         check = self._check(sensor, theta, noise)
         if check is not None and check.rejected:
+            n = sensor.n
             wls = NoiseLevels(np.diag(np.mean(sensor.residual(theta) ** 2, axis=0)), np.zeros((n, n)), 1.0, 0.0, 0)
-            theta, info = self._solve(sensor, cons, theta_pilot, wls)
+            theta = self._solve(sensor, cons, start, wls)[0]
             f = noise_model_objective(sensor, theta, wls.sigma_tau, wls.sigma_a, self.chunk)
             choice = (f"wls: the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's "
                       f"beyond the noise model's prediction, standard error {check.standard_error:.2g})")
@@ -123,6 +121,22 @@ class NoiseModelDM:
         return IdentificationResult(self.name, theta, problem.parameters, f, "optimal", "newton",
                                     time.perf_counter() - t0, iterations, self.constrained,
                                     {"rounds": rounds, "start": "wls", **guard}, noise=record)
+
+    def _pilot(self, sensor, cons) -> np.ndarray:
+        """Least squares in weights 1/mean τ_j² (each coordinate's equations on its own torque scale: covariant per
+        coordinate, unlike OLS's), unconstrained; under the constraints, by the interior point, where M(θ) is not
+        positive definite at every sample there."""
+        scale = np.sqrt(np.mean(sensor.tau**2, axis=0)) + 1e-300
+        Yw = (sensor.Y / scale[None, :, None]).reshape(-1, sensor.p)
+        theta = np.linalg.lstsq(Yw, (sensor.tau / scale).reshape(-1), rcond=None)[0]
+        try:
+            np.linalg.cholesky(sensor.metric.evaluate(theta))
+            return theta
+        except np.linalg.LinAlgError:
+            pass
+        n = sensor.n
+        weights = NoiseLevels(np.diag(scale**2), np.zeros((n, n)), 1.0, 0.0, 0)
+        return self._solve(sensor, cons, central_point(theta, cons) if self.constrained else theta, weights)[0]
 
     def _check(self, sensor, theta, noise) -> NoiseCheck | None:
         W = np.diag(1.0 / np.mean(sensor.residual(theta) ** 2, axis=0))

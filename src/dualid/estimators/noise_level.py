@@ -36,6 +36,7 @@ from dualid.problem import strided_rows
 NOISE_SAMPLES = 5_000  # the levels from at most this many evenly strided samples
 PRIOR_SAMPLES = 10.0  # ν: the prior's weight, in samples
 PRIOR_SHARE = 1e-2  # ε: the prior's scale, as a share of the all-torque / all-acceleration levels
+SCORING_TOL = 1e-6  # Newton decrement (mean negative log-likelihood per sample) at which scoring stops
 LR_ACCELERATION = 10.0  # twice the log-likelihood ratio Σ_a free vs Σ_a = 0 needed to keep acceleration noise
 
 
@@ -141,10 +142,10 @@ def _scoring(r, a, owner, psi, weight, x) -> tuple[np.ndarray, float]:
         return val, data, grad, hess
 
     val, data, grad, hess = evaluate(x, 1)
-    for _ in range(100):
+    for _ in range(50):
         step = -np.linalg.solve(hess + 1e-12 * np.trace(hess) * np.eye(m), grad)
         dec = -float(grad @ step)
-        if dec < 1e-12:
+        if dec < SCORING_TOL or np.max(np.abs(step)) < 1e-9:
             break
         t = 1.0
         while t > 1e-8:
