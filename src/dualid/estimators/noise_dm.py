@@ -30,6 +30,7 @@ import numpy as np
 from dualid.errors import ConfigError, MetricError
 from dualid.estimators.base import check_identifiable
 from dualid.estimators.metric_guard import reference_guard
+from dualid.estimators.newton.closure import on_closure
 from dualid.estimators.newton.interior_point import run_interior_point
 from dualid.estimators.newton.noise_objective import (
     noise_model_derivatives,
@@ -80,7 +81,7 @@ class NoiseModelDM:
         if not self.allow_unidentifiable:
             check_identifiable(problem)
         sensor = problem.in_sensor_chart()
-        cons = feasible_set(sensor.parameters, self.constrained)
+        cons, done = self._closure(sensor)
         theta_pilot, iterations, rounds = self._pilot(sensor, cons), 0, 0
         start = theta_pilot
         if self.constrained and not cons.margin(start) > 0:
@@ -100,7 +101,7 @@ class NoiseModelDM:
         choice = "noise model"
         if not noise.acceleration_share > 0:
             choice = f"no acceleration noise (2 log-likelihood ratio {noise.likelihood_ratio:.3g}): WLS"
-            return self._result(problem, theta, f, noise, rounds, theta_pilot, None, choice, iterations, t0)
+            return self._result(problem, done, theta, f, noise, rounds, theta_pilot, None, choice, iterations, t0)
         check = self._check(sensor, theta, noise)
         if check is not None and check.rejected:
             n = sensor.n
@@ -109,9 +110,19 @@ class NoiseModelDM:
             f = noise_model_objective(sensor, theta, wls.sigma_tau, wls.sigma_a, self.chunk)
             choice = (f"wls: the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's "
                       f"beyond the noise model's prediction, standard error {check.standard_error:.2g})")
-        return self._result(problem, theta, f, noise, rounds, theta_pilot, check, choice, iterations, t0)
+        return self._result(problem, done, theta, f, noise, rounds, theta_pilot, check, choice, iterations, t0)
 
-    def _result(self, problem, theta, f, noise, rounds, theta_pilot, check, choice, iterations, t0):
+    def _closure(self, sensor):
+        """The feasible set to solve on, closed over the parameters f cannot see (``newton.closure``: a link mass that
+        enters only its consistency block would otherwise grow without bound), and the completion of θ after."""
+        scale = np.mean(sensor.tau**2, axis=0) + 1e-300
+        Yw = (sensor.Y / np.sqrt(scale)[None, :, None]).reshape(-1, sensor.p)
+        H, c = Yw.T @ Yw, float(np.sum(sensor.tau**2 / scale))
+        return on_closure(feasible_set(sensor.parameters, self.constrained), H, c, sensor.parameters.names,
+                          enabled=self.constrained)
+
+    def _result(self, problem, done, theta, f, noise, rounds, theta_pilot, check, choice, iterations, t0):
+        theta, completed = done(theta, {})
         record = NoiseRecord(noise.sigma_tau, noise.sigma_a, noise.torque_share, noise.acceleration_share,
                              "fixed" if self.sigma_tau is not None else "estimated", rounds, np.nan,
                              choice, np.nan if check is None else check.excess,
@@ -120,7 +131,7 @@ class NoiseModelDM:
         guard = reference_guard(problem.in_sensor_chart(), theta, theta_pilot, "pilot (wls)")
         return IdentificationResult(self.name, theta, problem.parameters, f, "optimal", "newton",
                                     time.perf_counter() - t0, iterations, self.constrained,
-                                    {"rounds": rounds, "start": "wls", **guard}, noise=record)
+                                    {"rounds": rounds, "start": "wls", **guard, **completed}, noise=record)
 
     def _pilot(self, sensor, cons) -> np.ndarray:
         """Least squares in weights 1/mean τ_j² (each coordinate's equations on its own torque scale: covariant per
