@@ -48,6 +48,15 @@ from dualid.problem import IdentificationProblem
 ROUNDS = 2  # noise levels at the pilot, θ; the levels at that θ, θ again (unless the first round finds Σ_a = 0)
 
 
+def torque_scale(problem) -> np.ndarray:
+    """(n,) each coordinate's squared force scale, mean τ_j² (covariant under a unit change of q_j); on a passive
+    coordinate (τ_j = 0) the mean squared norm of its regressor rows, which transforms alike."""
+    scale = np.mean(problem.tau**2, axis=0)
+    rows = np.mean(np.sum(problem.Y**2, axis=2), axis=0)
+    scale = np.where(scale > 0, scale, rows)
+    return np.where(scale > 0, scale, 1.0)
+
+
 @dataclass(frozen=True)
 class NoiseModelDM:
     """Σ r_iᵀ (Σ_τ + M_i(θ) Σ_a M_i(θ))⁻¹ r_i with Σ_τ, Σ_a estimated from the data (module doc).
@@ -115,7 +124,7 @@ class NoiseModelDM:
     def _closure(self, sensor):
         """The feasible set to solve on, closed over the parameters f cannot see (``newton.closure``: a link mass that
         enters only its consistency block would otherwise grow without bound), and the completion of θ after."""
-        scale = np.mean(sensor.tau**2, axis=0) + 1e-300
+        scale = torque_scale(sensor)
         Yw = (sensor.Y / np.sqrt(scale)[None, :, None]).reshape(-1, sensor.p)
         H, c = Yw.T @ Yw, float(np.sum(sensor.tau**2 / scale))
         return on_closure(feasible_set(sensor.parameters, self.constrained), H, c, sensor.parameters.names,
@@ -137,7 +146,7 @@ class NoiseModelDM:
         """Least squares in weights 1/mean τ_j² (each coordinate's equations on its own torque scale: covariant per
         coordinate, unlike OLS's), unconstrained; under the constraints, by the interior point, where M(θ) is not
         positive definite at every sample there."""
-        scale = np.sqrt(np.mean(sensor.tau**2, axis=0)) + 1e-300
+        scale = np.sqrt(torque_scale(sensor))
         Yw = (sensor.Y / scale[None, :, None]).reshape(-1, sensor.p)
         theta = np.linalg.lstsq(Yw, (sensor.tau / scale).reshape(-1), rcond=None)[0]
         try:
