@@ -27,10 +27,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dualid.errors import ConfigError, MetricError
+import warnings
+
+from dualid.errors import ConfigError, MetricError, OptimumAtInfinityWarning, SolverError
 from dualid.estimators.base import check_identifiable
 from dualid.estimators.metric_guard import reference_guard
 from dualid.estimators.newton.closure import on_closure
+from dualid.estimators.newton.fit import fit_dual_metric_newton
 from dualid.estimators.newton.interior_point import run_interior_point
 from dualid.estimators.newton.noise_objective import (
     noise_model_derivatives,
@@ -96,16 +99,15 @@ class NoiseModelDM:
         if self.constrained and not cons.margin(start) > 0:
             start = central_point(start, cons)
         theta = start
-        fixed = self.sigma_tau is not None
-        if fixed:
-            noise = NoiseLevels(np.asarray(self.sigma_tau), np.asarray(self.sigma_a), np.nan, np.nan, 0)
-        for k in range(1 if fixed else ROUNDS):
-            if not fixed:
-                noise = estimate_noise(sensor, theta_pilot if k == 0 else theta, start=noise if k else None)
-            theta, info = self._solve(sensor, cons, theta, noise)
-            iterations, rounds = iterations + info["iterations"], rounds + 1
-            if not noise.acceleration_share > 0:  # no acceleration noise: the noise model is WLS's
-                break
+        try:
+            theta, noise, iterations, rounds = self._rounds(sensor, cons, start, theta_pilot)
+        except SolverError:  # unseen parameters drifting outward from this start: from the paper's optimum instead
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", OptimumAtInfinityWarning)
+                paper = np.asarray(fit_dual_metric_newton(sensor, constrained=self.constrained, chunk=self.chunk).theta)
+            if self.constrained and not cons.margin(paper) > 0:
+                paper = central_point(paper, cons)
+            theta, noise, iterations, rounds = self._rounds(sensor, cons, paper, theta_pilot)
         f = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk)
         choice = "noise model"
         if not noise.acceleration_share > 0:
@@ -120,6 +122,21 @@ class NoiseModelDM:
             choice = (f"wls: the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's "
                       f"beyond the noise model's prediction, standard error {check.standard_error:.2g})")
         return self._result(problem, done, theta, f, noise, rounds, theta_pilot, check, choice, iterations, t0)
+
+    def _rounds(self, sensor, cons, theta, theta_pilot):
+        """The noise-level / θ alternations from θ (module doc, step 3): (θ, levels, iterations, rounds)."""
+        iterations, rounds, noise = 0, 0, None
+        fixed = self.sigma_tau is not None
+        if fixed:
+            noise = NoiseLevels(np.asarray(self.sigma_tau), np.asarray(self.sigma_a), np.nan, np.nan, 0)
+        for k in range(1 if fixed else ROUNDS):
+            if not fixed:
+                noise = estimate_noise(sensor, theta_pilot if k == 0 else theta, start=noise if k else None)
+            theta, info = self._solve(sensor, cons, theta, noise)
+            iterations, rounds = iterations + info["iterations"], rounds + 1
+            if not noise.acceleration_share > 0:  # no acceleration noise: the noise model is WLS's
+                break
+        return theta, noise, iterations, rounds
 
     def _closure(self, sensor):
         """The feasible set to solve on, closed over the parameters f cannot see (``newton.closure``: a link mass that
