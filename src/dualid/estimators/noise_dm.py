@@ -9,11 +9,15 @@ torque noise; this objective is consistent under both when the noise levels are 
 
 The fit, in the problem's sensor chart (so every chart the problem records, configuration-dependent ones too, gives
 the same fit; the objective is invariant when Σ_τ, Σ_a are carried covariantly):
-1. pilot: WLS under the physical-consistency constraints, moved strictly inside them;
-2. ``rounds`` times: the noise levels from the residuals at the current θ (``noise_level.estimate_noise``: full
-   covariances, regularised likelihood, equivariant), then θ by dualid's primal–dual interior point on f with those
-   levels, under the same constraints (the objective's gradient and Hessian of ``newton.noise_objective``);
-3. the result records the noise levels (sensor chart), their residual shares and the rounds in ``result.noise``.
+1. pilot: least squares in weights 1/mean τ_j² (unconstrained; constrained where M(θ) is not positive definite);
+2. the noise levels from its residuals (``noise_level.estimate_noise``: Σ_τ per joint, Σ_a = σ_a² diag(mean v²),
+   equivariant under per-coordinate units). When the likelihood does not support acceleration noise, Σ_a = 0 and
+   the noise model is WLS's: ``dm`` returns the pilot;
+3. ROUNDS times: θ by dualid's primal–dual interior point on f (gradient and Hessian of ``newton.noise_objective``)
+   under the physical-consistency constraints, from the pilot moved strictly inside them, then from the last θ
+   with the levels re-estimated at it;
+4. the held-out check (``noise_check``): WLS when the residual is not the modelled noise;
+5. the result records the noise levels (sensor chart), their residual shares and the rounds in ``result.noise``.
 """
 
 from __future__ import annotations
@@ -27,10 +31,9 @@ import warnings
 
 from dualid.errors import ConfigError, MetricError, OptimumAtInfinityWarning, SolverError
 from dualid.estimators.base import check_identifiable
-from dualid.estimators.least_squares import WLS
 from dualid.estimators.metric_guard import reference_guard
-from dualid.estimators.newton.fit import fit_dual_metric_newton
 from dualid.estimators.newton.closure import on_closure
+from dualid.estimators.newton.fit import fit_dual_metric_newton
 from dualid.estimators.newton.interior_point import run_interior_point
 from dualid.estimators.newton.noise_objective import (
     noise_model_derivatives,
@@ -40,10 +43,21 @@ from dualid.estimators.newton.noise_objective import (
 from dualid.estimators.newton.objective import CHUNK, NotPositiveDefinite
 from dualid.estimators.newton.start import central_point
 from dualid.estimators.noise_check import NoiseCheck, check_noise_model
-from dualid.estimators.noise_level import PRIOR_SAMPLES, PRIOR_SHARE, NoiseLevels, estimate_noise
+from dualid.estimators.noise_level import NoiseLevels, estimate_noise
 from dualid.estimators.result import IdentificationResult, NoiseRecord
 from dualid.model.consistency import feasible_set
 from dualid.problem import IdentificationProblem
+
+ROUNDS = 2  # noise levels at the pilot, θ; the levels at that θ, θ again (unless the first round finds Σ_a = 0)
+
+
+def torque_scale(problem) -> np.ndarray:
+    """(n,) each coordinate's squared force scale, mean τ_j² (covariant under a unit change of q_j); on a passive
+    coordinate (τ_j = 0) the mean squared norm of its regressor rows, which transforms alike."""
+    scale = np.mean(problem.tau**2, axis=0)
+    rows = np.mean(np.sum(problem.Y**2, axis=2), axis=0)
+    scale = np.where(scale > 0, scale, rows)
+    return np.where(scale > 0, scale, 1.0)
 
 
 CHECK_SAMPLES = 20_000  # streamed data: the noise levels and the held-out check from a strided subsample of this size
@@ -54,20 +68,13 @@ class NoiseModelDM:
     """Σ r_iᵀ (Σ_τ + M_i(θ) Σ_a M_i(θ))⁻¹ r_i with Σ_τ, Σ_a estimated from the data (module doc).
 
     sigma_tau, sigma_a: fix the noise levels ((n, n), in the sensor chart: force² and acceleration² units) instead
-    of estimating them; rounds: noise-level / θ alternations; prior_samples, prior_share: the noise-level prior
-    (``noise_level``); tol, max_iter: the interior point's.
+    of estimating them; tol, max_iter: the interior point's.
     """
 
     constrained: bool = True
     allow_unidentifiable: bool = False
-    rounds: int = 3
-    pilot: str = "dm-paper"  # "dm-paper" | "wls"
     sigma_tau: tuple | None = None
     sigma_a: tuple | None = None
-    prior_samples: float = PRIOR_SAMPLES
-    prior_share: float = PRIOR_SHARE
-    check: bool = True  # the held-out check of the noise model against WLS (estimators.noise_check)
-    structure: str = "pooled"  # "pooled" | "diagonal" | "highpass" | "full" (noise_level.estimate_noise)
     tol: float = 1e-9
     max_iter: int = 100
     chunk: int = field(default=CHUNK, kw_only=True)
@@ -83,86 +90,106 @@ class NoiseModelDM:
                 if a.ndim != 2 or a.shape[0] != a.shape[1] or not np.all(np.isfinite(a)):
                     raise ConfigError(f"NoiseModelDM: {key} must be a finite (n, n) matrix, got shape {a.shape}")
                 object.__setattr__(self, key, tuple(tuple(float(x) for x in row) for row in a))
-        if not (isinstance(self.rounds, (int, np.integer)) and self.rounds >= 1):
-            raise ConfigError(f"NoiseModelDM: rounds must be a positive integer, got {self.rounds!r}")
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
         t0 = time.perf_counter()
         if not self.allow_unidentifiable:
             check_identifiable(problem)
         sensor = problem.in_sensor_chart()
-        sample = _in_memory(sensor)  # the noise levels and the check read sample subsets
-        cons = feasible_set(sensor.parameters, self.constrained)
-        pilot, start = self._pilot(sensor)
-        theta = np.asarray(pilot.theta)
-        if self.constrained and not cons.margin(theta) > 0:
-            theta = central_point(theta, cons)
+        sample = _in_memory(sensor)  # pilot, closure, noise levels and check read sample subsets
+        cons, done = self._closure(sample)
+        theta_pilot, iterations, rounds = self._pilot(sample, cons), 0, 0
+        start = theta_pilot
+        if self.constrained and not cons.margin(start) > 0:
+            start = central_point(start, cons)
+        theta = start
+        try:
+            theta, noise, iterations, rounds = self._rounds(sensor, sample, cons, start, theta_pilot)
+        except SolverError:  # unseen parameters drifting outward from this start: from the paper's optimum instead
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", OptimumAtInfinityWarning)
+                paper = np.asarray(fit_dual_metric_newton(sensor, constrained=self.constrained, chunk=self.chunk).theta)
+            if self.constrained and not cons.margin(paper) > 0:
+                paper = central_point(paper, cons)
+            theta, noise, iterations, rounds = self._rounds(sensor, sample, cons, paper, theta_pilot)
+        f = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk)
+        choice = "noise model"
+        if not noise.acceleration_share > 0:
+            choice = f"no acceleration noise (2 log-likelihood ratio {noise.likelihood_ratio:.3g}): WLS"
+            return self._result(problem, done, theta, f, noise, rounds, theta_pilot, None, choice, iterations, t0)
+        check = self._check(sample, theta, noise)
+        if check is not None and check.rejected:
+            n = sensor.n
+            wls = NoiseLevels(np.diag(np.mean(sensor.residual(theta) ** 2, axis=0)), np.zeros((n, n)), 1.0, 0.0, 0)
+            theta = self._solve(sensor, cons, start, wls)[0]
+            f = noise_model_objective(sensor, theta, wls.sigma_tau, wls.sigma_a, self.chunk)
+            choice = (f"wls: the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's "
+                      f"beyond the noise model's prediction, standard error {check.standard_error:.2g})")
+        return self._result(problem, done, theta, f, noise, rounds, theta_pilot, check, choice, iterations, t0)
+
+    def _rounds(self, sensor, sample, cons, theta, theta_pilot):
+        """The noise-level / θ alternations from θ (module doc, step 3): (θ, levels, iterations, rounds); the levels
+        from ``sample`` (the problem itself in memory, a subsample of streamed data)."""
+        iterations, rounds, noise = 0, 0, None
         fixed = self.sigma_tau is not None
-        noise = None
         if fixed:
             noise = NoiseLevels(np.asarray(self.sigma_tau), np.asarray(self.sigma_a), np.nan, np.nan, 0)
-        iterations, history = 0, []
-        for k in range(1 if fixed else self.rounds):
+        for k in range(1 if fixed else ROUNDS):
             if not fixed:
-                noise = estimate_noise(sample, theta, prior_samples=self.prior_samples, prior_share=self.prior_share,
-                                       start=noise, structure=self.structure)
+                noise = estimate_noise(sample, theta_pilot if k == 0 else theta, start=noise if k else None)
             theta, info = self._solve(sensor, cons, theta, noise)
-            iterations += info["iterations"]
-            history.append((noise.torque_share, noise.acceleration_share, info["objective"]))
-        f = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk)
-        wls = pilot if start.endswith("wls") else WLS(constrained=self.constrained, allow_unidentifiable=True).fit(sensor)
-        check, choice = None, "noise model"
-        if self.check:
-            check = self._check(sample, cons, theta, noise, wls)
-            if check is not None and check.rejected:
-                theta, f = np.asarray(wls.theta), float(wls.objective)
-                choice = (f"wls: the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's "
-                          f"beyond the noise model's prediction, standard error {check.standard_error:.2g})")
+            iterations, rounds = iterations + info["iterations"], rounds + 1
+            if not noise.acceleration_share > 0:  # no acceleration noise: the noise model is WLS's
+                break
+        return theta, noise, iterations, rounds
+
+    def _closure(self, sensor):
+        """The feasible set to solve on, closed over the parameters f cannot see (``newton.closure``: a link mass that
+        enters only its consistency block would otherwise grow without bound), and the completion of θ after."""
+        scale = torque_scale(sensor)
+        Yw = (sensor.Y / np.sqrt(scale)[None, :, None]).reshape(-1, sensor.p)
+        H, c = Yw.T @ Yw, float(np.sum(sensor.tau**2 / scale))
+        return on_closure(feasible_set(sensor.parameters, self.constrained), H, c, sensor.parameters.names,
+                          enabled=self.constrained)
+
+    def _result(self, problem, done, theta, f, noise, rounds, theta_pilot, check, choice, iterations, t0):
+        theta, completed = done(theta, {})
         record = NoiseRecord(noise.sigma_tau, noise.sigma_a, noise.torque_share, noise.acceleration_share,
-                             "fixed" if fixed else "estimated", len(history), float(pilot.objective), choice,
-                             np.nan if check is None else check.excess,
+                             "fixed" if self.sigma_tau is not None else "estimated", rounds, np.nan,
+                             choice, np.nan if check is None else check.excess,
                              np.nan if check is None else check.measured_gap,
                              np.nan if check is None else check.predicted_gap)
-        guard = reference_guard(sensor, theta, np.asarray(pilot.theta), f"pilot ({start})")
-        closure = _closure_info(info if choice == "noise model" else wls.info)
+        guard = reference_guard(problem.in_sensor_chart(), theta, theta_pilot, "pilot (wls)")
         return IdentificationResult(self.name, theta, problem.parameters, f, "optimal", "newton",
                                     time.perf_counter() - t0, iterations, self.constrained,
-                                    {"rounds": len(history), "start": start, **guard, **closure}, noise=record)
+                                    {"rounds": rounds, "start": "wls", **guard, **completed}, noise=record)
 
-    def _check(self, sensor, cons, theta, noise, wls) -> NoiseCheck | None:
-        Sigma = np.asarray(wls.info["covariance_matrix"])
-
-        def fit_wls(train):
-            return np.asarray(WLS(covariance=Sigma, constrained=self.constrained, allow_unidentifiable=True)
-                              .fit(train).theta)
-
-        def fit_dm(train, start):
-            return self._solve(train, cons, start, noise)[0]
-
+    def _pilot(self, sensor, cons) -> np.ndarray:
+        """Least squares in weights 1/mean τ_j² (each coordinate's equations on its own torque scale: covariant per
+        coordinate, unlike OLS's), unconstrained; under the constraints, by the interior point, where M(θ) is not
+        positive definite at every sample there."""
+        scale = np.sqrt(torque_scale(sensor))
+        Yw = (sensor.Y / scale[None, :, None]).reshape(-1, sensor.p)
+        theta = np.linalg.lstsq(Yw, (sensor.tau / scale).reshape(-1), rcond=None)[0]
         try:
-            return check_noise_model(sensor, theta, noise.sigma_tau, noise.sigma_a, np.linalg.inv(Sigma),
-                                     fit_wls, fit_dm)
-        except (SolverError, MetricError, NotPositiveDefinite):
+            np.linalg.cholesky(sensor.metric.evaluate(theta))
+            return theta
+        except np.linalg.LinAlgError:
+            pass
+        n = sensor.n
+        weights = NoiseLevels(np.diag(scale**2), np.zeros((n, n)), 1.0, 0.0, 0)
+        return self._solve(sensor, cons, central_point(theta, cons) if self.constrained else theta, weights)[0]
+
+    def _check(self, sensor, theta, noise) -> NoiseCheck | None:
+        W = np.diag(1.0 / np.mean(sensor.residual(theta) ** 2, axis=0))
+        try:
+            return check_noise_model(sensor, theta, noise.sigma_tau, noise.sigma_a, W, self.chunk)
+        except (MetricError, NotPositiveDefinite, np.linalg.LinAlgError):
             return None
 
-    def _pilot(self, problem) -> tuple[IdentificationResult, str]:
-        """The paper's dual-metric optimum (the same θ in every chart, hand-made ones too); WLS where it fails."""
-        if self.pilot == "dm-paper":
-            try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", OptimumAtInfinityWarning)
-                    return fit_dual_metric_newton(problem, constrained=self.constrained, chunk=self.chunk), "dm-paper"
-            except (SolverError, MetricError) as exc:
-                why = f"dm-paper pilot failed ({str(exc)[:120]}); "
-        else:
-            why = ""
-        return WLS(constrained=self.constrained, allow_unidentifiable=True).fit(problem), why + "wls"
-
     def _solve(self, problem, cons, theta, noise: NoiseLevels):
-        """θ minimising f with the noise levels fixed, from θ, on the closed feasible set: a parameter that neither Y
-        nor M(θ) sees (f's row of it vanishes) only loosens its consistency block, so f's infimum would be approached
-        as it grows without bound; it is projected out and completed to the smallest consistent value
-        (``newton.closure``), as the quadratic fits do."""
+        """θ minimising f with the noise levels fixed, from θ, on ``cons`` (the closed set of ``_closure``); f is not
+        convex, so the interior point runs in its non-convex mode."""
         S, A = noise.sigma_tau, noise.sigma_a
 
         def objective(th, order):
@@ -170,13 +197,11 @@ class NoiseModelDM:
 
         try:
             scale = noise_model_scale(problem, theta, S, A, self.chunk)
-            der = objective(theta, 2)
         except NotPositiveDefinite:
             raise MetricError("dm: the noise model's covariance is not positive definite at the start") from None
-        closed, done = on_closure(cons, 0.5 * der.hess, scale, problem.parameters.names, enabled=self.constrained)
-        theta, _, _, info = run_interior_point(problem, closed, theta, None, None, self.tol, self.max_iter, self.chunk,
-                                               False, der=der, objective=objective, f_scale=scale, convex=False)
-        return done(theta, info)
+        theta, _, _, info = run_interior_point(problem, cons, theta, None, None, self.tol, self.max_iter, self.chunk,
+                                               False, objective=objective, f_scale=scale, convex=False)
+        return theta, info
 
 
 def _in_memory(problem, samples: int = CHECK_SAMPLES):
@@ -185,11 +210,6 @@ def _in_memory(problem, samples: int = CHECK_SAMPLES):
     if isinstance(problem, IdentificationProblem):
         return problem
     return problem.subset(slice(0, None, max(1, -(-problem.N // samples))))
-
-
-def _closure_info(info: dict) -> dict:
-    """What the closed-set completion said of the parameters the data do not determine (``newton.closure``)."""
-    return {k: info[k] for k in ("projected_parameters", "projected_names", "projected_note") if k in info}
 
 
 __all__ = ["NoiseModelDM"]
