@@ -43,7 +43,7 @@ from dualid.estimators.newton.noise_objective import (
 from dualid.estimators.newton.objective import CHUNK, NotPositiveDefinite
 from dualid.estimators.newton.start import central_point
 from dualid.estimators.noise_check import NoiseCheck, check_noise_model
-from dualid.estimators.noise_level import NoiseLevels, estimate_noise
+from dualid.estimators.noise_level import NoiseLevels, estimate_noise, given_levels
 from dualid.estimators.result import IdentificationResult, NoiseRecord
 from dualid.model.consistency import feasible_set
 from dualid.problem import IdentificationProblem
@@ -115,7 +115,8 @@ class NoiseModelDM:
         f = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk)
         choice = "noise model"
         if not noise.acceleration_share > 0:
-            choice = f"no acceleration noise (2 log-likelihood ratio {noise.likelihood_ratio:.3g}): WLS"
+            why = "given" if self.sigma_tau is not None else f"2 log-likelihood ratio {noise.likelihood_ratio:.3g}"
+            choice = f"no acceleration noise ({why}): WLS"
             return self._result(problem, done, theta, f, noise, rounds, theta_pilot, None, choice, iterations, t0)
         check = self._check(sample, theta, noise)
         if check is not None and check.rejected:
@@ -133,7 +134,7 @@ class NoiseModelDM:
         iterations, rounds, noise = 0, 0, None
         fixed = self.sigma_tau is not None
         if fixed:
-            noise = NoiseLevels(np.asarray(self.sigma_tau), np.asarray(self.sigma_a), np.nan, np.nan, 0)
+            noise = given_levels(sample, theta, np.asarray(self.sigma_tau), np.asarray(self.sigma_a))
         for k in range(1 if fixed else ROUNDS):
             if not fixed:
                 noise = estimate_noise(sample, theta_pilot if k == 0 else theta, start=noise if k else None)

@@ -68,6 +68,16 @@ def _shares(M, S, A) -> tuple[float, float]:
     return t, a
 
 
+def given_levels(problem, theta: np.ndarray, sigma_tau: np.ndarray, sigma_a: np.ndarray,
+                 max_samples: int = NOISE_SAMPLES) -> NoiseLevels:
+    """Levels given by the user, with the share of the residual each explains at θ (on at most ``max_samples``
+    evenly strided samples)."""
+    rows = strided_rows(problem.N, max_samples)
+    M = problem.metric.evaluate(theta, rows)
+    t, a = _shares(M, np.asarray(sigma_tau, dtype=float), np.asarray(sigma_a, dtype=float))
+    return NoiseLevels(np.asarray(sigma_tau, dtype=float), np.asarray(sigma_a, dtype=float), t, a, M.shape[0])
+
+
 def estimate_noise(problem, theta: np.ndarray, start: NoiseLevels | None = None,
                    max_samples: int = NOISE_SAMPLES) -> NoiseLevels:
     """Σ_τ, Σ_a from the residuals at θ (module doc). MetricError if some M_i(θ) is not positive definite."""

@@ -35,10 +35,10 @@ def _weights(problem: IdentificationProblem, result: IdentificationResult, est):
         else:
             W = np.linalg.inv(np.asarray(S, dtype=float))
         return problem, 0.5 * (W + W.T), None
-    if isinstance(est, NoiseModelDM):  # dm returned WLS (its noise check): WLS's weight at θ̂
+    if isinstance(est, NoiseModelDM):  # dm returned WLS (its noise check): its weight, the residual variances
         sensor = problem.in_sensor_chart()
         r = sensor.residual(np.asarray(result.theta))
-        return sensor, np.linalg.inv(r.T @ r / len(r)), None
+        return sensor, np.diag(1.0 / np.mean(r**2, axis=0)), None
     raise ConfigError(f"uncertainty: no sandwich for estimator {type(est).__name__} (method {result.method!r}); "
                            "supported: OLS, WLS, EnergyLS, RegularizedWLS, NoiseModelDM (dm), DualMetric (dm-paper); "
                            "use the block bootstrap (dualid.bootstrap; in a fit config: "
@@ -65,7 +65,7 @@ def derivatives(problem: IdentificationProblem, result: IdentificationResult, es
             g = 2.0 * np.einsum("nap,na->np", problem.Y[rows], w) - problem.metric.quad(w, rows)
             np.add.at(G, labels[rows], g)
         return d.hess, G, d.f
-    if isinstance(est, NoiseModelDM) and result.noise is not None and result.noise.choice == "noise model":
+    if isinstance(est, NoiseModelDM) and result.noise is not None and not result.noise.choice.startswith("wls:"):
         return _noise_model_pass(problem.in_sensor_chart(), result, theta, labels, G, chunk)
     chart, W, L = _weights(problem, result, est)
     H, f = _quadratic_pass(chart, W, L, theta, labels, G, chunk)
