@@ -252,6 +252,7 @@ LONG_FUNCTIONS = {
     ("dualid.data.io", "load_log"),
     ("dualid.estimators.newton.fit", "fit_dual_metric_newton"),
     ("dualid.estimators.newton.interior_point", "run_interior_point"),
+    ("dualid.estimators.quadratic_fit", "fit_quadratic"),
     ("dualid.model.urdf", "identified_urdf"),
 }
 

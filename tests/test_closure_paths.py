@@ -3,10 +3,12 @@ finds the unseen mass also where rounding leaves its regressor column not exactl
 
 - the weighted Newton fit whose cheap start fails (a bound the central point violates): before, ``quadratic_fit.fit_weighted``
   refitted the materialised constant metric without the closure (j0.m = 3.5·10⁹ kg where rounding left it);
+- a cvxpy answer that the Newton polish certified within ``certify.TOL``: before, it was returned as it was (j0.m =
+  1.7·10⁷ kg where Clarabel stopped, no completion note);
 - a tilted first joint with its link's parameters taken about a point of the axis (a link frame, not the joint
   frame): the mass column of Y is rounding (H_mm = 7e-38·c), the rule "row exactly 0" missed the ray and the fit
   stopped along it (j0.m = 1,323 kg; the two charts' objectives 6.7e-8 apart);
-- dm's OLS/WLS pilot whatever the final fit's solver: with solver "cvxpy" only the final fit is cvxpy's.
+- dm's OLS/WLS pilot when both Newton fits fail: before, the library's OLS/WLS by cvxpy (original set).
 """
 
 from __future__ import annotations

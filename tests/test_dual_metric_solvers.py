@@ -1,5 +1,5 @@
-"""DualMetric's solver options: validation in the constructor, the solver asked for and no other (its failure is a
-SolverError), captured warnings, and ``optimal_inaccurate`` reported instead of passed off as optimal."""
+"""DualMetric's solver options: validation in the constructor, the recorded fallback chain, captured warnings,
+and ``optimal_inaccurate`` reported instead of passed off as optimal."""
 
 from __future__ import annotations
 
@@ -24,16 +24,15 @@ def problem():
 @pytest.mark.parametrize(
     "kwargs, message",
     [
-        ({"solver": "qp"}, r"solver must be one of 'newton', 'cvxpy', got 'qp'"),
-        ({"solver": "sdp"}, r"solver must be one of 'newton', 'cvxpy', got 'sdp'"),
-        ({"solver": "sdp_scs"}, r"solver must be one of 'newton', 'cvxpy', got 'sdp_scs'"),
-        ({"solver": "cvxpy", "solver_options": {"cvxpy_solver": "MOSEK"}},
-         r"solver_options\['cvxpy_solver'\] must be one of CLARABEL, SCS, got 'MOSEK'"),
+        ({"solver": "qp"}, r"solver: expected one of \('newton', 'sdp', 'sdp_clarabel', 'sdp_scs'\), got 'qp'"),
+        ({"sdp_solver": "MOSEK"}, r"sdp_solver: expected one of \('CLARABEL', 'SCS'\), got 'MOSEK'"),
+        ({"fallback": ("sdp", "ipopt")}, r"fallback: expected solver names from .*, got \['ipopt'\]"),
+        ({"fallback": 3}, r"fallback: expected a tuple of solver names, got 3"),
         ({"tol": 0.0}, r"tol: expected a relative tolerance in \(0, 1\), got 0.0"),
         ({"tol": "tight"}, r"tol: expected a relative tolerance in \(0, 1\), got 'tight'"),
         ({"max_iter": 0}, r"max_iter: expected a positive integer, got 0"),
         ({"max_iter": 2.5}, r"max_iter: expected a positive integer, got 2.5"),
-        ({"solver_options": {"maxiter": 5}}, r"solver_options of solver='newton' are .*; got \['maxiter'\]"),
+        ({"solver_options": {"maxiter": 5}}, r"solver_options: the Newton solver accepts .*, got \['maxiter'\]"),
         ({"tol": 1e-6, "solver_options": {"tol": 1e-8}}, r"tol: given both as an argument and in solver_options"),
     ],
 )
@@ -43,40 +42,32 @@ def test_bad_options_raise_a_typed_error_in_the_constructor(kwargs, message):
     assert isinstance(exc.value, DualidError) and isinstance(exc.value, ValueError)
 
 
-def test_there_is_no_fallback_field():
-    for old in ({"fallback": ("cvxpy",)}, {"sdp_solver": "SCS"}):
-        with pytest.raises(TypeError):
-            DualMetric(**old)
+def test_a_single_fallback_name_is_accepted_as_a_string():
+    assert DualMetric(fallback="sdp_scs").fallback == ("sdp_scs",)
 
 
-def test_the_sdp_by_scs_is_chosen_by_solver_options(problem):
-    scs = DualMetric(solver="cvxpy", solver_options={"cvxpy_solver": "SCS"}, allow_unidentifiable=True).fit(problem)
-    assert scs.solver == "sdp/SCS"
-
-
-def test_newton_agrees_with_the_sdp_reference(problem):
-    newton = DualMetric(allow_unidentifiable=True).fit(problem)
-    sdp = DualMetric(solver="cvxpy", allow_unidentifiable=True).fit(problem)
-    assert (newton.solver, sdp.solver) == ("newton", "sdp/CLARABEL")
-    assert "solver_chain" not in newton.info and "fallback_used" not in newton.info
-    np.testing.assert_allclose(newton.objective, sdp.objective, rtol=1e-6)
+def test_newton_failure_falls_back_to_the_sdp_and_says_so(problem):
+    result = DualMetric(max_iter=2, allow_unidentifiable=True).fit(problem)  # Newton cannot converge in 2 iterations
+    assert result.solver == "sdp/CLARABEL" and result.status == "optimal"
+    assert result.info["fallback_used"] is True
+    assert result.info["fallback_reason"].startswith("newton failed (max_iterations): dual-metric Newton: no convergence in 2")
+    assert result.info["solver_chain"].endswith("→ sdp/CLARABEL optimal")
+    reference = DualMetric(allow_unidentifiable=True).fit(problem)
+    assert reference.info["fallback_used"] is False and reference.info["solver_chain"] == "newton optimal"
+    np.testing.assert_allclose(result.objective, reference.objective, rtol=1e-6)
 
 
 def test_tol_and_max_iter_reach_the_newton_solver(problem):
-    loose = DualMetric(tol=1e-3, allow_unidentifiable=True).fit(problem)
-    tight = DualMetric(tol=1e-11, allow_unidentifiable=True).fit(problem)
+    loose = DualMetric(tol=1e-3, fallback=(), allow_unidentifiable=True).fit(problem)
+    tight = DualMetric(tol=1e-11, fallback=(), allow_unidentifiable=True).fit(problem)
     assert loose.iterations < tight.iterations
     assert loose.info["relative_gap"] <= 1e-3 and tight.info["relative_gap"] <= 1e-11
 
 
-def test_a_newton_failure_is_raised_and_the_sdp_is_not_tried(problem, monkeypatch):
-    def never(*args, **kwargs):
-        raise AssertionError("the SDP was run")
-
-    monkeypatch.setattr(dual_metric, "fit_dual_metric_sdp", never)
-    with pytest.raises(SolverError, match=r"dual-metric Newton: no convergence in 2") as exc:
-        DualMetric(max_iter=2, allow_unidentifiable=True).fit(problem)  # Newton cannot converge in 2 iterations
-    assert exc.value.status == "max_iterations"
+def test_without_fallback_the_failure_is_raised_with_every_attempt(problem):
+    with pytest.raises(SolverError, match=r"every solver failed: newton failed \(max_iterations\)") as exc:
+        DualMetric(max_iter=2, fallback=(), allow_unidentifiable=True).fit(problem)
+    assert exc.value.status == "all_solvers_failed"
 
 
 def test_infeasible_problems_do_not_fall_back(problem):
@@ -100,13 +91,37 @@ def inaccurate_sdp(monkeypatch):
     monkeypatch.setattr(dual_metric, "fit_dual_metric_sdp", _inaccurate_sdp)
 
 
-def test_optimal_inaccurate_is_reported_and_its_warning_captured(problem, inaccurate_sdp, monkeypatch):
-    def never(*args, **kwargs):
-        raise AssertionError("Newton was run")
-
-    monkeypatch.setattr(dual_metric, "fit_dual_metric_newton", never)
+def test_optimal_inaccurate_is_reported_and_its_warning_captured(problem, inaccurate_sdp):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # any warning reaching the caller fails the test
-        result = DualMetric(solver="cvxpy", allow_unidentifiable=True).fit(problem)
-    assert result.status == "optimal_inaccurate" and result.solver == "sdp/CLARABEL"
+        result = DualMetric(solver="sdp", fallback=(), allow_unidentifiable=True).fit(problem)
+    assert result.status == "optimal_inaccurate"
     assert "UserWarning: Solution may be inaccurate" in result.info["solver_warnings"]
+    assert result.info["solver_chain"] == "sdp/CLARABEL optimal_inaccurate"
+
+
+def test_optimal_inaccurate_tries_the_next_solver(problem, inaccurate_sdp):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = DualMetric(solver="sdp", fallback=("newton",), allow_unidentifiable=True).fit(problem)
+    assert result.solver == "newton" and result.status == "optimal"
+    assert result.info["fallback_reason"].startswith("sdp returned optimal_inaccurate")
+
+
+def test_optimal_inaccurate_comes_back_labelled_when_the_next_solver_fails(problem, inaccurate_sdp, monkeypatch):
+    def failing_newton(problem, **kwargs):
+        raise SolverError("dual-metric Newton: line search failed", status="line_search_failed")
+
+    monkeypatch.setattr(dual_metric, "fit_dual_metric_newton", failing_newton)
+    result = DualMetric(solver="sdp", fallback=("newton",), allow_unidentifiable=True).fit(problem)
+    assert result.status == "optimal_inaccurate" and result.solver == "sdp/CLARABEL"
+    assert result.info["solver_chain"] == (
+        "sdp returned optimal_inaccurate (objective " + f"{result.objective:.10g}) → newton failed "
+        "(line_search_failed): dual-metric Newton: line search failed → sdp/CLARABEL optimal_inaccurate"
+    )
+
+
+def test_no_sdp_fallback_on_large_problems(problem, monkeypatch):
+    monkeypatch.setattr(dual_metric, "SDP_FALLBACK_MAX_N", 10)
+    with pytest.raises(SolverError, match=r"newton failed \(max_iterations\).*; then sdp skipped \(N = 30 > 10"):
+        DualMetric(max_iter=2, allow_unidentifiable=True).fit(problem)

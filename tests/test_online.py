@@ -122,7 +122,7 @@ def test_the_projection_is_the_batch_constrained_fit_of_the_statistics(data):
     sub = restrict(whole, fit.idx, fit.theta0)
     sub = IdentificationProblem(sub.Y, biased[3] - (whole.tau - sub.tau), sub.metric, sub.v, sub.parameters)
     assert not sub.parameters.is_consistent(fit.theta[fit.idx])
-    reference = fit_quadratic(sub, statistics(sub), method="ols", constrained=True, solver="cvxpy",
+    reference = fit_quadratic(sub, statistics(sub), method="ols", constrained=True, solver="CLARABEL",
                               solver_options=None, allow_unidentifiable=False)
     assert sub.parameters.is_consistent(fit.consistent[fit.idx])
     f_online = statistics(sub).objective(sub, fit.consistent[fit.idx])

@@ -34,7 +34,7 @@ def test_the_flag_fires_where_the_objective_keeps_falling_as_the_mass_grows():
     problem = _problem(identifiable_mass=False)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result = DualMetric(solver="newton", allow_unidentifiable=True, tol=1e-6).fit(problem)
+        result = DualMetric(solver="newton", fallback=(), allow_unidentifiable=True, tol=1e-6).fit(problem)
     assert result.info["optimum_at_infinity"] is True
     assert result.info["diverging_direction"].startswith("+1.000·m")  # the mass, growing
     assert result.theta[1] > 1e3 * abs(result.theta[0])  # stopped far out on the ray
@@ -46,7 +46,7 @@ def test_the_flag_fires_where_the_objective_keeps_falling_as_the_mass_grows():
 
 
 def test_no_flag_at_a_finite_optimum():
-    result = DualMetric(solver="newton", tol=1e-6).fit(_problem(identifiable_mass=True))
+    result = DualMetric(solver="newton", fallback=(), tol=1e-6).fit(_problem(identifiable_mass=True))
     assert result.info["optimum_at_infinity"] is False
     assert "diverging_direction" not in result.info
 
@@ -65,9 +65,9 @@ def test_dfki_joint1_mass_is_flagged_and_a_mass_bound_removes_the_flag():
     from tests.test_newton_convergence import _dfki_problem
 
     problem = _dfki_problem(mass_bound=None)
-    result = DualMetric(allow_unidentifiable=True).fit(problem)
+    result = DualMetric(allow_unidentifiable=True, fallback=()).fit(problem)
     assert result.info["optimum_at_infinity"] is True
     assert result.info["diverging_direction"].startswith("+1.000·Joint1.m")
     assert result.info["objective_pushed_out"] < result.objective  # lower still with Joint1.m ≥ 10× θ̂'s
-    bounded = DualMetric(allow_unidentifiable=True).fit(_dfki_problem(mass_bound=5.0))
+    bounded = DualMetric(allow_unidentifiable=True, fallback=()).fit(_dfki_problem(mass_bound=5.0))
     assert bounded.info["optimum_at_infinity"] is False

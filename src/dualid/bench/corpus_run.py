@@ -1,17 +1,17 @@
 """Run every method of the method table, with each solver where there is a choice, on one corpus problem.
 
 Runs per problem (``fits``):
-- ols, wls, energy: the library default (dualid's interior point);
+- ols, wls, energy: the library default (Clarabel, dualid's interior point as recorded fallback);
 - logdet, pullback: with a CAD-like prior, and with a prior on the consistency boundary (the constrained
   OLS fit), the latter also with the prior floor off (``prior_floor=0``: the behaviour before the lift);
 - dm: dualid's interior point (its only solver);
-- dm-paper: Newton and the SDP through Clarabel (solver "cvxpy"), so a failure of either shows.
+- dm-paper: Newton and the SDP through Clarabel, each without fallback, so a failure shows.
 
 The reference of each run (``ref_objective``, ``rel_gap`` = (f − f_ref)/|f_ref|, ``pred_diff`` = ‖Y(θ − θ_ref)‖/‖Yθ_ref‖):
 dm-paper: the SDP (Clarabel) when it is optimal; dm: its own objective (its noise levels are estimated from the data);
-quadratic and regularized fits: the same fit by the other solver stack, cvxpy (Clarabel, with the fit's own weight),
-when it says optimal, else SCS to 1e-9 when it says optimal, else the interior point run directly on the same
-sufficient statistics from SCS's end point; or the fit itself if lower.
+quadratic and regularized fits: dualid's interior-point method run directly on the same sufficient statistics
+(``quadratic_newton``; where it fails, SCS to 1e-9 when it says optimal, else SCS's end point polished by the interior
+point), or the fit itself if lower.
 Failures are rows, never dropped; raw warnings reaching the caller are counted.
 """
 
@@ -84,7 +84,7 @@ def fits(problem, theta_true, sdp: bool = True, prior_seed: int = 0, sdp_max_n: 
          methods=None) -> list[dict]:
     """Every (method, variant, solver) run on ``problem`` (see the module doc), as row dicts. ``prior``: the CAD-like
     prior (default: ``cad_prior(theta_true)``); ``methods``: run only these (large N: ols, wls, dm, dm-paper by
-    Newton: no prior fits, no cvxpy solve of dm, no SDP)."""
+    Newton: no prior fits, no CLARABEL solve of dm, no SDP)."""
     from dualid.bench.corpus import cad_prior
     from dualid.estimators.dual_metric import DualMetric
     from dualid.estimators.methods import make_estimator
@@ -94,21 +94,22 @@ def fits(problem, theta_true, sdp: bool = True, prior_seed: int = 0, sdp_max_n: 
     def quad(method, variant, est):
         r, row = _record(est, problem)
         row.update(method=method, variant=variant, solver_choice="default")
-        same = {}  # the fit's own weights: cvxpy's pilot OLS would give slightly different ones (another problem)
-        if r is not None and "covariance_matrix" in r.info and hasattr(est, "covariance"):
-            same["covariance"] = np.asarray(r.info["covariance_matrix"])
-        f_ref, th_ref = None, None
-        for options, label in ((None, "cvxpy"), ({"cvxpy_solver": "SCS", **SCS_TIGHT}, "SCS")):
-            ref, _ = _record(dataclasses.replace(est, solver="cvxpy", solver_options=options, **same), problem)
-            if ref is not None and ref.status == "optimal":
-                f_ref, th_ref, row["reference"] = float(ref.objective), np.asarray(ref.theta), label
-                break
-        else:
-            row["ref_error"] = "cvxpy (Clarabel, SCS) not optimal"
-            if ref is not None:  # SCS's end point polished by the interior point (a different start than the fit's)
+        try:
+            f_ref, th_ref = _quadratic_reference(est, problem)
+            row["reference"] = "newton"
+        except Exception as exc:  # then SCS to a tight tolerance, if it is optimal
+            f_ref, th_ref = None, None
+            row["ref_error"] = f"{type(exc).__name__}: {exc}"[:200]
+            same = {}  # the fit's own weights: SCS's pilot OLS would give slightly different ones (another problem)
+            if r is not None and "covariance_matrix" in r.info and hasattr(est, "covariance"):
+                same["covariance"] = np.asarray(r.info["covariance_matrix"])
+            scs, _ = _record(dataclasses.replace(est, solver="SCS", solver_options=SCS_TIGHT, **same), problem)
+            if scs is not None and scs.status == "optimal" and scs.solver == "SCS":
+                f_ref, th_ref, row["reference"] = float(scs.objective), np.asarray(scs.theta), "SCS"
+            elif scs is not None:  # SCS's end point polished by the interior point (a different start than the fit's)
                 try:
-                    f_ref, th_ref = _quadratic_reference(est, problem, start=np.asarray(ref.theta))
-                    row["reference"] = "SCS + newton"
+                    f_ref, th_ref = _quadratic_reference(est, problem, start=np.asarray(scs.theta))
+                    row["reference"] = "SCS + newton polish"
                 except Exception as exc2:
                     row["ref_error"] += f"; from SCS: {type(exc2).__name__}: {exc2}"[:200]
         if r is not None and f_ref is not None and row["objective"] < f_ref:
@@ -141,12 +142,12 @@ def fits(problem, theta_true, sdp: bool = True, prior_seed: int = 0, sdp_max_n: 
             _agreement(row, r, row["objective"], np.asarray(r.theta), problem)
     if "dm-paper" not in run:
         return _sized(rows, problem)
-    newton, nrow = _record(DualMetric(solver="newton", **kw), problem)
+    newton, nrow = _record(DualMetric(solver="newton", fallback=(), **kw), problem)
     nrow.update(method="dm-paper", variant="", solver_choice="newton")
     rows.append(nrow)
     if sdp and problem.N <= sdp_max_n:
-        s, srow = _record(DualMetric(solver="cvxpy", **kw), problem)
-        srow.update(method="dm-paper", variant="", solver_choice="cvxpy")
+        s, srow = _record(DualMetric(solver="sdp_clarabel", fallback=(), **kw), problem)
+        srow.update(method="dm-paper", variant="", solver_choice="sdp_clarabel")
         rows.append(srow)
         if s is not None and s.status == "optimal":
             _agreement(nrow, newton, srow["objective"], np.asarray(s.theta), problem)

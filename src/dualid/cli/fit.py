@@ -66,7 +66,7 @@ def _solver_overrides(cfg, flags: List[str]):
     for flag in flags:
         method, sep, name = flag.partition("=")
         if not sep or not method or not name:
-            raise ConfigError(f"--solver: expected METHOD=SOLVER (e.g. wls=cvxpy), got {flag!r}")
+            raise ConfigError(f"--solver: expected METHOD=SOLVER (e.g. dm=sdp), got {flag!r}")
         options.setdefault(method, {})["solver"] = name
     return tuple((m, tuple(sorted(o.items()))) for m, o in options.items())
 
@@ -78,9 +78,8 @@ def fit(
                                 "repeatable"),
     test: List[Path] = typer.Option([], "--test", help="held-out log for validation; repeatable"),
     method: List[str] = typer.Option([], "--method", help="ols, wls, energy, logdet, pullback or dm; repeatable"),
-    solver: List[str] = typer.Option([], "--solver", help="METHOD=SOLVER with SOLVER newton (dualid's interior point, "
-                                     "the default) or cvxpy (the reference: Clarabel), e.g. wls=cvxpy or "
-                                     "pullback=newton; repeatable (SCS and other options: 'solver:' in the config)"),
+    solver: List[str] = typer.Option([], "--solver", help="METHOD=SOLVER: dm=newton or dm=sdp, wls=CLARABEL or "
+                                     "wls=SCS, …; repeatable (more options: 'solver:' in the config)"),
     config: Optional[Path] = typer.Option(None, "--config", help="fit.yaml (columns, preprocessing, ...); flags override it"),
     out: Optional[Path] = typer.Option(None, "--out", help="output directory"),
     force: bool = typer.Option(False, "--force", metavar=FLAG, help="write into an existing non-empty output directory"),

@@ -20,10 +20,7 @@ from dualid.errors import ConfigError, ConsistencyError, IdentifiabilityError, S
 from dualid.model.parameters import ParameterSpace
 from dualid.problem import IdentificationProblem
 
-SOLVERS = ("newton", "cvxpy")  # every estimator's solver=: dualid's interior point (the default) | the cvxpy reference
-CVXPY_SOLVERS = ("CLARABEL", "SCS")  # the conic solver of solver="cvxpy": solver_options={"cvxpy_solver": ...}
-CVXPY_SOLVER_KEY = "cvxpy_solver"
-QUADRATIC_NEWTON_OPTIONS = ("tol", "max_iter")  # solver_options of the quadratic fits' interior point
+SOLVERS = ("CLARABEL", "SCS")
 DEFAULT_OPTIONS = {
     "CLARABEL": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10, "max_iter": 500},
     "SCS": {"eps": 1e-9, "max_iters": 200000},
@@ -46,36 +43,6 @@ def freeze_options(options: Mapping[str, Any] | None, what: str) -> tuple[tuple[
     return items
 
 
-def check_solver(solver, who: str, error=ConfigError) -> str:
-    """solver, one of SOLVERS; anything else (e.g. an old name such as "CLARABEL" or "sdp") is an ``error`` naming
-    the valid ones."""
-    if solver not in SOLVERS:
-        raise error(f"{who}: solver must be one of {', '.join(repr(s) for s in SOLVERS)}, got {solver!r} "
-                    f"(the conic solver of solver='cvxpy' is chosen by solver_options={{{CVXPY_SOLVER_KEY!r}: "
-                    f"{' | '.join(repr(s) for s in CVXPY_SOLVERS)}}})")
-    return solver
-
-
-def check_solver_options(solver: str, options: Mapping[str, Any] | None, who: str, newton_options=QUADRATIC_NEWTON_OPTIONS,
-                         error=ConfigError) -> None:
-    """The options of ``solver``: for "newton" only ``newton_options``; for "cvxpy" any cvxpy/solver option, with
-    ``cvxpy_solver`` one of CVXPY_SOLVERS."""
-    options = dict(options or ())
-    if solver == "newton":
-        unknown = sorted(set(options) - set(newton_options))
-        if unknown:
-            raise error(f"{who}: solver_options of solver='newton' are {', '.join(newton_options)}; got {unknown}")
-    elif options.get(CVXPY_SOLVER_KEY, "CLARABEL") not in CVXPY_SOLVERS:
-        raise error(f"{who}: solver_options[{CVXPY_SOLVER_KEY!r}] must be one of {', '.join(CVXPY_SOLVERS)}, got "
-                    f"{options[CVXPY_SOLVER_KEY]!r}")
-
-
-def cvxpy_solver(options: Mapping[str, Any] | None) -> tuple[str, dict]:
-    """(conic solver name, the remaining options) of solver="cvxpy"'s solver_options (default Clarabel)."""
-    options = dict(options or ())
-    return options.pop(CVXPY_SOLVER_KEY, "CLARABEL"), options
-
-
 def check_covariance(covariance, who: str) -> tuple[tuple[float, ...], ...] | None:
     """A given residual covariance (n, n): symmetric positive definite and finite; stored as tuples."""
     if covariance is None:
@@ -90,7 +57,8 @@ def check_covariance(covariance, who: str) -> tuple[tuple[float, ...], ...] | No
 
 def is_problem_property(exc: SolverError) -> bool:
     """Infeasible, unbounded or an optimum at infinity: a property of the problem, which another solver cannot
-    change (no fallback)."""
+    change (no fallback). The quadratic fits check a cvxpy "infeasible" with dualid's interior point first
+    (``quadratic_fit._solve_with_fallback``): a badly scaled conic problem can be called infeasible."""
     return bool(exc.status) and any(s in exc.status for s in ("infeasible", "unbounded", "at_infinity"))
 
 
@@ -198,8 +166,8 @@ def solve_cvxpy(problem, variable, solver: str, solver_options: dict | None, wha
     """Solve a cvxpy problem; raise SolverError with the status unless it is optimal."""
     import cvxpy as cp
 
-    if solver not in CVXPY_SOLVERS:
-        raise ConfigError(f"cvxpy solver: expected one of {CVXPY_SOLVERS}, got {solver!r}")
+    if solver not in SOLVERS:
+        raise ConfigError(f"solver: expected one of {SOLVERS}, got {solver!r}")
     options = dict(DEFAULT_OPTIONS.get(solver, {}))
     options.update(dict(solver_options or ()))
     t0 = time.perf_counter()

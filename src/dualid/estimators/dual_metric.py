@@ -1,6 +1,6 @@
 """Dual-metric least squares: min_θ Σ r_iᵀ M_i(θ)⁻¹ r_i, invariant to coordinates, units and scaling.
 
-Reference formulation (``solver="cvxpy"``): with slacks s_i, minimise Σ s_i subject to
+Reference formulation (``solver="sdp"``): with slacks s_i, minimise Σ s_i subject to
 
     [[M_i(θ), r_i], [r_iᵀ, s_i]] ⪰ 0     (Schur complement, one (n+1)×(n+1) LMI per sample)
 
@@ -20,10 +20,8 @@ from dualid.errors import MetricError, SolverError, SolverOptionError
 from dualid.estimators.base import (
     captured_warnings,
     check_identifiable,
-    check_solver,
-    check_solver_options,
-    cvxpy_solver,
     freeze_options,
+    is_problem_property,
     parameter_scale,
     solve_cvxpy,
 )
@@ -196,6 +194,8 @@ def fit_dual_metric_sdp(
 
 
 NEWTON_OPTIONS = ("tol", "max_iter", "chunk", "warm_start_samples", "verbose")
+SOLVER_NAMES = ("newton", "sdp", "sdp_clarabel", "sdp_scs")
+SDP_FALLBACK_MAX_N = 20_000  # an SDP fallback beyond this would take minutes and GBs (one LMI per sample)  # "sdp": the SDP with DualMetric.sdp_solver
 
 
 @dataclass(frozen=True)
@@ -203,31 +203,50 @@ class DualMetric:
     """Dual-metric weighted least squares, Σ r_iᵀ M_i(θ)⁻¹ r_i.
 
     solver: "newton" (default: the structure-exploiting primal–dual interior-point method of
-    dualid.estimators.newton, O(N·n·p) memory, about the cost of a few least-squares passes) or "cvxpy"
-    (the Schur-complement SDP through cvxpy: the reference, one LMI per sample, slow for large N; Clarabel,
-    or SCS with solver_options={"cvxpy_solver": "SCS"}). Both solve the same convex problem; the one asked
-    for runs, and its failure is a SolverError (no fallback to the other). A cvxpy ``optimal_inaccurate`` is
-    reported as such, never turned into ``optimal``.
+    dualid.estimators.newton, O(N·n·p) memory, about the cost of a few least-squares passes), "sdp"
+    (the Schur-complement SDP through cvxpy with ``sdp_solver``: the reference, one LMI per sample, slow
+    for large N), "sdp_clarabel" or "sdp_scs". Both methods solve the same convex problem.
 
-    tol, max_iter: the solver's tolerance and iteration limit (None: its defaults; Newton: relative
-    duality gap 1e-9 and 100 iterations; Clarabel 1e-10 and 500). solver_options: Newton: tol, max_iter,
-    chunk, warm_start_samples, verbose; cvxpy: cvxpy_solver and the conic solver's options. Options are
-    checked here, in the constructor (SolverOptionError).
+    tol, max_iter: the first solver's tolerance and iteration limit (None: its defaults; Newton: relative
+    duality gap 1e-9 and 100 iterations; the SDP: Clarabel 1e-10 and 500). fallback: solvers tried in
+    order when the one before fails (SolverError) or returns only ``optimal_inaccurate``; the
+    result's ``info["solver_chain"]`` says which solver produced θ̂ and what failed before it, and its
+    ``status`` is the producing solver's (``optimal_inaccurate`` is reported, never turned into
+    ``optimal``). An SDP fallback is skipped (and recorded) above SDP_FALLBACK_MAX_N samples.
+    solver_options: extra options for the first solver only (Newton: tol, max_iter, chunk,
+    warm_start_samples, verbose; the SDP: cvxpy/solver options). Options are checked here, in the
+    constructor (SolverOptionError).
     """
 
     constrained: bool = True
     solver: str = "newton"
+    sdp_solver: str = "CLARABEL"  # cvxpy solver for solver="sdp": "CLARABEL" or "SCS"
     solver_options: Mapping[str, Any] | None = None  # stored as sorted (key, value) pairs (hashable)
     allow_unidentifiable: bool = False
     tol: float | None = None
     max_iter: int | None = None
+    fallback: tuple[str, ...] = ("sdp",)
     # metric guard in every result (estimators.guards): against this θ_ref, else against a WLS fit
     guard_reference: tuple | None = field(default=None, kw_only=True)
     guard_bound: float = field(default=DEFAULT_BOUND, kw_only=True)
     name = "dual_metric"
 
     def __post_init__(self) -> None:
-        check_solver(self.solver, "DualMetric", SolverOptionError)
+        from dualid.estimators.base import SOLVERS
+
+        if self.solver not in SOLVER_NAMES:
+            raise SolverOptionError(f"solver: expected one of {SOLVER_NAMES}, got {self.solver!r}")
+        if self.sdp_solver not in SOLVERS:
+            raise SolverOptionError(f"sdp_solver: expected one of {SOLVERS}, got {self.sdp_solver!r}")
+        fallback = (self.fallback,) if isinstance(self.fallback, str) else self.fallback
+        try:
+            fallback = tuple(fallback or ())
+        except TypeError:
+            raise SolverOptionError(f"fallback: expected a tuple of solver names, got {self.fallback!r}") from None
+        bad = [f for f in fallback if f not in SOLVER_NAMES]
+        if bad:
+            raise SolverOptionError(f"fallback: expected solver names from {SOLVER_NAMES}, got {bad}")
+        object.__setattr__(self, "fallback", fallback)
         if self.tol is not None and not (isinstance(self.tol, (int, float)) and 0 < self.tol < 1):
             raise SolverOptionError(f"tol: expected a relative tolerance in (0, 1), got {self.tol!r}")
         if self.max_iter is not None and not (isinstance(self.max_iter, (int, np.integer)) and self.max_iter >= 1):
@@ -237,7 +256,10 @@ class DualMetric:
             raise SolverOptionError(f"solver_options: expected a dict, got {type(options).__name__}")
         options = dict(options)
         object.__setattr__(self, "solver_options", freeze_options(options, "DualMetric: solver_options"))
-        check_solver_options(self.solver, options, "DualMetric", NEWTON_OPTIONS, SolverOptionError)
+        if self.solver == "newton":
+            unknown = sorted(set(options) - set(NEWTON_OPTIONS))
+            if unknown:
+                raise SolverOptionError(f"solver_options: the Newton solver accepts {NEWTON_OPTIONS}, got {unknown}")
         ref, bound = check_guard_options(self.guard_reference, self.guard_bound, "DualMetric")
         object.__setattr__(self, "guard_reference", ref)
         object.__setattr__(self, "guard_bound", bound)
@@ -245,21 +267,28 @@ class DualMetric:
         if both:
             raise SolverOptionError(f"{both[0]}: given both as an argument and in solver_options; give it once")
 
-    def _fit_with(self, problem: IdentificationProblem) -> IdentificationResult:
-        options = dict(self.solver_options or {})
-        if self.solver == "newton":
-            if self.tol is not None:
+    def _chain(self) -> tuple[str, ...]:
+        chain = [self.solver]
+        for f in self.fallback:
+            if f not in chain and not (f == "sdp" and _sdp_name(self, f) in [_sdp_name(self, c) for c in chain]):
+                chain.append(f)
+        return tuple(chain)
+
+    def _fit_with(self, problem: IdentificationProblem, solver: str, first: bool) -> IdentificationResult:
+        options = dict(self.solver_options or {}) if first else {}
+        if solver == "newton":
+            if first and self.tol is not None:
                 options["tol"] = self.tol
-            if self.max_iter is not None:
+            if first and self.max_iter is not None:
                 options["max_iter"] = self.max_iter
             return fit_dual_metric_newton(problem, constrained=self.constrained, method=self.name, **options)
-        cvx_solver, options = cvxpy_solver(options)
+        cvx_solver = _sdp_name(self, solver)
         if not isinstance(problem, IdentificationProblem):  # streamed: the SDP needs every sample at once
             problem = problem.materialise()
-        if self.tol is not None:
+        if first and self.tol is not None:
             options.update({"tol_gap_abs": self.tol, "tol_gap_rel": self.tol, "tol_feas": self.tol}
                            if cvx_solver == "CLARABEL" else {"eps": self.tol})
-        if self.max_iter is not None:
+        if first and self.max_iter is not None:
             options["max_iter" if cvx_solver == "CLARABEL" else "max_iters"] = self.max_iter
         return fit_dual_metric_sdp(problem, constrained=self.constrained, solver=cvx_solver,
                                    solver_options=options or None, method=self.name)
@@ -273,7 +302,7 @@ class DualMetric:
             from dualid.estimators.guard_reference import wls_reference
 
             some, count = guard_sample(problem)  # the reference on the samples the guard looks at
-            try:  # dualid's interior point on the statistics (guard_reference.py)
+            try:  # dualid's interior point on the statistics (cvxpy only if it fails: guard_reference.py)
                 ref, how = wls_reference(some, self.constrained)
                 label = "wls fit" + ("" if count is None else f" on {count} strided samples")
                 solved_by = {"metric_guard_solver": how}
@@ -283,12 +312,46 @@ class DualMetric:
         return replace(result, info={**result.info, **guard, **solved_by})
 
     def _solve(self, problem: IdentificationProblem) -> IdentificationResult:
-        """The solver asked for, its warnings (e.g. cvxpy's "Solution may be inaccurate") in info["solver_warnings"]
-        instead of the terminal; its failure is a SolverError."""
         if not self.allow_unidentifiable:
             check_identifiable(problem)
-        with captured_warnings() as notes:
-            result = self._fit_with(problem)
-        if notes:
-            result = replace(result, info={**result.info, "solver_warnings": " | ".join(notes)})
-        return result
+        chain, failures, inaccurate = self._chain(), [], None
+        for k, solver in enumerate(chain):
+            if k and solver != "newton" and problem.N > SDP_FALLBACK_MAX_N:
+                failures.append(f"{solver} skipped (N = {problem.N} > {SDP_FALLBACK_MAX_N}: too large for a fallback SDP)")
+                continue
+            with captured_warnings() as notes:  # e.g. cvxpy's "Solution may be inaccurate"
+                try:
+                    result = self._fit_with(problem, solver, first=k == 0)
+                except SolverError as exc:
+                    if is_problem_property(exc):
+                        raise
+                    failures.append(f"{solver} failed ({exc.status}): {exc}")
+                    continue
+            if result.status == "optimal_inaccurate" and k + 1 < len(chain):
+                failures.append(f"{solver} returned optimal_inaccurate (objective {result.objective:.10g})")
+                inaccurate = inaccurate or (result, notes)
+                continue
+            return _with_chain(result, solver, failures, notes)
+        if inaccurate is not None:  # no later solver did better: the inaccurate result, reported as such
+            result, notes = inaccurate
+            return _with_chain(result, result.solver, failures, notes)
+        raise SolverError(
+            "dual-metric fit: every solver failed: " + "; then ".join(failures), status="all_solvers_failed"
+        )
+
+
+def _sdp_name(est: DualMetric, solver: str) -> str:
+    return {"sdp": est.sdp_solver, "sdp_clarabel": "CLARABEL", "sdp_scs": "SCS"}.get(solver, solver)
+
+
+def _with_chain(result: IdentificationResult, solver: str, failures: list[str], notes: list[str]) -> IdentificationResult:
+    """result with info: solver_chain (what failed first, why, and which solver produced θ̂), fallback_used,
+    solver_warnings (captured instead of printed)."""
+    info = dict(result.info)
+    info["solver_chain"] = " → ".join(failures + [f"{result.solver} {result.status}"])
+    info["fallback_used"] = bool(failures)
+    if failures:
+        info["fallback_reason"] = failures[0]
+    if notes:
+        info["solver_warnings"] = " | ".join(notes)
+    return replace(result, info=info)

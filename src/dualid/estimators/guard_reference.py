@@ -21,13 +21,13 @@ from dualid.problem import IdentificationProblem
 
 TOL = 1e-6  # relative: the guard compares eigenvalue ratios against [1/100, 100], far coarser than this …
 MAX_ITER = 30  # … and a jam (rank-deficient arm7 at N = 100: stuck at a gap of 8.7e-7 after 100 iterations, 1e-6 not reached in 40)
-# costs at most this many cheap iterations before the WLS estimator takes over
+# costs at most this many cheap iterations before cvxpy takes over
 
 
 def wls_reference(problem: IdentificationProblem, constrained: bool) -> tuple[np.ndarray, str]:
     """(θ_wls, how it was solved): OLS → Σ̂ of its residuals → WLS with W = Σ̂⁻¹, both by dualid's interior-point
-    method to TOL; if that fails, the WLS estimator (the same interior point to its full tolerance, recorded in the
-    second element). Raises SolverError when that fails too."""
+    method to TOL; if that fails, the cvxpy WLS estimator (recorded in the second element). Raises SolverError when
+    both fail."""
     try:
         ols = statistics(problem)
         theta_ols, _ = fit_quadratic_newton(ols.H, ols.g, ols.c, problem.parameters, constrained=constrained,
@@ -39,4 +39,4 @@ def wls_reference(problem: IdentificationProblem, constrained: bool) -> tuple[np
         return theta, f"newton (tol {TOL:g})"
     except (SolverError, np.linalg.LinAlgError) as exc:
         theta = WLS(constrained=constrained, allow_unidentifiable=True).fit(problem).theta
-        return theta, f"newton (the WLS estimator, after tol {TOL:g} in {MAX_ITER} iterations failed: {str(exc)[:120]})"
+        return theta, f"cvxpy (dualid's interior point failed: {str(exc)[:120]})"

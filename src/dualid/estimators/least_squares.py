@@ -16,10 +16,9 @@ import numpy as np
 
 from dualid.errors import ConfigError, ConsistencyError, DataError
 from dualid.estimators.base import (
+    SOLVERS,
     check_covariance,
     check_nominal,
-    check_solver,
-    check_solver_options,
     freeze_options,
 )
 from dualid.estimators.metric_guard import DEFAULT_BOUND, check_guard_options, given_reference, reference_guard
@@ -37,8 +36,8 @@ class _Common:
     values: arrays and option mappings are stored as tuples, so equality and hashing work."""
 
     constrained: bool = True  # physical-consistency constraints (pseudo-inertia ⪰ 0, drag ⪰ 0, bounds)
-    solver: str = "newton"  # dualid's interior point, or "cvxpy" (the reference: Clarabel, or SCS by solver_options)
-    solver_options: Mapping[str, Any] | None = None  # newton: tol, max_iter; cvxpy: cvxpy_solver and its options
+    solver: str = "CLARABEL"  # or "SCS"
+    solver_options: Mapping[str, Any] | None = None
     allow_unidentifiable: bool = False  # accept one minimiser when the data do not determine θ
     # metric guard recorded in every result (estimators.guards): against this θ_ref (e.g. a prior), else the
     # estimator's own pilot or prior when it has one (WLS: its OLS fit; RegularizedWLS: θ₀)
@@ -56,9 +55,9 @@ class _Common:
         for flag in ("constrained", "allow_unidentifiable"):
             if not isinstance(getattr(self, flag), (bool, np.bool_)):
                 raise ConfigError(f"{name}: {flag} must be True or False, got {getattr(self, flag)!r}")
-        check_solver(self.solver, name)
+        if self.solver not in SOLVERS:
+            raise ConfigError(f"{name}: solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
         object.__setattr__(self, "solver_options", freeze_options(self.solver_options, f"{name}: solver_options"))
-        check_solver_options(self.solver, self.solver_options, name)
 
     def _guarded(self, result: IdentificationResult, problem: IdentificationProblem, own=None,
                  own_label: str = "") -> IdentificationResult:

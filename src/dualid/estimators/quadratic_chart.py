@@ -23,9 +23,9 @@ regularized fits over the corpus's small cases, with the whole curvature 0 and 3
 keeps 1/√g_kk from the prior's pullback metric when a prior sees it (its size in C_b(θ₀)), else its physical unit, 1.
 Measured: the per-equation normalisation √(c/(N n H_kk)) (a chart N·n times smaller) made Clarabel report the
 feasible pullback fit with a margin of tests/test_margin.py "infeasible", and so does the whole-curvature chart
-(its margin puts the feasible set far out in φ); this chart is the cvxpy reference's (solver="cvxpy"), which can
-still call a badly scaled conic problem infeasible: the default solver, dualid's interior point, does not use it
-(Newton steps are affine-invariant). Without a prior the chart is invariant to the noise level; with one it is not, nor should it be:
+(its margin puts the feasible set far out in φ); the quadratic fits therefore check a cvxpy "infeasible" with
+dualid's interior point (``quadratic_fit._solve_with_fallback``: chain "CLARABEL claimed infeasible → newton
+optimal" there). Without a prior the chart is invariant to the noise level; with one it is not, nor should it be:
 the balance of data and prior is then part of the problem.
 """
 

@@ -1,4 +1,4 @@
-"""Least squares and geometric-prior fits by dualid's own interior-point method (the quadratic fits' default solver).
+"""Least squares and geometric-prior fits by dualid's own interior-point method (the fallback of cvxpy).
 
     min_θ f(θ) = (θ − θ_ls)ᵀ H (θ − θ_ls) + f_min  [+ γ R(θ)]     s.t. the physical-consistency constraints
 
@@ -95,9 +95,9 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
 
     ``start`` (e.g. a cvxpy solution on the cone's boundary): tried first, moved just inside the cones and started
     close to the central path (a polish); when that does not converge, the cold start below runs as without it.
-    closure=True (without a prior): on the closed feasible set of ``newton.closure`` (OLS, energy and the priors keep
-    the original set, whose stopping points along an unbounded unseen mass are moderate, e.g. as priors; WLS fits on
-    the closed set by ``quadratic_fit.closed_fit``)."""
+    closure=True (without a prior): on the closed feasible set of ``newton.closure`` (dm's cvxpy path; OLS, energy
+    and the priors keep the original set, whose stopping points along an unbounded unseen mass are moderate, e.g. as
+    priors; WLS fits such a problem by ``quadratic_fit.closed_fit``)."""
     cons, done = on_closure(feasible_set(parameters, constrained), np.asarray(H), c, parameters.names,
                             enabled=closure and regularizer is None)
     objective, theta_ls = quadratic_objective(H, g, c, parameters, regularizer)
@@ -144,7 +144,7 @@ RETRY_LEVENBERG = 0.0
 
 def _run(cons, theta, tol, max_iter, objective, f_scale, gap0=1.0):
     """run_interior_point on the module's f; an arithmetic failure inside it (e.g. a duality gap that underflows to 0)
-    is a SolverError of this solver, so that the caller sees a failed solve. A failed
+    is a SolverError of this solver, so that the caller's fallback or certification sees a failed solve. A failed
     run is retried once with RETRY_LEVENBERG (recorded as info["newton_levenberg"])."""
     failure = None
     for levenberg in (1e-12, RETRY_LEVENBERG):

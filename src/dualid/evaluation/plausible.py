@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualid.errors import ConfigError, ConsistencyError, DataError, SolverError
-from dualid.estimators.base import CVXPY_SOLVERS as SOLVERS, captured_warnings, check_nominal, is_problem_property, solve_cvxpy
+from dualid.estimators.base import SOLVERS, captured_warnings, check_nominal, is_problem_property, solve_cvxpy
 from dualid.model.consistency import prior_blocks, pullback_metric, regularizer_value
 from dualid.problem import IdentificationProblem
 

@@ -167,9 +167,8 @@ class FitConfigSchema(_Section):
     bounds: dict[str, tuple[float | None, float | None]] | None = None
     methods: list[Method] | Method | None = None
     solver: dict[Method, dict[str, Any]] | None = Field(
-        None, description="estimator options per method: solver newton (dualid's interior point, the default) or "
-                          "cvxpy (the reference), solver_options, e.g. {wls: {solver: cvxpy, solver_options: "
-                          "{cvxpy_solver: SCS}}, dm-paper: {solver: cvxpy, tol: 1e-8}}; checked by the estimator")
+        None, description="estimator options per method, e.g. {dm: {solver: sdp, tol: 1e-8, fallback: []}, "
+                          "wls: {solver: SCS}}; checked by the estimator")
     prior: PriorSection | str | None = None
     validation: ValidationSection | None = None
     references: dict[str, str] | None = None
