@@ -149,7 +149,7 @@ def test_dm_closes_the_ray_of_a_tilted_first_joint_whose_mass_column_is_rounding
     a, b = est.fit(train), est.fit(train.in_coordinates(B))
     assert a.info["projected_parameters"].startswith("j0.m = ")  # before the closure: 1,323 kg, a stopping point
     assert list(a.not_determined()) == ["j0.m"] and list(b.not_determined()) == ["j0.m"]
-    assert b.objective == pytest.approx(a.objective, rel=1e-8)
+    assert b.objective == pytest.approx(a.objective, rel=1e-6)  # dm re-estimates its noise levels in each chart
     Yt = train.Y.reshape(-1, train.p)
     tau = Yt @ a.theta
     assert np.linalg.norm(Yt @ b.theta - tau) <= 1e-6 * np.linalg.norm(tau)

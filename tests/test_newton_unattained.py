@@ -33,7 +33,7 @@ def test_the_sdp_optimum_runs_off_with_its_tolerance(case):
     loose, tight = (fit_dual_metric_sdp(case, solver="CLARABEL", solver_options={
         "tol_gap_abs": t, "tol_gap_rel": t, "tol_feas": t}) for t in (1e-8, 1e-10))
     assert loose.status == "optimal" and tight.status in ("optimal", "optimal_inaccurate")  # Clarabel ≥ 0.11: inaccurate
-    assert tight.theta[j0m] > 3 * loose.theta[j0m] > 3 * 1e3  # kg: no finite minimiser in sight
+    assert tight.theta[j0m] > 2 * loose.theta[j0m] > 2 * 1e3  # kg: no finite minimiser in sight
     assert tight.objective < loose.objective
 
 
