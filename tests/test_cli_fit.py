@@ -110,7 +110,7 @@ def test_solver_flag_and_config_reach_the_estimator_and_the_report(tmp_path):
     bad = runner.invoke(app, ["fit", "--config", str(EXAMPLE), "--solver", "dm-paper=gurobi", "--out", str(tmp_path / "x")])
     assert bad.exit_code == 2 and "solver: expected one of ('newton', 'sdp', 'sdp_clarabel', 'sdp_scs'), got 'gurobi'" in _out(bad)
     bad = runner.invoke(app, ["fit", "--config", str(EXAMPLE), "--solver", "dm", "--out", str(tmp_path / "y")])
-    assert bad.exit_code == 2 and "--solver: expected METHOD=SOLVER (e.g. dm=sdp), got 'dm'" in _out(bad)
+    assert bad.exit_code == 2 and "--solver: expected METHOD=SOLVER (e.g. dm-paper=sdp), got 'dm'" in _out(bad)
 
 
 def test_verbose_prints_the_cpu_time_of_every_stage(tmp_path):

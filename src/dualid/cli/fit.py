@@ -66,7 +66,7 @@ def _solver_overrides(cfg, flags: List[str]):
     for flag in flags:
         method, sep, name = flag.partition("=")
         if not sep or not method or not name:
-            raise ConfigError(f"--solver: expected METHOD=SOLVER (e.g. dm=sdp), got {flag!r}")
+            raise ConfigError(f"--solver: expected METHOD=SOLVER (e.g. dm-paper=sdp), got {flag!r}")
         options.setdefault(method, {})["solver"] = name
     return tuple((m, tuple(sorted(o.items()))) for m, o in options.items())
 
@@ -77,8 +77,8 @@ def fit(
     data: List[Path] = typer.Option([], "--data", help="training log (csv/parquet/npz, a ROS 1 .bag or a rosbag2 folder); "
                                 "repeatable"),
     test: List[Path] = typer.Option([], "--test", help="held-out log for validation; repeatable"),
-    method: List[str] = typer.Option([], "--method", help="ols, wls, energy, logdet, pullback or dm; repeatable"),
-    solver: List[str] = typer.Option([], "--solver", help="METHOD=SOLVER: dm=newton or dm=sdp, wls=CLARABEL or "
+    method: List[str] = typer.Option([], "--method", help="ols, wls, energy, logdet, pullback, dm-paper or dm; repeatable"),
+    solver: List[str] = typer.Option([], "--solver", help="METHOD=SOLVER: dm-paper=newton or dm-paper=sdp, wls=CLARABEL or "
                                      "wls=SCS, …; repeatable (more options: 'solver:' in the config)"),
     config: Optional[Path] = typer.Option(None, "--config", help="fit.yaml (columns, preprocessing, ...); flags override it"),
     out: Optional[Path] = typer.Option(None, "--out", help="output directory"),
