@@ -98,8 +98,9 @@ class NoiseModelDM:
             check_identifiable(problem)
         sensor = problem.in_sensor_chart()
         sample = _in_memory(sensor)  # pilot, closure, noise levels and check read sample subsets
-        cons, done = self._closure(sample)
-        theta_pilot, iterations, rounds = self._pilot(sample, cons), 0, 0
+        scaled = _scaled(sample)  # the equations on each coordinate's own force scale: closure and pilot
+        cons, done = self._closure(sample, *scaled)
+        theta_pilot, iterations, rounds = self._pilot(sample, cons, *scaled), 0, 0
         start = theta_pilot
         if self.constrained and not cons.margin(start) > 0:
             start = central_point(start, cons)
@@ -107,9 +108,7 @@ class NoiseModelDM:
         try:
             theta, noise, iterations, rounds = self._rounds(sensor, sample, cons, start, theta_pilot)
         except SolverError:  # unseen parameters drifting outward from this start: from the paper's optimum instead
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", OptimumAtInfinityWarning)
-                paper = np.asarray(fit_dual_metric_newton(sensor, constrained=self.constrained, chunk=self.chunk).theta)
+            paper = self._paper_optimum(sensor)
             if self.constrained and not cons.margin(paper) > 0:
                 paper = central_point(paper, cons)
             theta, noise, iterations, rounds = self._rounds(sensor, sample, cons, paper, theta_pilot)
@@ -145,12 +144,11 @@ class NoiseModelDM:
                 break
         return theta, noise, iterations, rounds
 
-    def _closure(self, sensor):
+    def _closure(self, sensor, Yw, tw):
         """The feasible set to solve on, closed over the parameters f cannot see (``newton.closure``: a link mass that
-        enters only its consistency block would otherwise grow without bound), and the completion of θ after."""
-        scale = torque_scale(sensor)
-        Yw = (sensor.Y / np.sqrt(scale)[None, :, None]).reshape(-1, sensor.p)
-        H, c = Yw.T @ Yw, float(np.sum(sensor.tau**2 / scale))
+        enters only its consistency block would otherwise grow without bound), and the completion of θ after; Yw, tw:
+        the equations on their force scales (``_scaled``)."""
+        H, c = Yw.T @ Yw, float(tw @ tw)
         return on_closure(feasible_set(sensor.parameters, self.constrained), H, c, sensor.parameters.names,
                           enabled=self.constrained)
 
@@ -166,7 +164,14 @@ class NoiseModelDM:
                                     time.perf_counter() - t0, iterations, self.constrained,
                                     {"rounds": rounds, "start": "wls", **guard, **completed}, noise=record)
 
-    def _pilot(self, sensor, cons) -> np.ndarray:
+    def _paper_optimum(self, problem) -> np.ndarray:
+        """The paper's dual-metric optimum (the same θ in every chart); where its infimum is at infinity, where the
+        solver stopped (its warning is not this fit's to raise)."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", OptimumAtInfinityWarning)
+            return np.asarray(fit_dual_metric_newton(problem, constrained=self.constrained, chunk=self.chunk).theta)
+
+    def _pilot(self, sensor, cons, Yw, tw) -> np.ndarray:
         """Least squares in weights 1/mean τ_j² (each coordinate's equations on its own torque scale: covariant per
         coordinate, unlike OLS's), unconstrained; under the constraints, by the interior point, where M(θ) is not
         positive definite at every sample there. With a passive coordinate (τ_j = 0 on every sample: a floating base,
@@ -175,19 +180,15 @@ class NoiseModelDM:
         start led to one whose model cannot predict the pendulum (Crazyflie, 20 samples, 6 subsets: shape NCC −0.37 /
         −0.11 against 0.93 / 0.91 from the paper's optimum; WLS 0.91 / 0.83)."""
         if np.any(np.all(sensor.tau == 0, axis=0)):
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", OptimumAtInfinityWarning)
-                return np.asarray(fit_dual_metric_newton(sensor, constrained=self.constrained, chunk=self.chunk).theta)
-        scale = np.sqrt(torque_scale(sensor))
-        Yw = (sensor.Y / scale[None, :, None]).reshape(-1, sensor.p)
-        theta = np.linalg.lstsq(Yw, (sensor.tau / scale).reshape(-1), rcond=None)[0]
+            return self._paper_optimum(sensor)
+        theta = np.linalg.lstsq(Yw, tw, rcond=None)[0]
         try:
             np.linalg.cholesky(sensor.metric.evaluate(theta))
             return theta
         except np.linalg.LinAlgError:
             pass
         n = sensor.n
-        weights = NoiseLevels(np.diag(scale**2), np.zeros((n, n)), 1.0, 0.0, 0)
+        weights = NoiseLevels(np.diag(torque_scale(sensor)), np.zeros((n, n)), 1.0, 0.0, 0)
         return self._solve(sensor, cons, central_point(theta, cons) if self.constrained else theta, weights)[0]
 
     def _check(self, sensor, theta, noise) -> NoiseCheck | None:
@@ -212,6 +213,13 @@ class NoiseModelDM:
         theta, _, _, info = run_interior_point(problem, cons, theta, None, None, self.tol, self.max_iter, self.chunk,
                                                False, objective=objective, f_scale=scale, convex=False)
         return theta, info
+
+
+def _scaled(problem) -> tuple[np.ndarray, np.ndarray]:
+    """(Yw (N·n, p), τw (N·n,)): every coordinate's equations divided by its force scale √mean τ_j² (``torque_scale``),
+    stacked: the unit-free least squares of the pilot and the statistics of the closure."""
+    scale = np.sqrt(torque_scale(problem))
+    return (problem.Y / scale[None, :, None]).reshape(-1, problem.p), (problem.tau / scale).reshape(-1)
 
 
 def _in_memory(problem, samples: int = CHECK_SAMPLES):
