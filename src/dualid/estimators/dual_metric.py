@@ -87,13 +87,9 @@ def reference_theta(problem: IdentificationProblem) -> np.ndarray:
 
 
 def internal_chart(problem: IdentificationProblem) -> np.ndarray:
-    """B_i (N, n, n) diagonal, such that B_iᵀ M_i(θ_ref) B_i has unit diagonal.
-
-    The dual-metric objective is unchanged by any change of coordinates (r̃ᵀM̃⁻¹r̃ = rᵀM⁻¹r), so the
-    solver may work in this chart: it undoes the user's units and scalings, sample by sample, and
-    keeps the LMI entries O(1). Falls back to the median diagonal where M_i(θ_ref) has a
-    non-positive diagonal entry.
-    """
+    """B_i (N, n, n) diagonal, such that B_iᵀ M_i(θ_ref) B_i has unit diagonal: the objective is the same in every
+    chart (r̃ᵀM̃⁻¹r̃ = rᵀM⁻¹r), and this one keeps the LMI entries O(1). The median diagonal where M_i(θ_ref) has a
+    non-positive diagonal entry."""
     M = problem.metric.evaluate(reference_theta(problem))
     d = np.diagonal(M, axis1=1, axis2=2).copy()  # (N, n)
     med = np.median(np.abs(d), axis=0)
@@ -115,11 +111,9 @@ def _slack_scale(problem: IdentificationProblem) -> float:
 def whitening_chart(problem: IdentificationProblem, chunk: int = 4096) -> tuple[np.ndarray, float, str]:
     """(B (N, n, n), slack scale, description): B_i = L_i⁻ᵀ with M_i(θ_s) = L_i L_iᵀ, so M̃_i(θ_s) = I.
 
-    θ_s is the Newton solver's starting point, computed from chart-invariant quantities only (every M_i(θ_s)
-    ≻ 0, constraints strictly satisfied), so the whitened problem is the same in every chart up to a
-    rotation per sample, which the PSD cone does not see. The slack scale is the residual size: the
-    frozen-metric least-squares objective at θ_s per sample (a chart-invariant estimate of f*/N from
-    below), floored at 1e-12 of the signal size τ̃ᵀτ̃ so exact data still give a positive scale.
+    θ_s is the Newton solver's chart-invariant start, so the whitened problem is the same in every chart up to a
+    rotation per sample, which the PSD cone does not see. The slack scale: the frozen-metric least-squares objective
+    at θ_s per sample (a chart-invariant estimate of f*/N), floored at 1e-12 of the signal size τ̃ᵀτ̃.
     """
     cons = feasible_set(problem.parameters, True)
     theta_s, _ = starting_point(problem, cons, chunk)

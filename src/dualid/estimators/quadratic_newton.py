@@ -158,9 +158,8 @@ RETRY_LEVENBERG = 0.0
 
 
 def run_quadratic(cons, theta, tol, max_iter, objective, f_scale, gap0=1.0):
-    """run_interior_point on the module's f; an arithmetic failure inside it (e.g. a duality gap that underflows to 0)
-    is a SolverError of this solver, so that the caller's fallback or certification sees a failed solve. A failed
-    run is retried once with RETRY_LEVENBERG (recorded as info["newton_levenberg"])."""
+    """run_interior_point on the module's f, an arithmetic failure inside it a SolverError (a failed solve for the
+    caller's fallback or certificate); a failed run is retried once with RETRY_LEVENBERG (info["newton_levenberg"])."""
     failure = None
     for levenberg in (1e-12, RETRY_LEVENBERG):
         try:

@@ -259,12 +259,8 @@ def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, c
 
 
 def iteration_diagnostics(cons, theta, Z, gap, system) -> str:
-    """Diagnostics of one interior-point iteration, printed by ``run_interior_point(verbose=True)``.
-    
-    Per block b: the conditioning of C_b(θ) (λ_min/λ_max) and the centrality spread of the eigenvalues of
-    L_bᵀ Z_b L_b / μ (C_b = L_b L_bᵀ, μ = gap/ν; all 1 on the central path); the Newton matrix's conditioning
-    (from its Jacobi-scaled Cholesky diagonal, or the rank kept by the eigen fallback). Read-only: it changes
-    nothing in the iteration."""
+    """One iteration's diagnostics (``run_interior_point(verbose=True)``): per block the conditioning of C_b(θ) and
+    the spread of the eigenvalues of L_bᵀ Z_b L_b / μ (all 1 on the central path), and the Newton matrix's."""
     mu = gap / max(cons.size, 1)
     parts = []
     for c, Zb in zip(cons.lmis, Z):

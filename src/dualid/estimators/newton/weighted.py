@@ -47,10 +47,9 @@ def _not_positive_definite(problem, what: str, bad: int, low: float) -> MetricEr
 
 
 class _Whitening:
-    """(block, rows) → the block's whitened rows (L_i⁻¹ Y_i (c, n, p), L_i⁻¹ τ_i (c, n)), C_i = L_i L_iᵀ, for one fit:
-    a constant weight (``weight`` returns one (1, n, n) block) is factored once and its L⁻¹ reused while the weight
-    returns the same C (one n×n Cholesky per fit, not one per sample and pass); otherwise a Cholesky per sample.
-    ``kind``: "constant", "per-sample", "mixed" (both, by block) or "factor" (the caller's W_i, below)."""
+    """(block, rows) → the block's whitened rows (L_i⁻¹ Y_i, L_i⁻¹ τ_i), C_i = L_i L_iᵀ, for one fit: a constant weight
+    (one (1, n, n) block) factored once, else a Cholesky per sample. ``kind``: "constant", "per-sample", "mixed" (both,
+    by block) or "factor" (the caller's W_i)."""
 
     def __init__(self, problem: IdentificationProblem, weight: Weight, what: str, whiten=None):
         self.problem, self.weight, self.what, self.whiten = problem, weight, what, whiten
