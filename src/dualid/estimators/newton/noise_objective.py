@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from dualid.estimators.newton.objective import CHUNK, cholesky_batch, Derivatives, forward_substitute, NotPositiveDefinite, tri_inverse
-from dualid.problem import sample_blocks
+from dualid.problem import additive, sample_blocks
 
 
 def noise_model_covariance(M: np.ndarray, sigma_tau: np.ndarray, sigma_a: np.ndarray) -> np.ndarray:
@@ -37,8 +37,22 @@ def noise_model_derivatives(problem, theta: np.ndarray, sigma_tau: np.ndarray, s
     """f (and ∇f and the Hessian for order 2; see the module doc), accumulated over chunks of samples.
 
     Raises NotPositiveDefinite when some C_i(θ) is not positive definite (Σ_τ singular and M_i(θ) singular)."""
+    f, grad, gn, neg = noise_model_sums(problem, np.asarray(theta, dtype=float), sigma_tau, sigma_a, order, chunk)
+    if not np.isfinite(f):
+        raise NotPositiveDefinite
+    if not order:
+        return Derivatives(f)
+    gn = 0.5 * (gn + gn.T)
+    exact = gn - 0.5 * (neg + neg.T)
+    return Derivatives(f, grad, exact if _positive_definite(exact) else gn)
+
+
+@additive
+def noise_model_sums(problem, theta: np.ndarray, sigma_tau: np.ndarray, sigma_a: np.ndarray, order: int,
+                     chunk: int) -> tuple:
+    """(f, ∇f, Gauss–Newton part, negative part) summed over the samples (None beyond f for order 0): one pass,
+    run where the data live on a problem spread over partitions."""
     p = problem.p
-    theta = np.asarray(theta, dtype=float)
     f = 0.0
     grad = np.zeros(p) if order else None
     gn = np.zeros((p, p)) if order else None
@@ -66,13 +80,7 @@ def noise_model_derivatives(problem, theta: np.ndarray, sigma_tau: np.ndarray, s
         Z = _bmm(Li, D).reshape(-1, p)
         gn += 2.0 * (Z.T @ Z)
         neg += 2.0 * (P.reshape(-1, p).T @ SP.reshape(-1, p))
-    if not np.isfinite(f):
-        raise NotPositiveDefinite
-    if not order:
-        return Derivatives(f)
-    gn = 0.5 * (gn + gn.T)
-    exact = gn - 0.5 * (neg + neg.T)
-    return Derivatives(f, grad, exact if _positive_definite(exact) else gn)
+    return f, grad, gn, neg
 
 
 def _bmm(A: np.ndarray, X: np.ndarray) -> np.ndarray:
@@ -102,6 +110,7 @@ def noise_model_objective(problem, theta, sigma_tau, sigma_a, chunk: int = CHUNK
         return np.inf
 
 
+@additive
 def noise_model_scale(problem, theta, sigma_tau, sigma_a, chunk: int = CHUNK) -> float:
     """Σ τ_iᵀ C_i(θ)⁻¹ τ_i: the size of the measured forces in the noise model's metric (the objective's scale)."""
     total = 0.0
