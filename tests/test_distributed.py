@@ -121,7 +121,7 @@ def test_fit_stream_runs_its_passes_on_a_scheduler(client, tmp_path):
     v, a = rng.normal(size=(600, model.nv)), rng.normal(size=(600, model.nv))
     tau = model.regressor(q, v, a) @ model.nominal
     table = pd.DataFrame(np.column_stack([q, v, a, tau]), columns=frame_columns(model))
-    args = ["fit-stream", "--model", str(urdf), "--method", "ols", "--allow-unidentifiable"]
+    args = ["fit-stream", "--model", str(urdf), "--method", "ols"]
     for k in range(3):
         table.iloc[200 * k : 200 * (k + 1)].to_parquet(tmp_path / f"run{k}.parquet", index=False)
         args += ["--data", str(tmp_path / f"run{k}.parquet")]
