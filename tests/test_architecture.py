@@ -269,6 +269,16 @@ def test_no_benchmark_script_is_too_long():
              f"benchmark scripts over {MAX_LINES} lines")
 
 
+def test_every_benchmark_has_a_readme_row_and_no_dated_result_folder():
+    """One script per question, listed in benchmarks/README.md; results beside it, older ones in git history."""
+    readme = (BENCHMARKS / "README.md").read_text()
+    unlisted = sorted(p.name for p in BENCHMARKS.glob("*.py") if f"benchmarks/{p.name}" not in readme)
+    assert not unlisted, f"benchmark scripts without a row in benchmarks/README.md: {unlisted}"
+    dated = sorted(str(d.relative_to(BENCHMARKS)) for d in BENCHMARKS.rglob("*") if d.is_dir()
+                   and (re.fullmatch(r"(?i)session.*|run.?[0-9]+|[0-9a-f]{7,40}|20[0-9]{2}-?[0-9]{2}-?[0-9]{2}.*", d.name)))
+    assert not dated, f"result folders named after a run, a commit or a date: {dated}"
+
+
 def _functions(tree: ast.AST, prefix: str = ""):
     for node in ast.iter_child_nodes(tree):
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):

@@ -51,7 +51,7 @@ from dualid.linalg import NotPositiveDefinite
 from dualid.metric_guard import reference_guard
 from dualid.model.closure import on_closure
 from dualid.model.consistency import central_point, feasible_set
-from dualid.problem import IdentificationProblem
+from dualid.problem import IdentificationProblem, additive
 
 ROUNDS = 2  # noise levels at the pilot, θ; the levels at that θ, θ again (unless the first round finds Σ_a = 0)
 
@@ -131,7 +131,7 @@ class NoiseModelDM:
         check = self._check(sample, theta, noise)
         if check is not None and check.rejected:
             n = sensor.n
-            wls = NoiseLevels(np.diag(np.mean(sensor.residual(theta) ** 2, axis=0)), np.zeros((n, n)), 1.0, 0.0, 0)
+            wls = NoiseLevels(np.diag(residual_squares(sensor, theta) / sensor.N), np.zeros((n, n)), 1.0, 0.0, 0)
             theta = self._solve(sensor, cons, start, wls)[0]
             f = noise_model_objective(sensor, theta, wls.sigma_tau, wls.sigma_a, self.chunk)
             choice = (f"wls: the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's "
@@ -223,6 +223,12 @@ class NoiseModelDM:
         theta, _, _, info = run_interior_point(problem, cons, theta, None, None, self.tol, self.max_iter, self.chunk,
                                                False, objective=objective, f_scale=scale, convex=False)
         return theta, info
+
+
+@additive
+def residual_squares(problem, theta: np.ndarray) -> np.ndarray:
+    """(n,) Σ_i r_ij² per coordinate (one pass, run where the data live): N times the WLS fallback's torque variances."""
+    return sum(np.sum(block.residual(theta) ** 2, axis=0) for block in problem.blocks())
 
 
 def _scaled(problem) -> tuple[np.ndarray, np.ndarray]:

@@ -47,7 +47,7 @@ import numpy as np
 from dualid.errors import MetricError
 from dualid.estimators.newton.objective import CHUNK, Derivatives
 from dualid.linalg import NotPositiveDefinite, cholesky_batch, forward_substitute, tri_inverse
-from dualid.problem import IdentificationProblem, sample_blocks, strided_rows
+from dualid.problem import IdentificationProblem, additive, sample_blocks, strided_rows
 
 def noise_model_covariance(M: np.ndarray, sigma_tau: np.ndarray, sigma_a: np.ndarray) -> np.ndarray:
     """C_i = Σ_τ + M_i Σ_a M_i for M (c, n, n)."""
@@ -60,8 +60,22 @@ def noise_model_derivatives(problem, theta: np.ndarray, sigma_tau: np.ndarray, s
     """f (and ∇f and the Hessian for order 2; see the module doc), accumulated over chunks of samples.
 
     Raises NotPositiveDefinite when some C_i(θ) is not positive definite (Σ_τ singular and M_i(θ) singular)."""
+    f, grad, gn, neg = noise_model_sums(problem, np.asarray(theta, dtype=float), sigma_tau, sigma_a, order, chunk)
+    if not np.isfinite(f):
+        raise NotPositiveDefinite
+    if not order:
+        return Derivatives(f)
+    gn = 0.5 * (gn + gn.T)
+    exact = gn - 0.5 * (neg + neg.T)
+    return Derivatives(f, grad, exact if _positive_definite(exact) else gn)
+
+
+@additive
+def noise_model_sums(problem, theta: np.ndarray, sigma_tau: np.ndarray, sigma_a: np.ndarray, order: int,
+                     chunk: int) -> tuple:
+    """(f, ∇f, Gauss–Newton part, negative part) summed over the samples (None beyond f for order 0): one pass,
+    run where the data live on a problem spread over partitions."""
     p = problem.p
-    theta = np.asarray(theta, dtype=float)
     f = 0.0
     grad = np.zeros(p) if order else None
     gn = np.zeros((p, p)) if order else None
@@ -89,13 +103,7 @@ def noise_model_derivatives(problem, theta: np.ndarray, sigma_tau: np.ndarray, s
         Z = _bmm(Li, D).reshape(-1, p)
         gn += 2.0 * (Z.T @ Z)
         neg += 2.0 * (P.reshape(-1, p).T @ SP.reshape(-1, p))
-    if not np.isfinite(f):
-        raise NotPositiveDefinite
-    if not order:
-        return Derivatives(f)
-    gn = 0.5 * (gn + gn.T)
-    exact = gn - 0.5 * (neg + neg.T)
-    return Derivatives(f, grad, exact if _positive_definite(exact) else gn)
+    return f, grad, gn, neg
 
 
 def _bmm(A: np.ndarray, X: np.ndarray) -> np.ndarray:
@@ -125,6 +133,7 @@ def noise_model_objective(problem, theta, sigma_tau, sigma_a, chunk: int = CHUNK
         return np.inf
 
 
+@additive
 def noise_model_scale(problem, theta, sigma_tau, sigma_a, chunk: int = CHUNK) -> float:
     """Σ τ_iᵀ C_i(θ)⁻¹ τ_i: the size of the measured forces in the noise model's metric (the objective's scale)."""
     total = 0.0
@@ -218,10 +227,9 @@ def estimate_noise(problem, theta: np.ndarray, start: NoiseLevels | None = None,
 
 def _scoring(r, a, owner, psi, weight, x) -> tuple[np.ndarray, float]:
     """The variances v (one per owner index) minimising the penalised mean negative log-likelihood of C_i = Σ_t
-    v_owner(t) a_it a_itᵀ (rank-one factors a_it, the rows of a[i]), and the mean nll of the data alone there.
-    Fisher scoring in x = log v (a change of units is a translation in x, so the iterates are equivariant under it),
-    with a backtracking line search: the likelihood is nearly flat along "torque noise ↔ acceleration noise" on a
-    joint whose inertia hardly varies, where a first-order method stops early."""
+    v_owner(t) a_it a_itᵀ (rank-one factors a_it, the rows of a[i]), and the mean nll of the data alone there: Fisher
+    scoring in x = log v (equivariant under units) with a backtracking line search (the likelihood is nearly flat
+    along "torque noise ↔ acceleration noise" where a joint's inertia hardly varies)."""
     N, n = r.shape
     m = len(psi)
     E = np.zeros((len(owner), m))

@@ -84,9 +84,8 @@ def dual_max_step(Z, z, dZ, dz) -> float:
 
 
 def min_centrality(cons: FeasibleSet, theta, Z, z, s) -> float:
-    """min over blocks of λ_min(L_bᵀ Z_b L_b) (C_b = L_b L_bᵀ) and over rows of s_j z_j: μ on the central path.
-    0 when a block no longer factors (an iterate that reached its boundary by rounding: on the DFKI pendubot tiled
-    three times, a mass pushed out by ``fit.pushed_out``): the least central point there is, so a centring step."""
+    """min over blocks of λ_min(L_bᵀ Z_b L_b) (C_b = L_b L_bᵀ) and over rows of s_j z_j: μ on the central path; 0
+    when a block no longer factors (an iterate on its boundary by rounding), so that a centring step follows."""
     try:
         w = [float(np.linalg.eigvalsh(L.T @ Zb @ L)[0])
              for L, Zb in ((np.linalg.cholesky(c.C(theta)), Zb) for c, Zb in zip(cons.lmis, Z))]

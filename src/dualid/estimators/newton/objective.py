@@ -19,9 +19,8 @@ from dualid.linalg import NotPositiveDefinite, cholesky_batch, forward_substitut
 from dualid.model.metric import AffineMetric
 from dualid.problem import IdentificationProblem, additive, sample_blocks
 
-CHUNK = 1024  # samples per block of a pass: the per-chunk temporaries (Y_i, D_i, L⁻¹D_i: c·n·p floats each) stay in
-# cache; on the benchmark Crazyflie a pass costs 2.7 µs per sample with 1,024 against 3.1 µs with 4,096
-# (benchmarks/derivatives_speed.md)
+CHUNK = 1024  # samples per block of a pass: the per-chunk temporaries (c·n·p floats each) stay in cache
+# (benchmarks/derivatives_speed.md: 2.7 µs per sample against 3.1 µs with 4,096 on the benchmark Crazyflie)
 
 
 @dataclass(frozen=True)
