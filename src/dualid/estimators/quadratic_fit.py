@@ -245,7 +245,7 @@ def fit_weighted(sensor: IdentificationProblem, C, method: str, common: dict, in
         if not common["allow_unidentifiable"]:
             check_identifiable(sensor, what=f"{method} regressor")
         try:  # from the weighted statistics (two passes over the data; phase I on the closed set if the cheap
-            # start fails: no fit of the materialised metric without the closure, newton.closure)
+            # start fails: no fit of the materialised metric without the closure, model.closure)
             result = fit_weighted_newton(sensor, weight, constrained=common["constrained"], method=method,
                                          what=f"{method}: {what}", **common["solver_options"])
             return dataclasses.replace(result, info={**result.info, **info})
@@ -270,7 +270,7 @@ def fit_weighted(sensor: IdentificationProblem, C, method: str, common: dict, in
     return fit_quadratic(
         white, statistics(white), method=method, constrained=common["constrained"], solver=common["solver"],
         solver_options=common["solver_options"], allow_unidentifiable=common["allow_unidentifiable"], info=info,
-        closure=True,  # the polish of the cvxpy answer on the closed feasible set, as the Newton fit (newton.closure)
+        closure=True,  # the polish of the cvxpy answer on the closed feasible set, as the Newton fit (model.closure)
     )
 
 

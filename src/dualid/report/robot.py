@@ -51,7 +51,7 @@ def method_entry_record(m: str, f, P) -> dict:
         "solve_time_s": r.solve_time,
         "objective": r.objective,
         "physically_consistent": bool(r.is_consistent),
-        "parameters": r.parameter_records(f.uncertainty),  # the completed ones say so (newton.closure)
+        "parameters": r.parameter_records(f.uncertainty),  # the completed ones say so (model.closure)
         "base_parameters": method_record(f),
         "validation": None if f.validation is None else f.validation.as_dict(),
     }

@@ -211,7 +211,7 @@ def fit_weighted_newton(
     check_bounds(problem, constrained)
     white = _Whitening(problem, weight, what, whiten)
     H, g, c, H_e, g_e = weighted_statistics(problem, white, chunk, energy=True)
-    # parameters f cannot see that only loosen a block: solved on the closed set, then completed (newton.closure)
+    # parameters f cannot see that only loosen a block: solved on the closed set, then completed (model.closure)
     cons, done = on_closure(feasible_set(problem.parameters, constrained), H, c, problem.parameters.names)
     theta_f = solve_psd(H, g, rtol=1e-10)  # the unconstrained weighted LS (min-norm): the frozen-metric LS
     f_min = max(c - 2.0 * float(g @ theta_f) + float(theta_f @ H @ theta_f), 0.0)
@@ -236,7 +236,7 @@ def fit_weighted_newton(
         label = "energy→frozen-metric→central"
         start, theta0 = ((f"{label}→lifted", lifted) if f_lifted < f_of(line) else (label, line))
     if start is None:  # the same closed problem from the weighted LS's central point or phase I (not a fit without
-        # the closure: newton.closure)
+        # the closure: model.closure)
         theta0, start = constant_metric_start(problem, cons, theta_f)
     theta, _, _, info = run_interior_point(problem, cons, theta0, None, None, tol, max_iter, chunk, verbose,
                                         objective=objective, f_scale=c)
