@@ -6,8 +6,8 @@ import pytest
 
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.newton import dual_metric_derivatives
+from dualid.estimators.newton.objective import energy_statistics, statistics
 from dualid.estimators.newton.weighted import weighted_statistics
-from dualid.estimators.statistics import energy_statistics, statistics
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.problem import IdentificationProblem
 from dualid.streaming import ArraySource, ChunkedProblem, ParquetSource

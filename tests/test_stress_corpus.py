@@ -109,7 +109,7 @@ def test_boundary_prior_fails_without_the_lift_and_is_solved_and_recorded_with_i
         except SolverError:
             failed, chain = True, ""
         if kind == "logdet":  # Clarabel inaccurate (raw-regressor chart) or failed (the weighted fit's own chart,
-            # estimators.quadratic_chart): either way not optimal on its own, and the fallback solves it
+            # estimators.quadratic_fit.signal_scale): either way not optimal on its own, and the fallback solves it
             assert not failed and chain.endswith("→ newton optimal"), chain
             assert chain.startswith(("CLARABEL returned optimal_inaccurate", "CLARABEL failed (solver_error)")), chain
         else:

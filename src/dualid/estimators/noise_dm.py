@@ -1,7 +1,7 @@
 """``dm``: the dual-metric fit with a physical noise model, min_θ Σ r_iᵀ (Σ_τ + M_i(θ) Σ_a M_i(θ))⁻¹ r_i.
 
 Torque noise (Σ_τ) and the acceleration noise that differentiated encoders put into the regressor (Σ_a) give the
-residual at the true θ the covariance C_i(θ) = Σ_τ + M_i(θ) Σ_a M_i(θ) (``newton.noise_objective``). Minimising
+residual at the true θ the covariance C_i(θ) = Σ_τ + M_i(θ) Σ_a M_i(θ) (``noise_model``). Minimising
 Σ r_iᵀ C_i(θ)⁻¹ r_i with C depending on θ is weighted total least squares: least squares shrinks the inertia under
 noise in the accelerations (errors-in-variables attenuation), the paper's Σ r_iᵀ M_i(θ)⁻¹ r_i inflates it under
 torque noise; this objective is consistent under both when the noise levels are right. The weights frozen at a θ
@@ -11,13 +11,13 @@ The fit, in the problem's sensor chart (so every chart the problem records, conf
 the same fit; the objective is invariant when Σ_τ, Σ_a are carried covariantly):
 1. pilot: least squares in weights 1/mean τ_j² (unconstrained; constrained where M(θ) is not positive definite);
    with a passive coordinate (τ_j ≡ 0), the paper's dual-metric optimum;
-2. the noise levels from its residuals (``noise_level.estimate_noise``: Σ_τ per joint, Σ_a = σ_a² diag(mean v²),
+2. the noise levels from its residuals (``noise_model.estimate_noise``: Σ_τ per joint, Σ_a = σ_a² diag(mean v²),
    equivariant under per-coordinate units). When the likelihood does not support acceleration noise, Σ_a = 0 and
    the noise model is WLS's: ``dm`` returns the pilot;
-3. ROUNDS times: θ by dualid's primal–dual interior point on f (gradient and Hessian of ``newton.noise_objective``)
+3. ROUNDS times: θ by dualid's primal–dual interior point on f (gradient and Hessian of ``noise_model``)
    under the physical-consistency constraints, from the pilot moved strictly inside them, then from the last θ
    with the levels re-estimated at it;
-4. the held-out check (``noise_check``): WLS when the residual is not the modelled noise;
+4. the held-out check (``noise_model.check_noise_model``): WLS when the residual is not the modelled noise;
 5. the result records the noise levels (sensor chart), their residual shares and the rounds in ``result.noise``.
 """
 
@@ -31,22 +31,26 @@ import numpy as np
 import warnings
 
 from dualid.errors import ConfigError, MetricError, OptimumAtInfinityWarning, SolverError
-from dualid.estimators.base import check_identifiable
-from dualid.estimators.metric_guard import reference_guard
-from dualid.estimators.newton.closure import on_closure
+from dualid.estimators.base import check_solver
 from dualid.estimators.newton.fit import fit_dual_metric_newton
 from dualid.estimators.newton.interior_point import run_interior_point
-from dualid.estimators.newton.noise_objective import (
+from dualid.estimators.newton.objective import CHUNK
+from dualid.estimators.noise_model import (
+    NoiseCheck,
+    NoiseLevels,
+    check_noise_model,
+    estimate_noise,
+    given_levels,
     noise_model_derivatives,
     noise_model_objective,
     noise_model_scale,
 )
-from dualid.estimators.newton.objective import CHUNK, NotPositiveDefinite
-from dualid.estimators.newton.start import central_point
-from dualid.estimators.noise_check import NoiseCheck, check_noise_model
-from dualid.estimators.noise_level import NoiseLevels, estimate_noise, given_levels
 from dualid.estimators.result import IdentificationResult, NoiseRecord
-from dualid.model.consistency import feasible_set
+from dualid.identifiability import check_identifiable
+from dualid.linalg import NotPositiveDefinite
+from dualid.metric_guard import reference_guard
+from dualid.model.closure import on_closure
+from dualid.model.consistency import central_point, feasible_set
 from dualid.problem import IdentificationProblem, additive
 
 ROUNDS = 2  # noise levels at the pilot, θ; the levels at that θ, θ again (unless the first round finds Σ_a = 0)
@@ -69,7 +73,8 @@ class NoiseModelDM:
     """Σ r_iᵀ (Σ_τ + M_i(θ) Σ_a M_i(θ))⁻¹ r_i with Σ_τ, Σ_a estimated from the data (module doc).
 
     sigma_tau, sigma_a: fix the noise levels ((n, n), in the sensor chart: force² and acceleration² units) instead
-    of estimating them; tol, max_iter: the interior point's.
+    of estimating them; tol, max_iter: the interior point's. solver: "newton" (dualid's interior point); "cvxpy"
+    (a conic reference, with ``cvxpy_solver``) has no implementation for this objective and raises ConfigError.
     """
 
     constrained: bool = True
@@ -79,9 +84,14 @@ class NoiseModelDM:
     tol: float = 1e-9
     max_iter: int = 300  # per solve: the non-convex fit converges linearly (Crazyflie, 21,000 samples: 265)
     chunk: int = field(default=CHUNK, kw_only=True)
+    solver: str = field(default="newton", kw_only=True)
+    cvxpy_solver: str = field(default="CLARABEL", kw_only=True)
     name = "dm"  # the result's method
 
     def __post_init__(self) -> None:
+        check_solver(self.solver, self.cvxpy_solver, "NoiseModelDM")
+        if self.solver == "cvxpy":
+            raise ConfigError("NoiseModelDM: solver 'cvxpy' has no implementation for dm's objective; use 'newton'")
         if (self.sigma_tau is None) != (self.sigma_a is None):
             raise ConfigError("NoiseModelDM: give both sigma_tau and sigma_a, or neither")
         for key in ("sigma_tau", "sigma_a"):
