@@ -146,7 +146,7 @@ def test_torque_noise_alone_keeps_no_acceleration_noise_and_is_wls():
 
 def test_the_estimator_has_few_settings():
     assert [f.name for f in fields(NoiseModelDM)] == ["constrained", "allow_unidentifiable", "sigma_tau", "sigma_a",
-                                                       "tol", "max_iter", "chunk"]
+                                                       "tol", "max_iter", "solver", "cvxpy_solver", "chunk"]
 
 
 def test_fixed_noise_levels_are_used_and_recorded():
