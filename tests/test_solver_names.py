@@ -45,9 +45,9 @@ def test_cvxpy_solver_picks_the_conic_backend(problem):
     assert ols.info["solver_chain"].startswith("SCS ")
 
 
-def test_dm_has_no_cvxpy_path_yet_and_says_so():
-    with pytest.raises(ConfigError, match="NoiseModelDM: solver 'cvxpy' has no implementation"):
-        make_estimator("dm", options={"solver": "cvxpy"})
+def test_dm_takes_the_same_names():
+    dm = make_estimator("dm", options={"solver": "cvxpy", "cvxpy_solver": "SCS"})
+    assert (dm.solver, dm.cvxpy_solver) == ("cvxpy", "SCS")
 
 
 @pytest.mark.parametrize("key", [*QUADRATIC, "dm-paper", "dm"])

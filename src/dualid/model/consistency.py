@@ -236,6 +236,21 @@ def cvxpy_constraints(theta, parameters: ParameterSpace) -> list:
     return cons
 
 
+def cvxpy_feasible_set(theta, cons: FeasibleSet) -> list:
+    """cvxpy constraints of a FeasibleSet (e.g. one closed over unseen parameters): C0 + Σ θ[idx_k] V_k ⪰ 0 per LMI
+    and G θ + h ≥ 0."""
+    import cvxpy as cp
+
+    out = []
+    for c in cons.lmis:
+        k, m, _ = c.V.shape
+        C = c.C0 + cp.reshape(c.V.reshape(k, m * m).T @ theta[[int(i) for i in c.idx]], (m, m), order="C")
+        out.append(0.5 * (C + C.T) >> 0)
+    if len(cons.h):
+        out.append(cons.G @ theta + cons.h >= 0)
+    return out
+
+
 # --- geometric priors on the constraint matrices ------------------------------------------------
 def prior_blocks(kind: str, parameters: ParameterSpace, theta0: np.ndarray):
     """Per block: (indices, V (k, m, m), C0 (m, m)) for the blocks a geometric prior applies to."""
