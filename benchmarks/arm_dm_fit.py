@@ -36,9 +36,9 @@ import pinocchio as pin
 
 from dualid.errors import DualidError
 from dualid.estimators.dual_metric import DualMetric
-from dualid.estimators.noise_dm import NoiseModelDM
-from dualid.estimators.guards import guard_info
 from dualid.estimators.least_squares import OLS, WLS
+from dualid.estimators.noise_dm import NoiseModelDM
+from dualid.metric_guard import guard_info
 from dualid.model.joint_terms import with_joint_terms
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.problem import IdentificationProblem

@@ -3,7 +3,7 @@
 For each data-set seed: the study's high-data and low-data fits (reproduce.run_study) of
 WLS, the paper's DM (``dm-paper``) and ``dm`` (estimators/noise_dm.py), with the
 plain rigid-body model and with ``with_base_drag`` (3 parameters d ≥ 0 on vx, vy, vz). Every fit
-carries the metric guard (estimators/guards.py) against the truth and against the high-data WLS
+carries the metric guard (metric_guard.py) against the truth and against the high-data WLS
 fit of the same model. Prints a markdown table and writes JSON.
 
     PYTHONPATH=src python benchmarks/crazyflie_base_drag.py --data-seeds 0 1 2 3 4 --low-seeds 5 \
@@ -20,9 +20,9 @@ import time
 import numpy as np
 
 from dualid.estimators.dual_metric import DualMetric
-from dualid.estimators.noise_dm import NoiseModelDM
-from dualid.estimators.guards import generalized_eigenvalues
 from dualid.estimators.least_squares import WLS
+from dualid.estimators.noise_dm import NoiseModelDM
+from dualid.metric_guard import generalized_eigenvalues
 from dualid.model.extra_terms import with_base_drag
 from dualid.paper.study import run_study
 from dualid.problem import build_problem

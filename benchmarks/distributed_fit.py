@@ -1,12 +1,14 @@
 """A fit over many Parquet files on a local Dask cluster of 1 and 2 workers, against the streamed fit on one machine.
 
-    OPENBLAS_NUM_THREADS=1 python benchmarks/distributed_fit.py --n 200000 --files 8 --methods ols,dm-paper \
+    OPENBLAS_NUM_THREADS=1 python benchmarks/distributed_fit.py --n 100000 --files 20 --methods ols,wls,dm-paper,dm \
         --out benchmarks/distributed_fit.md
+    OPENBLAS_NUM_THREADS=1 python benchmarks/distributed_fit.py --n 10000000 --files 20 --methods ols --workers 2 \
+        --out benchmarks/distributed_fit_1e7.md
 
 Writes N samples of the benchmark Crazyflie (as benchmarks/streaming.py: q, v, a and τ = Y θ + 5 % noise) to one
 Parquet file and splits it into ``--files`` files. Fits each method (1) streamed from the one file in this process
 (``ChunkedProblem``), (2) over the files on a ``LocalCluster`` of 1 worker process and (3) of 2 (``DaskProblem``,
-one task per file and pass, one thread per worker), and records wall time (the cluster started and warmed up
+one task per file and pass, one thread per worker, a Dask memory limit per worker), and records wall time (the cluster started and warmed up
 beforehand), passes, the largest relative difference of θ from the streamed fit, and the workers' peak RSS.
 """
 
@@ -56,7 +58,8 @@ def fit(method: str, problem) -> tuple[np.ndarray, float, str]:
     return result.theta, time.perf_counter() - t0, result.status
 
 
-def run(path: Path, parts: list[Path], methods: list[str], chunk: int) -> list[dict]:
+def run(path: Path, parts: list[Path], methods: list[str], chunk: int, workers_list: list[int],
+        memory_limit: str) -> list[dict]:
     from distributed import Client, LocalCluster
 
     from dualid.distributed import DaskProblem
@@ -73,8 +76,9 @@ def run(path: Path, parts: list[Path], methods: list[str], chunk: int) -> list[d
         rows.append({"method": method, "where": "one process, streamed", "wall_time_s": wall, "passes": problem.passes,
                      "status": status, "max_rel_dtheta": 0.0, "peak_rss_GB": peak_rss_gb()})
         print(rows[-1], flush=True)
-    for workers in (1, 2):
-        with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+    for workers in workers_list:
+        with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                          memory_limit=memory_limit) as cluster, \
                 Client(cluster) as client:
             client.run(lambda: __import__("dualid.estimators.methods"))
             for method in methods:
@@ -95,6 +99,8 @@ def main() -> None:
     ap.add_argument("--files", type=int, default=8)
     ap.add_argument("--methods", default="ols,dm-paper")
     ap.add_argument("--chunk", type=int, default=65536)
+    ap.add_argument("--workers", default="1,2", help="cluster sizes to run, e.g. 2")
+    ap.add_argument("--memory-limit", default="2GB", help="each worker's Dask memory limit")
     ap.add_argument("--out", type=Path, default=Path("benchmarks/distributed_fit.md"))
     ap.add_argument("--force", action="store_true")
     args = ap.parse_args()
@@ -106,12 +112,14 @@ def main() -> None:
         shape = write_parquet(path, args.n)
         (Path(tmp) / "parts").mkdir()
         parts = split(path, args.files, Path(tmp) / "parts")
-        rows = run(path, parts, args.methods.split(","), args.chunk)
+        rows = run(path, parts, args.methods.split(","), args.chunk, [int(w) for w in args.workers.split(",")],
+                   args.memory_limit)
     lines = [
         "# A fit over many Parquet files on a local Dask cluster (benchmark Crazyflie)", "",
         f"Command: `OPENBLAS_NUM_THREADS=1 python {' '.join(sys.argv)}`", "",
         f"N = {args.n:,} samples (n = {shape['n']}, p = {shape['p']}), {shape['file_GB']:.3f} GB of Parquet split into "
-        f"{len(parts)} files; chunks of {args.chunk:,} samples; one thread per worker. Wall time of the fit alone "
+        f"{len(parts)} files; chunks of {args.chunk:,} samples; one thread per worker, memory limit {args.memory_limit} "
+        f"per worker. Wall time of the fit alone "
         f"(cluster started and warmed up). Load average {load0} at the start, "
         f"{[round(x, 2) for x in os.getloadavg()]} at the end (a shared 2-core machine).", "",
         "| method | where | time [s] | passes | max rel. Δθ vs streamed | peak RSS per process [GB] | status |",

@@ -21,8 +21,8 @@ import time
 
 import numpy as np
 
-from dualid.estimators.guards import generalized_eigenvalues
 from dualid.estimators.methods import make_estimator
+from dualid.metric_guard import generalized_eigenvalues
 from dualid.paper.study import run_study
 from dualid.problem import build_problem
 from dualid.systems.crazyflie import make
@@ -36,7 +36,7 @@ def barely_swinging(swing_scale: float):
     import dualid.systems.crazyflie as cf
     from dualid.systems import crazyflie_control
 
-    original = crazyflie_control._random_reference
+    original = crazyflie_control.random_reference
 
     def reference(rng, B):
         ref = original(rng, B)
@@ -44,7 +44,7 @@ def barely_swinging(swing_scale: float):
         amplitude[:, 4:] *= swing_scale  # the two short components that keep the pendulum swinging
         return dataclasses.replace(ref, amplitude=amplitude)
 
-    cf._random_reference = reference
+    cf.random_reference = reference
     noise = dataclasses.replace(cf.noise_preset("realistic"), motor_lag=0.0)
     return lambda seed, size: make(seed=seed, noise=noise, size=size)
 

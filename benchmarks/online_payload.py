@@ -35,8 +35,8 @@ from scipy.stats import chi2
 
 from dualid.bench.runner import machine
 from dualid.bench.urdf_arm import arm_urdf, example_robot_urdf, joint_ranges
-from dualid.estimators.newton.noise_objective import noise_model_objective
 from dualid.estimators.noise_dm import NoiseModelDM
+from dualid.estimators.noise_model import noise_model_objective
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.online import ChiSquareDetector, RecursiveFit, restrict
 from dualid.problem import IdentificationProblem

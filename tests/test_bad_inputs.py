@@ -605,7 +605,7 @@ _flag_case("simulate-seed-negative", lambda tmp: ["simulate", "pan-tilt", "--siz
 
 
 def _stream(tmp: Path, make: Callable[[Path], Path], *extra: str) -> list[str]:
-    return ["fit-stream", "--model", str(write_urdf(tmp)), "--data", str(make(tmp)), "--allow-unidentifiable", *extra]
+    return ["fit-stream", "--model", str(write_urdf(tmp)), "--data", str(make(tmp)), *extra]
 
 
 def _parquet(rows: int, random: bool):

@@ -258,7 +258,7 @@ def test_validate_and_fit_stream_read_a_bag_as_its_csv(tmp_path):
         cfg = tmp_path / f"{log.name}.yaml"
         cfg.write_text(yaml.safe_dump({"model": str(URDF), "train": [str(log)], "preprocessing": STEPS, **columns}))
         stream = runner.invoke(app, ["fit-stream", "--model", str(URDF), "--data", str(log), "--config", str(cfg),
-                                     "--chunk", "100", "--allow-unidentifiable"])
+                                     "--chunk", "100"])
         assert stream.exit_code == 0, stream.output
         outputs[log] = (val.stdout, re.sub(r"passes over the data, [\d.]+ s", "", stream.stdout))
     assert outputs[bag] == outputs[tmp_path / "run.csv"]

@@ -1,5 +1,5 @@
 """Every cvxpy 'optimal' of a quadratic or regularized fit is certified by dualid's interior point started from it
-(estimators.certify): a solution above the certified optimum is polished and says by how much, an uncertified one
+(estimators.quadratic_newton.polish): a solution above the certified optimum is polished and says by how much, an uncertified one
 is reported as optimal_inaccurate, never as optimal."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import pytest
 
 from dualid.bench.corpus import problem as corpus_problem
 from dualid.errors import SolverError
-from dualid.estimators import certify
+from dualid.estimators import quadratic_newton as certify
 from dualid.estimators.methods import make_estimator
 
 CASE = "chain RPR, 3 dof, 5 %"  # Clarabel solves its OLS fit accurately (its WLS fit is on the closed set: no cvxpy)

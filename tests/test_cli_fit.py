@@ -98,9 +98,9 @@ def test_fit_needs_model_and_data(tmp_path):
 
 
 def test_solver_flag_and_config_reach_the_estimator_and_the_report(tmp_path):
-    out = tmp_path / "sdp"
+    out = tmp_path / "cvxpy"
     EXAMPLE = _config(tmp_path)
-    result = runner.invoke(app, ["fit", "--config", str(EXAMPLE), "--method", "dm-paper", "--solver", "dm-paper=sdp",
+    result = runner.invoke(app, ["fit", "--config", str(EXAMPLE), "--method", "dm-paper", "--solver", "dm-paper=cvxpy",
                                  "--out", str(out)])
     assert result.exit_code == 0, _out(result)
     record = yaml.safe_load((out / "parameters.yaml").read_text())
@@ -108,9 +108,9 @@ def test_solver_flag_and_config_reach_the_estimator_and_the_report(tmp_path):
     assert fit["solver"] == "sdp/CLARABEL" and fit["fallback_used"] is False
     assert "| dm-paper | optimal | sdp/CLARABEL | no |" in (out / "report.md").read_text()
     bad = runner.invoke(app, ["fit", "--config", str(EXAMPLE), "--solver", "dm-paper=gurobi", "--out", str(tmp_path / "x")])
-    assert bad.exit_code == 2 and "solver: expected one of ('newton', 'sdp', 'sdp_clarabel', 'sdp_scs'), got 'gurobi'" in _out(bad)
+    assert bad.exit_code == 2 and "solver must be one of ('newton', 'cvxpy'), got 'gurobi'" in _out(bad)
     bad = runner.invoke(app, ["fit", "--config", str(EXAMPLE), "--solver", "dm", "--out", str(tmp_path / "y")])
-    assert bad.exit_code == 2 and "--solver: expected METHOD=SOLVER (e.g. dm-paper=sdp), got 'dm'" in _out(bad)
+    assert bad.exit_code == 2 and "--solver: expected METHOD=SOLVER (e.g. dm-paper=cvxpy), got 'dm'" in _out(bad)
 
 
 def test_verbose_prints_the_cpu_time_of_every_stage(tmp_path):

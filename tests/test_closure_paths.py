@@ -1,9 +1,9 @@
-"""Every path of dm's weighted fit is made on the closed feasible set (estimators.newton.closure), and the closure
+"""Every path of dm's weighted fit is made on the closed feasible set (model.closure), and the closure
 finds the unseen mass also where rounding leaves its regressor column not exactly zero.
 
 - the weighted Newton fit whose cheap start fails (a bound the central point violates): before, ``quadratic_fit.fit_weighted``
   refitted the materialised constant metric without the closure (j0.m = 3.5·10⁹ kg where rounding left it);
-- a cvxpy answer that the Newton polish certified within ``certify.TOL``: before, it was returned as it was (j0.m =
+- a cvxpy answer that the Newton polish certified within ``quadratic_newton.TOL``: before, it was returned as it was (j0.m =
   1.7·10⁷ kg where Clarabel stopped, no completion note);
 - a tilted first joint with its link's parameters taken about a point of the axis (a link frame, not the joint
   frame): the mass column of Y is rounding (H_mm = 7e-38·c), the rule "row exactly 0" missed the ray and the fit
@@ -22,8 +22,8 @@ import pinocchio as pin
 import pytest
 
 from dualid.estimators.methods import make_estimator
-from dualid.estimators.newton.closure import NOT_DETERMINED, ZERO_CURVATURE, close, complete
 from dualid.estimators.quadratic_fit import fit_weighted
+from dualid.model.closure import NOT_DETERMINED, ZERO_CURVATURE, close, complete
 from dualid.model.consistency import feasible_set
 from dualid.model.metric import AffineMetric
 

@@ -16,7 +16,7 @@ from dualid.estimators.methods import make_estimator
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.problem import IdentificationProblem
 
-METHODS = ("ols", "wls", "dm-paper")
+METHODS = ("ols", "wls", "dm-paper", "dm")
 
 
 def _free_body():
@@ -30,7 +30,8 @@ def _free_body():
 
 @pytest.fixture(scope="module")
 def data(tmp_path_factory):
-    """Four Parquet files of 250 noisy samples each, and the in-memory problem of all of them."""
+    """Four Parquet files of 250 samples each with torque noise and noise in the logged accelerations (so that
+    ``dm`` keeps its acceleration-noise model and runs every one of its passes), and the in-memory problem."""
     model = _free_body()
     rng = np.random.default_rng(5)
     pin.seed(5)
@@ -39,6 +40,7 @@ def data(tmp_path_factory):
     v, a = rng.normal(size=(N, model.nv)), rng.normal(size=(N, model.nv))
     tau = model.regressor(q, v, a) @ model.nominal
     tau = tau + 0.05 * np.abs(tau).mean(axis=0) * rng.normal(size=tau.shape)
+    a = a + 0.3 * rng.normal(size=a.shape)
     table = pd.DataFrame(np.column_stack([q, v, a, tau]), columns=frame_columns(model))
     folder = tmp_path_factory.mktemp("fleet")
     paths = []
@@ -59,7 +61,10 @@ def client():
 
 
 def _fit(method, problem):
-    return make_estimator(method).fit(problem).theta
+    result = make_estimator(method).fit(problem)
+    if method == "dm":  # the comparison covers the noise model's passes, not only its WLS fallback
+        assert result.noise.choice == "noise model" and result.noise.acceleration_share > 0
+    return result.theta
 
 
 def _rel(x, y):
@@ -116,7 +121,7 @@ def test_fit_stream_runs_its_passes_on_a_scheduler(client, tmp_path):
     v, a = rng.normal(size=(600, model.nv)), rng.normal(size=(600, model.nv))
     tau = model.regressor(q, v, a) @ model.nominal
     table = pd.DataFrame(np.column_stack([q, v, a, tau]), columns=frame_columns(model))
-    args = ["fit-stream", "--model", str(urdf), "--method", "ols", "--allow-unidentifiable"]
+    args = ["fit-stream", "--model", str(urdf), "--method", "ols"]
     for k in range(3):
         table.iloc[200 * k : 200 * (k + 1)].to_parquet(tmp_path / f"run{k}.parquet", index=False)
         args += ["--data", str(tmp_path / f"run{k}.parquet")]
@@ -146,10 +151,11 @@ class _KillOnce(WorkerPlugin):
             os.kill(os.getpid(), signal.SIGKILL)
 
 
-def test_a_worker_killed_mid_fit_changes_nothing(data, client, tmp_path):
+@pytest.mark.parametrize("method", ["dm-paper", "dm"])
+def test_a_worker_killed_mid_fit_changes_nothing(data, client, tmp_path, method):
     model, paths, whole = data
-    client.register_plugin(_KillOnce(tmp_path, after=6), name="kill-once")  # the second task of the second pass
+    client.register_plugin(_KillOnce(tmp_path, after=6), name=f"kill-once-{method}")  # 2nd task of the 2nd pass
     problem = DaskProblem.from_files(model, paths, client, chunk=100)
-    theta = _fit("dm-paper", problem)
+    theta = _fit(method, problem)
     assert (tmp_path / "killed").exists()  # a worker did die mid-fit
-    assert _rel(theta, _fit("dm-paper", whole)) < 1e-10
+    assert _rel(theta, _fit(method, whole)) < 1e-10

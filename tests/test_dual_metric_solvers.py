@@ -24,9 +24,10 @@ def problem():
 @pytest.mark.parametrize(
     "kwargs, message",
     [
-        ({"solver": "qp"}, r"solver: expected one of \('newton', 'sdp', 'sdp_clarabel', 'sdp_scs'\), got 'qp'"),
-        ({"sdp_solver": "MOSEK"}, r"sdp_solver: expected one of \('CLARABEL', 'SCS'\), got 'MOSEK'"),
-        ({"fallback": ("sdp", "ipopt")}, r"fallback: expected solver names from .*, got \['ipopt'\]"),
+        ({"solver": "qp"}, r"solver must be one of \('newton', 'cvxpy'\), got 'qp'"),
+        ({"solver": "sdp_scs"}, r"got 'sdp_scs' \(for SCS: solver='cvxpy', cvxpy_solver='SCS'\)"),
+        ({"cvxpy_solver": "MOSEK"}, r"cvxpy_solver must be one of \('CLARABEL', 'SCS'\), got 'MOSEK'"),
+        ({"fallback": ("cvxpy", "ipopt")}, r"fallback: expected solver names from .*, got \['ipopt'\]"),
         ({"fallback": 3}, r"fallback: expected a tuple of solver names, got 3"),
         ({"tol": 0.0}, r"tol: expected a relative tolerance in \(0, 1\), got 0.0"),
         ({"tol": "tight"}, r"tol: expected a relative tolerance in \(0, 1\), got 'tight'"),
@@ -43,7 +44,7 @@ def test_bad_options_raise_a_typed_error_in_the_constructor(kwargs, message):
 
 
 def test_a_single_fallback_name_is_accepted_as_a_string():
-    assert DualMetric(fallback="sdp_scs").fallback == ("sdp_scs",)
+    assert DualMetric(fallback="newton").fallback == ("newton",)
 
 
 def test_newton_failure_falls_back_to_the_sdp_and_says_so(problem):
@@ -94,7 +95,7 @@ def inaccurate_sdp(monkeypatch):
 def test_optimal_inaccurate_is_reported_and_its_warning_captured(problem, inaccurate_sdp):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # any warning reaching the caller fails the test
-        result = DualMetric(solver="sdp", fallback=(), allow_unidentifiable=True).fit(problem)
+        result = DualMetric(solver="cvxpy", fallback=(), allow_unidentifiable=True).fit(problem)
     assert result.status == "optimal_inaccurate"
     assert "UserWarning: Solution may be inaccurate" in result.info["solver_warnings"]
     assert result.info["solver_chain"] == "sdp/CLARABEL optimal_inaccurate"
@@ -103,9 +104,9 @@ def test_optimal_inaccurate_is_reported_and_its_warning_captured(problem, inaccu
 def test_optimal_inaccurate_tries_the_next_solver(problem, inaccurate_sdp):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        result = DualMetric(solver="sdp", fallback=("newton",), allow_unidentifiable=True).fit(problem)
+        result = DualMetric(solver="cvxpy", fallback=("newton",), allow_unidentifiable=True).fit(problem)
     assert result.solver == "newton" and result.status == "optimal"
-    assert result.info["fallback_reason"].startswith("sdp returned optimal_inaccurate")
+    assert result.info["fallback_reason"].startswith("cvxpy returned optimal_inaccurate")
 
 
 def test_optimal_inaccurate_comes_back_labelled_when_the_next_solver_fails(problem, inaccurate_sdp, monkeypatch):
@@ -113,15 +114,15 @@ def test_optimal_inaccurate_comes_back_labelled_when_the_next_solver_fails(probl
         raise SolverError("dual-metric Newton: line search failed", status="line_search_failed")
 
     monkeypatch.setattr(dual_metric, "fit_dual_metric_newton", failing_newton)
-    result = DualMetric(solver="sdp", fallback=("newton",), allow_unidentifiable=True).fit(problem)
+    result = DualMetric(solver="cvxpy", fallback=("newton",), allow_unidentifiable=True).fit(problem)
     assert result.status == "optimal_inaccurate" and result.solver == "sdp/CLARABEL"
     assert result.info["solver_chain"] == (
-        "sdp returned optimal_inaccurate (objective " + f"{result.objective:.10g}) → newton failed "
+        "cvxpy returned optimal_inaccurate (objective " + f"{result.objective:.10g}) → newton failed "
         "(line_search_failed): dual-metric Newton: line search failed → sdp/CLARABEL optimal_inaccurate"
     )
 
 
 def test_no_sdp_fallback_on_large_problems(problem, monkeypatch):
     monkeypatch.setattr(dual_metric, "SDP_FALLBACK_MAX_N", 10)
-    with pytest.raises(SolverError, match=r"newton failed \(max_iterations\).*; then sdp skipped \(N = 30 > 10"):
+    with pytest.raises(SolverError, match=r"newton failed \(max_iterations\).*; then cvxpy skipped \(N = 30 > 10"):
         DualMetric(max_iter=2, allow_unidentifiable=True).fit(problem)

@@ -5,8 +5,8 @@ import pytest
 
 from dualid import OLS, WLS, DualMetric
 from dualid.errors import ConfigError, DataError
-from dualid.estimators.guards import guard_info
 from dualid.estimators.methods import METHODS, make_estimator
+from dualid.metric_guard import guard_info
 from tests.factories import drag_problem, random_chart
 
 # what each method measures against when no guard_reference is given
@@ -80,7 +80,7 @@ def test_a_reference_of_the_wrong_size_is_a_data_error(problem):
 
 def test_a_large_problem_is_guarded_on_evenly_strided_samples(problem, monkeypatch):
     """Above GUARD_SAMPLES the recorded guard is that of every k-th sample, and says how many it looked at."""
-    import dualid.estimators.metric_guard as mg
+    import dualid.metric_guard as mg
 
     prob, theta = problem
     monkeypatch.setattr(mg.guard_sample, "__defaults__", (30,))  # 80 samples > 30: every 3rd, 27 samples

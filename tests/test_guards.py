@@ -1,4 +1,4 @@
-"""The metric guard (estimators/guards.py): generalised eigenvalues of M_i(θ̂) against M_i(θ_ref)."""
+"""The metric guard (metric_guard.py; evaluation/guards.py): generalised eigenvalues of M_i(θ̂) against M_i(θ_ref)."""
 
 import numpy as np
 import pytest
@@ -6,7 +6,8 @@ import scipy.linalg
 
 from dualid import OLS, WLS, DualMetric
 from dualid.errors import ConfigError, MetricError
-from dualid.estimators.guards import DEFAULT_BOUND, Guarded, generalized_eigenvalues, guard_info, with_guard
+from dualid.evaluation.guards import Guarded, with_guard
+from dualid.metric_guard import DEFAULT_BOUND, generalized_eigenvalues, guard_info
 from tests.factories import drag_problem, random_chart
 from tests.test_newton import crazyflie_like, rigid_body_problem
 

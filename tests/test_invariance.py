@@ -67,9 +67,9 @@ def test_the_sdp_reference_is_invariant_to_its_accuracy(seed):
     """The interior-point SDP stops at a relative gap of ~1e-10: θ agrees to ~1e-5 on a flat optimum."""
     rng = np.random.default_rng(seed)
     problem, _ = drag_problem(rng, N=40, n=3, noise=0.3)
-    dm = DualMetric(solver="sdp").fit(problem)
+    dm = DualMetric(solver="cvxpy").fit(problem)
     for name, B in charts(rng, problem).items():
-        other = DualMetric(solver="sdp").fit(problem.in_coordinates(B))
+        other = DualMetric(solver="cvxpy").fit(problem.in_coordinates(B))
         assert rel(other.objective, dm.objective) < 1e-6, name
         assert rel(other.theta, dm.theta) < 1e-4, name
 
@@ -159,7 +159,7 @@ def test_sdp_and_newton_agree_to_1e6_in_every_chart(seed):
     newton = DualMetric(solver="newton").fit(problem)
     for name, B in {"identity": np.eye(problem.n), **charts(rng, problem)}.items():
         other = problem.in_coordinates(B)
-        sdp = DualMetric(solver="sdp", fallback=()).fit(other)
+        sdp = DualMetric(solver="cvxpy", fallback=()).fit(other)
         assert sdp.status == "optimal", name
         assert rel(sdp.objective, newton.objective) < 1e-6, name
         assert rel(other.Y @ sdp.theta, other.Y @ newton.theta) < 1e-6, name

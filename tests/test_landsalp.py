@@ -183,11 +183,11 @@ def test_estimators_fit_a_realistic_subsample_with_nonnegative_drag(realistic):
     problem = build_problem(realistic.model, list(realistic.train))
     idx = np.random.default_rng(0).choice(problem.N, size=200, replace=False)
     sub = problem.subset(np.sort(idx))
-    for est in (OLS(), EnergyLS(), DualMetric(solver="sdp")):
+    for est in (OLS(), EnergyLS(), DualMetric(solver="cvxpy")):
         res = est.fit(sub)
         assert np.all(res.theta[:9] >= -1e-6), (type(est).__name__, res.theta)
         assert MODEL.parameters.is_consistent(res.theta, tol=1e-6)
-    dm = DualMetric(solver="sdp").fit(sub).theta
+    dm = DualMetric(solver="cvxpy").fit(sub).theta
     # the dominant drags (longitudinal / lateral, N s/m) are recovered to within a factor of two
     big = [0, 1, 3, 4, 6]
     assert np.all(np.abs(np.log(dm[big] / THETA[big])) < np.log(2)), dm

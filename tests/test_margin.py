@@ -1,4 +1,4 @@
-"""The chart-invariant margin C_b(θ) ⪰ ε·C_b(θ_ref) (dualid.model.margin, estimators/margin.py).
+"""The chart-invariant margin C_b(θ) ⪰ ε·C_b(θ_ref) (dualid.model.margin, estimators/least_squares.py).
 
 Specifications: the cvxpy SDP and Newton agree with the margin active; M_i(θ̂) ⪰ ε·M_i(θ_ref) at θ̂ of every
 constrained method, at the training samples and at configurations the fit never saw; the same θ̂ in every chart
@@ -12,9 +12,9 @@ import pytest
 
 from dualid import DualMetric
 from dualid.errors import ConfigError, ModelError
-from dualid.estimators.guards import generalized_eigenvalues
-from dualid.estimators.margin import margin_reference, with_margin
+from dualid.estimators.least_squares import margin_reference, with_margin
 from dualid.estimators.methods import make_estimator
+from dualid.metric_guard import generalized_eigenvalues
 from dualid.model.consistency import feasible_set
 from dualid.model.parameters import ParameterSpace
 from tests.factories import drag_problem, random_chart
@@ -51,7 +51,7 @@ def test_sdp_and_newton_agree_with_the_margin_active(which, rigid):
     plain = DualMetric(allow_unidentifiable=True).fit(problem)
     shifted = margined(problem, binding_reference(problem))
     newton = DualMetric(solver="newton", allow_unidentifiable=True).fit(shifted)
-    sdp = DualMetric(solver="sdp", fallback=(), allow_unidentifiable=True).fit(shifted)
+    sdp = DualMetric(solver="cvxpy", fallback=(), allow_unidentifiable=True).fit(shifted)
     assert newton.status == "optimal" and sdp.status == "optimal"
     assert rel(sdp.objective, newton.objective) < 1e-6
     assert newton.objective > plain.objective * (1 + 1e-4)  # the margin binds ...

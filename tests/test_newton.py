@@ -1,7 +1,7 @@
 """The structure-exploiting Newton solver of the dual-metric problem, against the SDP reference.
 
 Specifications: f's gradient and Hessian against finite differences; the optimum against
-``DualMetric(solver="sdp")`` (objective within 1e-6 relative, θ when identifiable, predictions Yθ
+``DualMetric(solver="cvxpy")`` (objective within 1e-6 relative, θ when identifiable, predictions Yθ
 when not); active constraints; coordinate invariance; the documented errors.
 """
 
@@ -82,7 +82,7 @@ def factored_problem(N, n, p, d, seed, noise=0.1, M0=None) -> tuple[Identificati
 
 def fit_both(problem, **kw):
     newton = DualMetric(solver="newton", **kw).fit(problem)
-    sdp = DualMetric(solver="sdp", **kw).fit(problem)
+    sdp = DualMetric(solver="cvxpy", **kw).fit(problem)
     return newton, sdp
 
 
@@ -212,7 +212,7 @@ def test_objective_and_minimiser_are_invariant_to_the_chart():
 def test_unconstrained_problem_is_plain_newton():
     problem, _ = factored_problem(N=25, n=3, p=4, d=3, seed=9)
     free = DualMetric(solver="newton", constrained=False).fit(problem)
-    sdp = DualMetric(solver="sdp", constrained=False).fit(problem)
+    sdp = DualMetric(solver="cvxpy", constrained=False).fit(problem)
     assert free.status == "optimal" and free.info["duality_gap"] == 0.0
     np.testing.assert_allclose(free.objective, sdp.objective, rtol=1e-6)
 
@@ -258,7 +258,7 @@ def test_iteration_limit_raises_solver_error_naming_the_gap():
 
 def test_unknown_solver_name():
     problem = pan_tilt_problem(20, seed=0, theta=np.array([1.0, 0.2, 0.1]))
-    with pytest.raises(SolverOptionError, match=r"solver: expected one of \('newton', 'sdp', 'sdp_clarabel', 'sdp_scs'\), got 'qp'"):
+    with pytest.raises(SolverOptionError, match=r"solver must be one of \('newton', 'cvxpy'\), got 'qp'"):
         DualMetric(solver="qp").fit(problem)
 
 
@@ -270,7 +270,7 @@ def test_warm_start_from_a_subsample_starts_at_its_optimum_and_reaches_the_same_
     # the full solve starts at the subsample's optimum: f there, from an independent SDP fit of the
     # same strided subsample (the warm start solves it to 1e-4 only, hence rtol)
     sub = problem.subset(slice(0, None, problem.N // 25))
-    theta_sub = DualMetric(solver="sdp", allow_unidentifiable=True).fit(sub).theta
+    theta_sub = DualMetric(solver="cvxpy", allow_unidentifiable=True).fit(sub).theta
     f_sub = dual_metric_derivatives(problem, theta_sub, 0, 4096).f
     assert warm.info["objective_start"] == pytest.approx(f_sub, rel=1e-4)
     assert warm.info["objective_start"] < cold.info["objective_start"]
@@ -294,7 +294,7 @@ def test_a_failed_warm_start_is_recorded_and_the_cold_start_runs():
 def test_unconstrained_null_space_is_handled_without_failing():
     problem, _ = rigid_body_problem(crazyflie_like(), 40, seed=8, noise=0.05)
     newton = DualMetric(solver="newton", constrained=False, allow_unidentifiable=True).fit(problem)
-    sdp = DualMetric(solver="sdp", constrained=False, allow_unidentifiable=True).fit(problem)
+    sdp = DualMetric(solver="cvxpy", constrained=False, allow_unidentifiable=True).fit(problem)
     assert newton.status == "optimal"
     assert abs(newton.objective - sdp.objective) <= 1e-6 * sdp.objective
     np.testing.assert_allclose(problem.Y @ newton.theta, problem.Y @ sdp.theta, atol=1e-4 * np.abs(problem.Y @ sdp.theta).max())

@@ -1,10 +1,10 @@
-"""The chunk kernels (dualid.estimators.newton.kernels) against AffineMetric.apply_quad, and
+"""The chunk kernels (dualid.estimators.newton.objective) against AffineMetric.apply_quad, and
 AffineMetric.evaluate (with and without its symmetrisation) against M_i = Σ_b J_bᵀ (Σ_k θ_k E_k) J_b + M0_i by loops."""
 
 import numpy as np
 import pytest
 
-from dualid.estimators.newton.kernels import residual_jacobian
+from dualid.estimators.newton.objective import residual_jacobian
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.rigid_body import spatial_inertia_basis
 

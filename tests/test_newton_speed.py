@@ -6,10 +6,10 @@ import scipy.linalg
 
 from dualid import WLS, DualMetric
 from dualid.bench.runner import base_samples, build_problem
-from dualid.estimators.guard_reference import wls_reference
-from dualid.estimators.metric_guard import guard_info
-from dualid.estimators.statistics import statistics
-from dualid.model.consistency import _max_step_psd, _max_step_psd_batched, feasible_set
+from dualid.estimators.least_squares import wls_reference
+from dualid.estimators.newton.objective import statistics
+from dualid.metric_guard import guard_info
+from dualid.model.consistency import max_step_psd, max_step_psd_batched, feasible_set
 
 
 @pytest.fixture(scope="module")
@@ -28,10 +28,10 @@ def test_the_batched_max_step_is_the_generalised_eigenvalue_bound():
     dX = np.stack([0.5 * (A + A.T) for A in rng.standard_normal((5, 4, 4))])
     # reference: X + α dX ≻ 0 ⇔ α < −1/λ_min(dX, X), scipy's generalised symmetric eigenproblem per block
     lam = min(scipy.linalg.eigh(d, x, eigvals_only=True)[0] for x, d in zip(X, dX))
-    assert _max_step_psd_batched(X, dX) == pytest.approx(-1.0 / lam, rel=1e-10)
-    assert _max_step_psd(X[2], dX[2]) == pytest.approx(-1.0 / scipy.linalg.eigh(dX[2], X[2], eigvals_only=True)[0],
+    assert max_step_psd_batched(X, dX) == pytest.approx(-1.0 / lam, rel=1e-10)
+    assert max_step_psd(X[2], dX[2]) == pytest.approx(-1.0 / scipy.linalg.eigh(dX[2], X[2], eigvals_only=True)[0],
                                                        rel=1e-10)
-    assert _max_step_psd_batched(X, np.abs(dX) * 0 + np.eye(4)) == np.inf  # a PSD direction never leaves the cone
+    assert max_step_psd_batched(X, np.abs(dX) * 0 + np.eye(4)) == np.inf  # a PSD direction never leaves the cone
 
 
 def test_the_lmi_matrices_match_their_definitions(arm7):

@@ -55,7 +55,7 @@ def test_newton_names_the_constraint_only_parameters_that_grew(case):
 def test_bounded_base_link_newton_is_optimal_and_agrees_with_the_sdp(case):
     bounded = with_mass_bounds(case)
     newton = fit_dual_metric_newton(bounded)
-    sdp = DualMetric(solver="sdp", fallback=(), allow_unidentifiable=True).fit(bounded)
+    sdp = DualMetric(solver="cvxpy", fallback=(), allow_unidentifiable=True).fit(bounded)
     assert newton.status == "optimal" and newton.iterations <= 100
     assert abs(newton.objective - sdp.objective) <= 1e-6 * abs(sdp.objective)
 

@@ -8,9 +8,9 @@ import pytest
 
 from dualid.estimators.least_squares import WLS
 from dualid.estimators.methods import make_estimator
-from dualid.estimators.newton.noise_objective import noise_model_derivatives
 from dualid.estimators.noise_dm import NoiseModelDM
-from dualid.estimators.noise_level import estimate_noise
+from dualid.estimators.noise_model import estimate_noise
+from dualid.estimators.noise_model import noise_model_derivatives
 from tests.factories import drag_problem, random_chart
 
 
@@ -146,7 +146,7 @@ def test_torque_noise_alone_keeps_no_acceleration_noise_and_is_wls():
 
 def test_the_estimator_has_few_settings():
     assert [f.name for f in fields(NoiseModelDM)] == ["constrained", "allow_unidentifiable", "sigma_tau", "sigma_a",
-                                                       "tol", "max_iter", "chunk"]
+                                                       "tol", "max_iter", "chunk", "solver", "cvxpy_solver"]
 
 
 def test_fixed_noise_levels_are_used_and_recorded():

@@ -1,6 +1,6 @@
 """The written files say which parameter the data do not determine: a mass dm's fit completed (the link next to the
 fixed base of the DFKI pendubot turns about a fixed axis; its mass only loosens its consistency block:
-estimators.newton.closure) carries an XML comment on its body in the URDF and the MJCF, in closure.NOT_DETERMINED's
+model.closure) carries an XML comment on its body in the URDF and the MJCF, in closure.NOT_DETERMINED's
 words, and its parameters.yaml ``bodies`` entry says ``not_determined_by_data: [Joint1.m]``; the other body has
 neither. Before, the three outputs carried the completed value (0.99 kg on this data; 4.9e7 kg on the
 example's full runs) with no note."""
@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from dualid.errors import ModelError
-from dualid.estimators.newton.closure import NOT_DETERMINED
+from dualid.model.closure import NOT_DETERMINED
 from dualid.model.mjcf import identified_mjcf
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.model.urdf import identified_urdf

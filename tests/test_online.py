@@ -8,8 +8,8 @@ import pytest
 
 from dualid.errors import ConfigError, ModelError
 from dualid.estimators.least_squares import OLS, WLS
+from dualid.estimators.newton.objective import statistics
 from dualid.estimators.quadratic_fit import fit_quadratic
-from dualid.estimators.statistics import statistics
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.online import ChiSquareDetector, RecursiveFit, restrict
 from dualid.problem import IdentificationProblem

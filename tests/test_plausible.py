@@ -74,7 +74,7 @@ def test_matches_an_independent_formulation():
     # the same minimum; the minimiser to 1e-3 (the divergence is nearly flat along Joint1.Ixx + Joint1.Ia)
     const = sum(np.linalg.slogdet(b.constraint_matrix(theta0))[1] - b.constraint_basis.shape[1]
                 for b in problem.parameters.blocks)
-    # rel 1e-4: with θ̂ the certified OLS fit (estimators.certify) Clarabel's reference ends 1.1e-5 above the result
+    # rel 1e-4: with θ̂ the certified OLS fit (estimators.quadratic_newton.polish) Clarabel's reference ends 1.1e-5 above the result
     assert result.divergence == pytest.approx(reference.value + const, rel=1e-4)
     assert result.divergence <= reference.value + const + 1e-9  # never worse than the reference
     np.testing.assert_allclose(result.theta, th.value, rtol=1e-3, atol=1e-6)

@@ -1,4 +1,4 @@
-"""The chart in which the quadratic and regularized fits reach cvxpy (estimators.quadratic_chart).
+"""The chart in which the quadratic and regularized fits reach cvxpy (estimators.quadratic_fit.signal_scale).
 
 The stress corpus had Clarabel stop with a numerical error ("CLARABEL failed") on two feasible fits of the same
 3-DoF arm with one coordinate in other units: the energy fit at ×1e-6 and the pullback fit with the constrained
@@ -15,9 +15,9 @@ import pytest
 
 from dualid.bench.corpus import cases
 from dualid.estimators.methods import make_estimator
-from dualid.estimators.quadratic_chart import signal_scale
+from dualid.estimators.newton.objective import energy_statistics, statistics
+from dualid.estimators.quadratic_fit import signal_scale
 from dualid.estimators.quadratic_newton import fit_quadratic_newton
-from dualid.estimators.statistics import energy_statistics, statistics
 from dualid.model.consistency import prior_blocks, pullback_metric
 
 CASES = {c.name: c for c in cases(large=False)}

@@ -27,7 +27,7 @@ def test_every_estimator_keeps_every_pseudo_inertia_psd(noisy_arm):
     free = OLS(constrained=False, allow_unidentifiable=True).fit(problem)
     assert min(free.parameters.consistency_margins(free.theta).values()) < 0  # noise breaks consistency
     theta0 = model.nominal * 1.2
-    estimators = [OLS(), WLS(), EnergyLS(), DualMetric(solver="sdp"), DualMetric(solver="newton"),
+    estimators = [OLS(), WLS(), EnergyLS(), DualMetric(solver="cvxpy"), DualMetric(solver="newton"),
                   RegularizedWLS(theta0=theta0, gamma=1e-3), RegularizedWLS(theta0=theta0, gamma=1e-3, regularizer="pullback")]
     for est in estimators:
         result = type(est)(**{**est.__dict__, "allow_unidentifiable": True}).fit(problem)
@@ -39,7 +39,7 @@ def test_every_estimator_keeps_every_pseudo_inertia_psd(noisy_arm):
 
 def test_dual_metric_solvers_agree_on_the_arm(noisy_arm):
     _, problem = noisy_arm
-    sdp = DualMetric(solver="sdp", allow_unidentifiable=True).fit(problem)
+    sdp = DualMetric(solver="cvxpy", allow_unidentifiable=True).fit(problem)
     newton = DualMetric(solver="newton", allow_unidentifiable=True).fit(problem)
     assert sdp.solver.startswith("sdp/") and newton.solver == "newton"  # two different solvers
     # 13 unidentifiable directions and near-singular bodies: both stop within the target 1e-6 of each other

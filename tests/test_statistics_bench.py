@@ -105,8 +105,8 @@ def test_driver_parses_builtin_and_plugin_methods():
     spec.loader.exec_module(driver)
     label, est = driver.make_method("dualid.estimators.least_squares:OLS")
     assert label == "ols" and est.allow_unidentifiable  # set when the class accepts it
-    label, est = driver.make_method('mine=dualid.estimators.dual_metric:DualMetric:{"solver": "sdp"}')
-    assert label == "mine" and est.solver == "sdp"
+    label, est = driver.make_method('mine=dualid.estimators.dual_metric:DualMetric:{"solver": "cvxpy"}')
+    assert label == "mine" and est.solver == "cvxpy"
     assert driver._split_methods('ols,a=m:C:{"x": 1, "y": 2},wls') == ["ols", 'a=m:C:{"x": 1, "y": 2}', "wls"]
     with pytest.raises(ValueError):
         driver.make_method("nonsense")

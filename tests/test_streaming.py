@@ -6,8 +6,8 @@ import pytest
 
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.newton import dual_metric_derivatives
+from dualid.estimators.newton.objective import energy_statistics, statistics
 from dualid.estimators.newton.weighted import weighted_statistics
-from dualid.estimators.statistics import energy_statistics, statistics
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.problem import IdentificationProblem
 from dualid.streaming import ArraySource, ChunkedProblem, ParquetSource
@@ -135,13 +135,20 @@ def test_fit_stream_cli_prints_the_fit_and_its_passes(tmp_path):
         cols.update({f"{name}_{c}": x[:, k] for k, c in enumerate(model.coordinates)})
     pd.DataFrame(cols).to_parquet(tmp_path / "run.parquet", index=False)
     result = CliRunner().invoke(app, ["fit-stream", "--model", str(urdf), "--data", str(tmp_path / "run.parquet"),
-                                      "--method", "ols", "--chunk", "128", "--allow-unidentifiable"])
+                                      "--method", "ols", "--chunk", "128"])
     assert result.exit_code == 0, result.output
+    # the masses alone are not identifiable here: as dualid fit, one minimiser, and a note naming them
+    assert "note: the data determine 6 of 20 parameter combinations" in result.output
+    assert "Joint2.m" in result.output.split("note:")[1].split("ols:")[0]
     assert "ols: optimal" in result.output and "N = 600" in result.output and "passes over the data" in result.output
     # exact data (the masses alone are not identifiable here, so no parameter is checked): the fit is exact
     objective = float(result.output.split("objective ")[1].split(",")[0])
     assert objective < 1e-10 * float(np.sum(tau**2))
     assert "Joint2.m" in result.output
+    strict = CliRunner().invoke(app, ["fit-stream", "--model", str(urdf), "--data", str(tmp_path / "run.parquet"),
+                                      "--method", "ols", "--strict"])
+    assert strict.exit_code == 1 and "--strict: the data determine 6 of 20" in strict.output
+    assert "ols: optimal" not in strict.output and "Traceback" not in strict.output
 
 
 @pytest.mark.parametrize("key", ["logdet", "pullback"])

@@ -118,7 +118,7 @@ def test_boundary_prior_fails_without_the_lift_and_is_solved_and_recorded_with_i
         except SolverError:
             failed, chain = True, ""
         # Clarabel inaccurate (raw-regressor chart) or failed (the weighted fit's own chart,
-        # estimators.quadratic_chart): either way not optimal on its own
+        # estimators.quadratic_fit.signal_scale): either way not optimal on its own
         assert chain.startswith(("CLARABEL returned optimal_inaccurate", "CLARABEL failed (solver_error)")) or (
             failed and not chain), chain  # (no chain: the fit raised)
         if kind == "logdet":  # and the fallback solves it

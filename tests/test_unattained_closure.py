@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from dualid.errors import SolverError
-from dualid.estimators.newton.closure import close, complete
 from dualid.estimators.newton.weighted import fit_weighted_newton
+from dualid.model.closure import close, complete
 from dualid.model.consistency import feasible_set
 from dualid.model.metric import AffineMetric
 from dualid.model.parameters import rigid_body_space
@@ -117,8 +117,8 @@ def test_a_cvxpy_point_below_the_infimum_outside_the_set_does_not_beat_the_close
     (seen on these data: j0.m = 1.7e13 kg, Ixx = Iyy = 3.4e12, Izz = −7.7e-5), a point inside the set to a tolerance
     relative to that size but outside it exactly (Izz < 0), with f below the infimum. Such a point used to be kept as
     'certified by newton', beside a projected-mass note that described the closed run's θ, not the one returned."""
-    from dualid.estimators.certify import polish
-    from dualid.estimators.statistics import statistics
+    from dualid.estimators.quadratic_newton import polish
+    from dualid.estimators.newton.objective import statistics
     from dualid.model.consistency import feasible_set
 
     problem, names = _problem()

@@ -118,7 +118,7 @@ def test_dm_without_acceleration_noise_has_wls_intervals_with_the_same_covarianc
 def test_dm_per_sample_gradients_sum_to_its_objective_gradient():
     """The sandwich's per-sample gradients of dm's objective (noise model fixed) add up to the gradient of
     Σ r_iᵀ(Σ_τ + M_i(θ)Σ_aM_i(θ))⁻¹r_i, checked by central differences at a point away from the optimum."""
-    from dualid.estimators.newton.noise_objective import noise_model_objective
+    from dualid.estimators.noise_model import noise_model_objective
     from dualid.evaluation.objective_terms import derivatives
 
     problem, theta = drag_problem(np.random.default_rng(5), N=60, noise=0.1)

@@ -258,7 +258,7 @@ def test_report_says_what_dms_noise_model_estimated(written):
     assert f"dm: noise model (estimated): torque noise sd [{np.sqrt(record['sigma_tau'][0][0]):.3g}, " in text
     assert f"result: {record['choice']}" in text
     # Link 1 turns about a fixed axis: its mass only loosens its consistency block and the infimum is approached as
-    # it grows (estimators.newton.closure); the report names the completed value instead of hiding it
+    # it grows (model.closure); the report names the completed value instead of hiding it
     assert re.search(r"dm: Joint1\.m = [0-9.e+-]+: set to the smallest value consistent", text)
     # a note several methods share is shown once, naming them all
     from dualid.report.fit_report import PROJECTED

@@ -52,7 +52,8 @@ _LAZY = {
     **dict.fromkeys(("OLS", "WLS", "EnergyLS", "RegularizedWLS"), "dualid.estimators.least_squares"),
     "DualMetric": "dualid.estimators.dual_metric",
     "NoiseModelDM": "dualid.estimators.noise_dm",
-    **dict.fromkeys(("Guarded", "guard_info"), "dualid.estimators.guards"),
+    "Guarded": "dualid.evaluation.guards",
+    "guard_info": "dualid.metric_guard",
     "IdentificationResult": "dualid.estimators.result",
     **dict.fromkeys(("BaseUncertainty", "base_uncertainty", "bootstrap"), "dualid.evaluation.uncertainty"),
     **dict.fromkeys(("METHODS", "Method", "make_estimator"), "dualid.estimators.methods"),
@@ -106,7 +107,8 @@ if TYPE_CHECKING:  # static checkers and editors see the names without the runti
     from dualid.data.preprocessing import differentiate, filter_lowpass, preprocess, resample, trim
     from dualid.data.trajectory import Trajectory
     from dualid.estimators.dual_metric import DualMetric
-    from dualid.estimators.guards import Guarded, guard_info
+    from dualid.metric_guard import guard_info
+    from dualid.evaluation.guards import Guarded
     from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS
     from dualid.estimators.methods import METHODS, Method, make_estimator
     from dualid.estimators.noise_dm import NoiseModelDM

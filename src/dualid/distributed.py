@@ -8,8 +8,9 @@ worker reads its partition, builds the regressor and the metric chunk by chunk f
 same ``ChunkedProblem`` code as a streamed fit on one machine) and returns its sums (p×p floats); the client adds
 them in the partitions' order. Y never travels, and a worker holds one partition's raw samples and one chunk's Y.
 A worker lost mid-pass only loses its tasks: the scheduler runs them again on another worker, and the sums are the
-same. A pass that is not marked (none of OLS, WLS, energy or dm-paper needs one) reads the partitions on the client
-(``client_passes`` counts them).
+same. ``subset`` (the subsamples of ``dm``'s noise levels and of the metric guard) also runs on the workers and
+returns only the selected samples. A pass that is not marked (none of OLS, WLS, energy, dm-paper or dm needs one)
+reads the partitions on the client (``client_passes`` counts them).
 """
 
 from __future__ import annotations
@@ -22,8 +23,8 @@ import numpy as np
 
 from dualid.errors import DataError
 from dualid.model.base import Model
-from dualid.problem import add_sums
-from dualid.streaming import ArraySource, Chunk, ChunkedProblem, ParquetSource
+from dualid.problem import IdentificationProblem, add_sums
+from dualid.streaming import ArraySource, Chunk, ChunkedProblem, ParquetSource, take_rows
 
 
 def frame_columns(model: Model, has_a: bool = True) -> list[str]:
@@ -108,24 +109,27 @@ class DaskProblem(ChunkedProblem):
         """Passes that read the partitions on the client (not spread over the workers)."""
         return self._passes[0] - self._spread[0]
 
-    def _map(self, kernel, args: tuple, kwargs: dict) -> list:
+    def _map(self, kernel, args: tuple | list, kwargs: dict) -> list:
         """kernel(partition, *args, **kwargs) for every partition, one task each on the workers; the values in the
-        partitions' order. A task whose worker dies is run again by the scheduler on another worker."""
+        partitions' order (``args``: one tuple for all, or a list of one tuple per partition, None to skip one).
+        A task whose worker dies is run again by the scheduler on another worker."""
         import dask
         from distributed import as_completed
 
         self._passes[0] += 1
         self._spread[0] += 1
         source = self.source
+        each = args if isinstance(args, list) else [args] * len(source.parts)
         model = dask.delayed(self.model, traverse=False)  # in the graph once per pass, not once per task
-        tasks = [dask.delayed(_on_partition, pure=False)(kernel, model, part, source.chunk, args, kwargs)
-                 for part in source.parts]
+        tasks = [dask.delayed(_on_partition, pure=False)(kernel, model, part, source.chunk, a, kwargs)
+                 for part, a in zip(source.parts, each) if a is not None]
+        sizes = [size for size, a in zip(source.sizes, each) if a is not None]
         futures = self.client.compute(tasks)
         index, done = {f.key: i for i, f in enumerate(futures)}, 0
         for future in as_completed(futures):
             if future.status == "error":
                 future.result()  # raises the kernel's own exception (e.g. a metric that is not positive definite)
-            done += source.sizes[index[future.key]]
+            done += sizes[index[future.key]]
             if self.progress is not None:
                 self.progress(self._passes[0], done, self.N)
         return self.client.gather(futures)
@@ -140,6 +144,18 @@ class DaskProblem(ChunkedProblem):
     def map_concat(self, kernel, *args, **kwargs) -> np.ndarray:
         """A ``stacked`` kernel's rows, concatenated in the partitions' order."""
         return np.concatenate(self._map(kernel, args, kwargs))
+
+    def subset(self, idx: slice) -> IdentificationProblem:
+        """The samples idx (a slice) in memory on the client: each worker reads its partition and returns only
+        its selected samples (one pass; the subsamples of ``dm``'s noise levels and of the metric guard)."""
+        if not isinstance(idx, slice):
+            raise DataError(f"DaskProblem.subset: expected a slice of samples, got {type(idx).__name__}")
+        wanted, starts = np.arange(self.N)[idx], np.cumsum((0,) + self.source.sizes)
+        local = [wanted[(wanted >= a) & (wanted < b)] - a for a, b in zip(starts[:-1], starts[1:])]
+        parts = self._map(take_rows, [(rows,) if len(rows) else None for rows in local], {})
+        if not parts:
+            raise DataError(f"DaskProblem.subset: the slice {idx} selects no samples of {self.N}")
+        return IdentificationProblem.concatenate(parts)
 
 
 def local_client(workers: int, threads: int = 1):

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from dualid.errors import DataError
+from dualid.errors import DataError, IdentifiabilityError
 from dualid.linalg import rank_from_singular_values
 from dualid.model.parameters import ParameterSpace
 
@@ -278,3 +278,27 @@ def identifiability(A: np.ndarray, parameters: ParameterSpace) -> Identifiabilit
         names=parameters.names,
         base=base_parameters(A, parameters, rank),
     )
+
+
+def check_identifiable(problem, rank: int | None = None, what: str = "regressor") -> None:
+    """Raise IdentifiabilityError when the data of ``problem`` (an IdentificationProblem) do not determine θ (too
+    few equations or rank < p): the estimators' check before a fit."""
+    N, n, p = problem.N, problem.n, problem.p
+    if N * n < p:
+        raise IdentifiabilityError(
+            f"too few samples: {N} samples × {n} coordinates = {N * n} equations for {p} parameters; "
+            f"need at least {int(np.ceil(p / n))} exciting samples (or pass allow_unidentifiable=True)"
+        )
+    ident = None
+    if rank is None:
+        ident = problem.identifiability()
+        rank = ident.rank
+    if rank < p:
+        ident = ident or problem.identifiability()  # the null space, for the message
+        raise IdentifiabilityError(
+            f"the {what} has rank {rank} < {p} parameters, so θ is not unique. "
+            f"Not identifiable: {', '.join(ident.unidentifiable) or '(combinations below)'}.\n"
+            f"{ident.describe()}\n"
+            "Excite the system more, fix or regularize these parameters, or pass allow_unidentifiable=True "
+            "to accept one of the minimisers."
+        )

@@ -6,6 +6,9 @@ For a Gram (normal) matrix H = AᵀA the singular values are √λ, so the same 
 λ > RANK_RTOL² λ_max after the matching diagonal (Jacobi) scaling of H. The value sits above the
 resolution of a Gram matrix in double precision (√eps ≈ 1.5e-8 relative in σ), so the rank is
 the same whether it is computed from Y or from YᵀWY.
+
+Also the batched kernels for many tiny positive-definite matrices (one per sample): Cholesky, triangular inverse
+and forward substitution, vectorised over the samples.
 """
 
 from __future__ import annotations
@@ -50,3 +53,74 @@ def pinv_psd(H: np.ndarray) -> tuple[np.ndarray, int]:
     w, U, keep = gram_eigh(H / np.outer(d, d))
     Hs_pinv = (U[:, keep] / w[keep]) @ U[:, keep].T
     return Hs_pinv / np.outer(d, d), int(keep.sum())
+
+
+class NotPositiveDefinite(Exception):
+    """A matrix of a batch is not positive definite (e.g. some M_i(θ): θ outside an objective's domain)."""
+
+
+# Per-sample matrices are tiny (n ≲ 10) and numerous, where LAPACK's per-matrix calls are slow: the
+# kernels below loop over the small dimensions and vectorise over the samples of a chunk instead.
+def cholesky_batch(M: np.ndarray) -> np.ndarray:
+    """L (c, n, n) lower triangular with M_i = L_i L_iᵀ; raises NotPositiveDefinite."""
+    try:
+        L = np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        raise NotPositiveDefinite from None
+    if not np.all(np.isfinite(np.diagonal(L, axis1=1, axis2=2))):
+        raise NotPositiveDefinite
+    return L
+
+
+def tri_inverse(L: np.ndarray) -> np.ndarray:
+    """L⁻¹ (c, n, n) of lower-triangular L, by substitution vectorised over the samples."""
+    Lt = np.ascontiguousarray(np.moveaxis(L, 0, -1))  # (n, n, c): contiguous per-entry sample vectors
+    n = Lt.shape[0]
+    X = np.zeros_like(Lt)
+    inv_diag = 1.0 / np.diagonal(Lt).T  # (n, c)
+    for a in range(n):
+        X[a, a] = inv_diag[a]
+        for b in range(a):
+            acc = Lt[a, b] * X[b, b]
+            for k in range(b + 1, a):
+                acc += Lt[a, k] * X[k, b]
+            X[a, b] = -acc * inv_diag[a]
+    return np.moveaxis(X, -1, 0)
+
+
+def forward_substitute(L: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """L⁻¹ r for r (c, n)."""
+    z = np.empty_like(r)
+    for a in range(L.shape[1]):
+        acc = r[:, a].copy()
+        for b in range(a):
+            acc -= L[:, a, b] * z[:, b]
+        z[:, a] = acc / L[:, a, a]
+    return z
+
+
+def solve_psd(K: np.ndarray, b: np.ndarray, rtol: float = 1e-13) -> np.ndarray:
+    """K⁺ b for K ⪰ 0 (Jacobi-scaled; directions with eigenvalue < rtol·max are left out)."""
+    d = jacobi_psd(K)
+    lam, U = np.linalg.eigh(K / np.outer(d, d))
+    keep = lam > rtol * max(lam.max(), 1e-300)
+    x = U[:, keep] @ ((U[:, keep].T @ (b / d)) / lam[keep])
+    return x / d
+
+
+def jacobi_psd(K: np.ndarray) -> np.ndarray:
+    """√diag(K) of a PSD K, with (numerically) empty columns given the largest scale so they drop out."""
+    d = np.sqrt(np.abs(np.diag(K)))
+    top = d.max() if d.size and d.max() > 0 else 1.0
+    d[d <= 1e-7 * top] = top
+    return d
+
+
+def positive_definite(K: np.ndarray, rtol: float = 1e-10) -> bool:
+    """Is K (Jacobi-scaled) positive definite with a margin of rtol? A Cholesky attempt: the inertia test."""
+    d = jacobi_psd(K)
+    try:
+        np.linalg.cholesky(K / np.outer(d, d) - rtol * np.eye(len(K)))
+    except np.linalg.LinAlgError:
+        return False
+    return True

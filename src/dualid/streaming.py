@@ -211,21 +211,26 @@ class ChunkedProblem:
         """The samples idx (a slice, e.g. every k-th) collected into an in-memory problem (one pass)."""
         if not isinstance(idx, slice):
             raise DataError(f"ChunkedProblem.subset: expected a slice of samples, got {type(idx).__name__}")
-        wanted = np.arange(self.N)[idx]
-        parts, offset = [], 0
-        for block in self.blocks():
-            local = wanted[(wanted >= offset) & (wanted < offset + block.N)] - offset
-            if len(local):
-                parts.append(block.subset(local))
-            offset += block.N
-        if not parts:
+        taken = take_rows(self, np.arange(self.N)[idx])
+        if taken is None:
             raise DataError(f"ChunkedProblem.subset: the slice {idx} selects no samples of {self.N}")
-        return IdentificationProblem.concatenate(parts)
+        return taken
 
     def materialise(self) -> IdentificationProblem:
         """All samples in memory (for the solvers that need them at once, e.g. the SDP)."""
         return self.subset(slice(None))
 
+
+
+def take_rows(problem: "ChunkedProblem", wanted: np.ndarray) -> IdentificationProblem | None:
+    """The samples ``wanted`` (ascending indices into the problem) in memory, in one pass; None if there are none."""
+    parts, offset = [], 0
+    for block in problem.blocks():
+        local = wanted[(wanted >= offset) & (wanted < offset + block.N)] - offset
+        if len(local):
+            parts.append(block.subset(local))
+        offset += block.N
+    return IdentificationProblem.concatenate(parts) if parts else None
 
 
 # The passes above as sums (or rows) per sample, so that a problem spread over partitions (``dualid.distributed``)

@@ -46,7 +46,7 @@ def _quadratic_reference(est, problem, start=None):
     """(objective, θ) of est's problem solved by dualid's interior point on the same statistics."""
     from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS, covariance_weight
     from dualid.estimators.quadratic_newton import fit_quadratic_newton
-    from dualid.estimators.statistics import energy_statistics, statistics
+    from dualid.estimators.newton.objective import energy_statistics, statistics
     from dualid.model.consistency import regularizer_value
     from dualid.model.prior_lift import lift_prior
 
@@ -103,7 +103,7 @@ def fits(problem, theta_true, sdp: bool = True, prior_seed: int = 0, sdp_max_n: 
             same = {}  # the fit's own weights: SCS's pilot OLS would give slightly different ones (another problem)
             if r is not None and "covariance_matrix" in r.info and hasattr(est, "covariance"):
                 same["covariance"] = np.asarray(r.info["covariance_matrix"])
-            scs, _ = _record(dataclasses.replace(est, solver="SCS", solver_options=SCS_TIGHT, **same), problem)
+            scs, _ = _record(dataclasses.replace(est, solver="cvxpy", cvxpy_solver="SCS", solver_options=SCS_TIGHT, **same), problem)
             if scs is not None and scs.status == "optimal" and scs.solver == "SCS":
                 f_ref, th_ref, row["reference"] = float(scs.objective), np.asarray(scs.theta), "SCS"
             elif scs is not None:  # SCS's end point polished by the interior point (a different start than the fit's)
@@ -146,7 +146,7 @@ def fits(problem, theta_true, sdp: bool = True, prior_seed: int = 0, sdp_max_n: 
     nrow.update(method="dm-paper", variant="", solver_choice="newton")
     rows.append(nrow)
     if sdp and problem.N <= sdp_max_n:
-        s, srow = _record(DualMetric(solver="sdp_clarabel", fallback=(), **kw), problem)
+        s, srow = _record(DualMetric(solver="cvxpy", fallback=(), **kw), problem)
         srow.update(method="dm-paper", variant="", solver_choice="sdp_clarabel")
         rows.append(srow)
         if s is not None and s.status == "optimal":

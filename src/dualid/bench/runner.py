@@ -188,9 +188,9 @@ def _estimator(solver: str):
     if solver == "newton":
         return DualMetric(solver="newton", allow_unidentifiable=True)
     if solver == "sdp_clarabel":
-        return DualMetric(solver="sdp", sdp_solver="CLARABEL", allow_unidentifiable=True)
+        return DualMetric(solver="cvxpy", cvxpy_solver="CLARABEL", allow_unidentifiable=True)
     if solver == "sdp_scs":
-        return DualMetric(solver="sdp", sdp_solver="SCS", allow_unidentifiable=True)
+        return DualMetric(solver="cvxpy", cvxpy_solver="SCS", allow_unidentifiable=True)
     if solver == "ols_constrained":
         return OLS(allow_unidentifiable=True)
     raise ConfigError(f"unknown solver {solver!r}; expected one of {', '.join(SOLVERS)}")

@@ -57,7 +57,8 @@ def _config(config: Optional[Path], model: Optional[Path], data: List[Path]):
 
 
 def _solver_overrides(cfg, flags: List[str]):
-    """cfg.solver with each --solver METHOD=NAME merged in (None when no flag was given)."""
+    """cfg.solver with each --solver METHOD=SOLVER merged in (None when no flag was given); SOLVER "cvxpy:NAME" also
+    sets the estimator's cvxpy_solver."""
     from dualid.errors import ConfigError
 
     if not flags:
@@ -66,8 +67,11 @@ def _solver_overrides(cfg, flags: List[str]):
     for flag in flags:
         method, sep, name = flag.partition("=")
         if not sep or not method or not name:
-            raise ConfigError(f"--solver: expected METHOD=SOLVER (e.g. dm-paper=sdp), got {flag!r}")
+            raise ConfigError(f"--solver: expected METHOD=SOLVER (e.g. dm-paper=cvxpy), got {flag!r}")
+        name, colon, backend = name.partition(":")
         options.setdefault(method, {})["solver"] = name
+        if colon:
+            options[method]["cvxpy_solver"] = backend
     return tuple((m, tuple(sorted(o.items()))) for m, o in options.items())
 
 
@@ -78,8 +82,9 @@ def fit(
                                 "repeatable"),
     test: List[Path] = typer.Option([], "--test", help="held-out log for validation; repeatable"),
     method: List[str] = typer.Option([], "--method", help="ols, wls, energy, logdet, pullback, dm-paper or dm; repeatable"),
-    solver: List[str] = typer.Option([], "--solver", help="METHOD=SOLVER: dm-paper=newton or dm-paper=sdp, wls=CLARABEL or "
-                                     "wls=SCS, …; repeatable (more options: 'solver:' in the config)"),
+    solver: List[str] = typer.Option([], "--solver", help="METHOD=SOLVER, SOLVER newton (dualid's interior point) or cvxpy "
+                                     "(the conic reference; cvxpy:SCS for SCS): dm-paper=cvxpy, wls=newton, "
+                                     "wls=cvxpy:SCS, …; repeatable (more options: 'solver:' in the config)"),
     config: Optional[Path] = typer.Option(None, "--config", help="fit.yaml (columns, preprocessing, ...); flags override it"),
     out: Optional[Path] = typer.Option(None, "--out", help="output directory"),
     force: bool = typer.Option(False, "--force", metavar=FLAG, help="write into an existing non-empty output directory"),

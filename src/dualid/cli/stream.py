@@ -10,7 +10,9 @@ from typing import Optional
 import typer
 
 from dualid.cli.app import FLAG, app
-from dualid.cli.common import console, fail, print_warning
+from rich.text import Text
+
+from dualid.cli.common import EXIT_FAILED, console, fail, print_warning
 
 EXPLAINED = 0.5  # warn when the fit explains less than this share of the effort's variance (R²)
 
@@ -27,8 +29,10 @@ def fit_stream(
     method: str = typer.Option("ols", "--method", help="ols, ols_unconstrained, wls, energy, dm, dm-paper"),
     floating_base: bool = typer.Option(False, "--floating-base", metavar=FLAG, help="the URDF's root is free"),
     chunk: int = typer.Option(65536, "--chunk", help="samples per chunk (memory: chunk·n·p floats for Y)"),
-    allow_unidentifiable: bool = typer.Option(False, "--allow-unidentifiable", metavar=FLAG,
-                                              help="accept one minimiser when the data do not determine θ"),
+    strict: bool = typer.Option(False, "--strict", metavar=FLAG,
+                                help="fail when the data do not determine every parameter (by default, as dualid "
+                                     "fit does, the fit returns one minimiser on the closed feasible set and says "
+                                     "which parameters the data leave open)"),
     workers: int = typer.Option(0, "--workers", help="run the passes on a local Dask cluster of this many worker "
                                 "processes (needs dualid[distributed])"),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="run the passes on the Dask cluster whose "
@@ -47,7 +51,7 @@ def fit_stream(
         fail(f"--chunk: expected a positive number of samples, got {chunk}")
     rb = RigidBodyModel.from_urdf(model, floating_base=floating_base)
     if workers or scheduler:
-        _fit_spread(rb, data, method, chunk, allow_unidentifiable, workers, scheduler, config)
+        _fit_spread(rb, data, method, chunk, strict, workers, scheduler, config)
         return
     if len(data) != 1:
         fail(f"--data: {len(data)} files given; several files are read by a Dask cluster (--workers N or --scheduler)")
@@ -56,7 +60,7 @@ def fit_stream(
     if source.N < 2 or source.N * rb.nv < rb.parameters.p:
         fail(f"--data {data}: {source.N} sample{'s' * (source.N != 1)} × {rb.nv} coordinates = {source.N * rb.nv} "
              f"equations for {rb.parameters.p} parameters; a fit needs more samples")
-    _fit_and_print(rb, method, allow_unidentifiable, lambda report: ChunkedProblem(rb, source, report))
+    _fit_and_print(rb, method, strict, lambda report: ChunkedProblem(rb, source, report))
 
 
 def open_source(rb, data: Path, config: Optional[Path], chunk: int, log_suffixes: tuple[str, ...] = ()):
@@ -76,7 +80,7 @@ def open_source(rb, data: Path, config: Optional[Path], chunk: int, log_suffixes
     return ParquetSource(data, rb.coordinates, rb.nq, chunk=chunk)
 
 
-def _fit_spread(rb, data: list[Path], method: str, chunk: int, allow_unidentifiable: bool, workers: int,
+def _fit_spread(rb, data: list[Path], method: str, chunk: int, strict: bool, workers: int,
                 scheduler: Optional[str], config: Optional[Path]) -> None:
     """The fit's passes as one task per Parquet file on a Dask cluster (local, or at ``scheduler``)."""
     try:
@@ -99,7 +103,7 @@ def _fit_spread(rb, data: list[Path], method: str, chunk: int, allow_unidentifia
     try:
         typer.echo(f"Dask cluster: {len(client.scheduler_info()['workers'])} workers "
                    f"({'local' if workers else scheduler}), {len(data)} file{'s' * (len(data) != 1)}")
-        _fit_and_print(rb, method, allow_unidentifiable,
+        _fit_and_print(rb, method, strict,
                        lambda report: DaskProblem.from_files(rb, data, client, chunk=chunk, progress=report))
     finally:
         cluster = client.cluster if workers else None
@@ -108,13 +112,13 @@ def _fit_spread(rb, data: list[Path], method: str, chunk: int, allow_unidentifia
             cluster.close()
 
 
-def _fit_and_print(rb, method: str, allow_unidentifiable: bool, make_problem) -> None:
+def _fit_and_print(rb, method: str, strict: bool, make_problem) -> None:
     """Fit ``make_problem(progress)`` with one progress bar per pass; print θ̂, the objective, the passes, R²."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from dualid.estimators.methods import make_estimator
 
-    estimator = make_estimator(method, allow_unidentifiable=allow_unidentifiable)
+    estimator = make_estimator(method, allow_unidentifiable=True)
     columns = (TextColumn("{task.description}", markup=False), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     with Progress(*columns, console=console) as progress:
         tasks: dict[int, int] = {}
@@ -125,9 +129,20 @@ def _fit_and_print(rb, method: str, allow_unidentifiable: bool, make_problem) ->
             progress.update(tasks[k], completed=done)
 
         problem = make_problem(report)
+        ident = problem.identifiability()
+        if ident.rank < problem.p and strict:
+            progress.stop()
+            fail(f"--strict: the data determine {ident.rank} of {problem.p} parameter combinations, not θ; "
+                 f"not identifiable on these data: {', '.join(ident.unidentifiable) or '(combinations only)'}", EXIT_FAILED)
         t0 = time.perf_counter()
         result = estimator.fit(problem)
         wall = time.perf_counter() - t0
+    if ident.rank < problem.p:
+        console.print(Text(f"note: the data determine {ident.rank} of {problem.p} parameter combinations (base "
+                           f"parameters); θ̂ is one minimiser on the closed feasible set. Not identifiable on these data: "
+                           f"{', '.join(ident.unidentifiable) or '(combinations only)'}. dualid fit makes such "
+                           "parameters plausible against the URDF's inertials; --strict fails here instead."),
+                      highlight=False)
     typer.echo(f"{method}: {result.status} ({result.solver}), objective {result.objective:.10g}, "
                f"N = {problem.N:,}, {problem.passes} passes over the data, {wall:.1f} s")
     for name, value in result.named().items():

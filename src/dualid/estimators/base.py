@@ -16,15 +16,27 @@ from typing import Any
 
 import numpy as np
 
-from dualid.errors import ConfigError, ConsistencyError, IdentifiabilityError, SolverError, SolverOutputWarning
-from dualid.model.parameters import ParameterSpace
+from dualid.errors import ConfigError, SolverError, SolverOptionError, SolverOutputWarning
 from dualid.problem import IdentificationProblem
 
-SOLVERS = ("CLARABEL", "SCS")
+SOLVERS = ("CLARABEL", "SCS")  # the conic solvers behind solver="cvxpy" (cvxpy_solver=...)
+SOLVER_NAMES = ("newton", "cvxpy")  # every estimator's solver=: dualid's interior point, or the conic reference
 DEFAULT_OPTIONS = {
     "CLARABEL": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10, "max_iter": 500},
     "SCS": {"eps": 1e-9, "max_iters": 200000},
 }
+
+
+def check_solver(solver, cvxpy_solver, who: str) -> None:
+    """SolverOptionError unless solver is one of SOLVER_NAMES and cvxpy_solver one of SOLVERS; a conic solver's or
+    the SDP's name given as solver gets a hint to the pair that selects it."""
+    if solver not in SOLVER_NAMES:
+        backend = {"sdp": cvxpy_solver, "sdp_clarabel": "CLARABEL", "sdp_scs": "SCS"}.get(solver, solver)
+        hint = (f" (for {backend}: solver='cvxpy', cvxpy_solver={backend!r})"
+                if isinstance(backend, str) and backend in SOLVERS else "")
+        raise SolverOptionError(f"{who}: solver must be one of {SOLVER_NAMES}, got {solver!r}{hint}")
+    if cvxpy_solver not in SOLVERS:
+        raise SolverOptionError(f"{who}: cvxpy_solver must be one of {SOLVERS}, got {cvxpy_solver!r}")
 
 
 def freeze_options(options: Mapping[str, Any] | None, what: str) -> tuple[tuple[str, Any], ...] | None:
@@ -57,8 +69,7 @@ def check_covariance(covariance, who: str) -> tuple[tuple[float, ...], ...] | No
 
 def is_problem_property(exc: SolverError) -> bool:
     """Infeasible, unbounded or an optimum at infinity: a property of the problem, which another solver cannot
-    change (no fallback). The quadratic fits check a cvxpy "infeasible" with dualid's interior point first
-    (``quadratic_fit._solve_with_fallback``): a badly scaled conic problem can be called infeasible."""
+    change (no fallback; the quadratic fits still check a cvxpy "infeasible" with dualid's interior point)."""
     return bool(exc.status) and any(s in exc.status for s in ("infeasible", "unbounded", "at_infinity"))
 
 
@@ -71,46 +82,6 @@ def captured_warnings() -> Iterator[list[str]]:
         warnings.simplefilter("always")
         yield notes
     notes.extend(sorted({f"{w.category.__name__}: {w.message}" for w in caught}))
-
-
-def check_identifiable(problem: IdentificationProblem, rank: int | None = None, what: str = "regressor") -> None:
-    """Raise IdentifiabilityError when the data do not determine θ (too few equations or rank < p)."""
-    N, n, p = problem.N, problem.n, problem.p
-    if N * n < p:
-        raise IdentifiabilityError(
-            f"too few samples: {N} samples × {n} coordinates = {N * n} equations for {p} parameters; "
-            f"need at least {int(np.ceil(p / n))} exciting samples (or pass allow_unidentifiable=True)"
-        )
-    ident = None
-    if rank is None:
-        ident = problem.identifiability()
-        rank = ident.rank
-    if rank < p:
-        ident = ident or problem.identifiability()  # the null space, for the message
-        raise IdentifiabilityError(
-            f"the {what} has rank {rank} < {p} parameters, so θ is not unique. "
-            f"Not identifiable: {', '.join(ident.unidentifiable) or '(combinations below)'}.\n"
-            f"{ident.describe()}\n"
-            "Excite the system more, fix or regularize these parameters, or pass allow_unidentifiable=True "
-            "to accept one of the minimisers."
-        )
-
-
-def check_nominal(parameters: ParameterSpace, theta0: np.ndarray, strict: bool) -> np.ndarray:
-    """θ₀ must have p finite entries and be physically consistent (strictly, for log-det priors)."""
-    theta0 = np.asarray(theta0, dtype=float)
-    if theta0.shape != (parameters.p,):
-        raise ConsistencyError(f"nominal θ₀: expected shape ({parameters.p},), got {theta0.shape}")
-    if not np.all(np.isfinite(theta0)):
-        raise ConsistencyError("nominal θ₀ has non-finite entries (NaN or inf)")
-    for name, margin in parameters.consistency_margins(theta0).items():
-        if margin < 0 or (strict and margin <= 0):
-            need = "positive definite" if strict else "positive semidefinite"
-            raise ConsistencyError(
-                f"nominal θ₀ is not physically consistent: block {name!r} has constraint-matrix "
-                f"smallest eigenvalue {margin:.3g}; it must be {need}"
-            )
-    return theta0
 
 
 def parameter_scale(problem: IdentificationProblem) -> np.ndarray:

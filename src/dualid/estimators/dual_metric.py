@@ -1,6 +1,6 @@
 """Dual-metric least squares: min_θ Σ r_iᵀ M_i(θ)⁻¹ r_i, invariant to coordinates, units and scaling.
 
-Reference formulation (``solver="sdp"``): with slacks s_i, minimise Σ s_i subject to
+Reference formulation (``solver="cvxpy"``): with slacks s_i, minimise Σ s_i subject to
 
     [[M_i(θ), r_i], [r_iᵀ, s_i]] ⪰ 0     (Schur complement, one (n+1)×(n+1) LMI per sample)
 
@@ -18,22 +18,26 @@ import scipy.sparse as sp
 
 from dualid.errors import MetricError, SolverError, SolverOptionError
 from dualid.estimators.base import (
+    SOLVER_NAMES,
     captured_warnings,
-    check_identifiable,
+    check_solver,
     freeze_options,
     is_problem_property,
     parameter_scale,
     solve_cvxpy,
 )
-from dualid.estimators.metric_guard import (
+from dualid.estimators.least_squares import wls_reference
+from dualid.estimators.newton import feasible_set, fit_dual_metric_newton, starting_point
+from dualid.estimators.newton.start import frozen_metric_ls
+from dualid.estimators.result import IdentificationResult
+from dualid.identifiability import check_identifiable
+from dualid.metric_guard import (
     DEFAULT_BOUND,
     check_guard_options,
     given_reference,
     guard_sample,
     reference_guard,
 )
-from dualid.estimators.newton import fit_dual_metric_newton
-from dualid.estimators.result import IdentificationResult
 from dualid.model.consistency import cvxpy_constraints
 from dualid.problem import IdentificationProblem
 
@@ -83,13 +87,9 @@ def reference_theta(problem: IdentificationProblem) -> np.ndarray:
 
 
 def internal_chart(problem: IdentificationProblem) -> np.ndarray:
-    """B_i (N, n, n) diagonal, such that B_iᵀ M_i(θ_ref) B_i has unit diagonal.
-
-    The dual-metric objective is unchanged by any change of coordinates (r̃ᵀM̃⁻¹r̃ = rᵀM⁻¹r), so the
-    solver may work in this chart: it undoes the user's units and scalings, sample by sample, and
-    keeps the LMI entries O(1). Falls back to the median diagonal where M_i(θ_ref) has a
-    non-positive diagonal entry.
-    """
+    """B_i (N, n, n) diagonal, such that B_iᵀ M_i(θ_ref) B_i has unit diagonal: the objective is the same in every
+    chart (r̃ᵀM̃⁻¹r̃ = rᵀM⁻¹r), and this one keeps the LMI entries O(1). The median diagonal where M_i(θ_ref) has a
+    non-positive diagonal entry."""
     M = problem.metric.evaluate(reference_theta(problem))
     d = np.diagonal(M, axis1=1, axis2=2).copy()  # (N, n)
     med = np.median(np.abs(d), axis=0)
@@ -111,15 +111,10 @@ def _slack_scale(problem: IdentificationProblem) -> float:
 def whitening_chart(problem: IdentificationProblem, chunk: int = 4096) -> tuple[np.ndarray, float, str]:
     """(B (N, n, n), slack scale, description): B_i = L_i⁻ᵀ with M_i(θ_s) = L_i L_iᵀ, so M̃_i(θ_s) = I.
 
-    θ_s is the Newton solver's starting point, computed from chart-invariant quantities only (every M_i(θ_s)
-    ≻ 0, constraints strictly satisfied), so the whitened problem is the same in every chart up to a
-    rotation per sample, which the PSD cone does not see. The slack scale is the residual size: the
-    frozen-metric least-squares objective at θ_s per sample (a chart-invariant estimate of f*/N from
-    below), floored at 1e-12 of the signal size τ̃ᵀτ̃ so exact data still give a positive scale.
+    θ_s is the Newton solver's chart-invariant start, so the whitened problem is the same in every chart up to a
+    rotation per sample, which the PSD cone does not see. The slack scale: the frozen-metric least-squares objective
+    at θ_s per sample (a chart-invariant estimate of f*/N), floored at 1e-12 of the signal size τ̃ᵀτ̃.
     """
-    from dualid.estimators.newton import feasible_set, starting_point
-    from dualid.estimators.newton.start import _frozen_metric_ls
-
     cons = feasible_set(problem.parameters, True)
     theta_s, _ = starting_point(problem, cons, chunk)
     B = np.empty((problem.N, problem.n, problem.n))
@@ -128,7 +123,7 @@ def whitening_chart(problem: IdentificationProblem, chunk: int = 4096) -> tuple[
         L = np.linalg.cholesky(problem.metric.evaluate(theta_s, rows))
         B[rows] = np.swapaxes(np.linalg.inv(L), 1, 2)  # L⁻ᵀ
     whitened = problem.in_coordinates(B, problem.coordinates)
-    theta_f = _frozen_metric_ls(problem, theta_s, chunk)
+    theta_f = frozen_metric_ls(problem, theta_s, chunk)
     signal = float(np.mean(np.sum(whitened.tau**2, axis=1)))
     residual = np.nan
     if theta_f is not None:
@@ -194,50 +189,37 @@ def fit_dual_metric_sdp(
 
 
 NEWTON_OPTIONS = ("tol", "max_iter", "chunk", "warm_start_samples", "verbose")
-SOLVER_NAMES = ("newton", "sdp", "sdp_clarabel", "sdp_scs")
-SDP_FALLBACK_MAX_N = 20_000  # an SDP fallback beyond this would take minutes and GBs (one LMI per sample)  # "sdp": the SDP with DualMetric.sdp_solver
+SDP_FALLBACK_MAX_N = 20_000  # an SDP fallback beyond this would take minutes and GBs (one LMI per sample)
 
 
 @dataclass(frozen=True)
 class DualMetric:
     """Dual-metric weighted least squares, Σ r_iᵀ M_i(θ)⁻¹ r_i.
 
-    solver: "newton" (default: the structure-exploiting primal–dual interior-point method of
-    dualid.estimators.newton, O(N·n·p) memory, about the cost of a few least-squares passes), "sdp"
-    (the Schur-complement SDP through cvxpy with ``sdp_solver``: the reference, one LMI per sample, slow
-    for large N), "sdp_clarabel" or "sdp_scs". Both methods solve the same convex problem.
-
-    tol, max_iter: the first solver's tolerance and iteration limit (None: its defaults; Newton: relative
-    duality gap 1e-9 and 100 iterations; the SDP: Clarabel 1e-10 and 500). fallback: solvers tried in
-    order when the one before fails (SolverError) or returns only ``optimal_inaccurate``; the
-    result's ``info["solver_chain"]`` says which solver produced θ̂ and what failed before it, and its
-    ``status`` is the producing solver's (``optimal_inaccurate`` is reported, never turned into
-    ``optimal``). An SDP fallback is skipped (and recorded) above SDP_FALLBACK_MAX_N samples.
-    solver_options: extra options for the first solver only (Newton: tol, max_iter, chunk,
-    warm_start_samples, verbose; the SDP: cvxpy/solver options). Options are checked here, in the
-    constructor (SolverOptionError).
+    solver: "newton" (default: the interior-point method of dualid.estimators.newton, O(N·n·p) memory) or "cvxpy"
+    (the Schur-complement SDP with ``cvxpy_solver``, "CLARABEL" or "SCS": the reference, one LMI per sample, slow
+    for large N); both solve the same convex problem. tol, max_iter: the first solver's (None: its defaults).
+    fallback: solvers tried in order when the one before fails (SolverError) or returns only
+    ``optimal_inaccurate``, recorded in ``info["solver_chain"]``; ``status`` is the producing solver's. An SDP
+    fallback is skipped (and recorded) above SDP_FALLBACK_MAX_N samples. solver_options: for the first solver only
+    (Newton: NEWTON_OPTIONS; the SDP: cvxpy/solver options), checked in the constructor (SolverOptionError).
     """
 
     constrained: bool = True
     solver: str = "newton"
-    sdp_solver: str = "CLARABEL"  # cvxpy solver for solver="sdp": "CLARABEL" or "SCS"
+    cvxpy_solver: str = "CLARABEL"  # the SDP's conic solver: "CLARABEL" or "SCS"
     solver_options: Mapping[str, Any] | None = None  # stored as sorted (key, value) pairs (hashable)
     allow_unidentifiable: bool = False
     tol: float | None = None
     max_iter: int | None = None
-    fallback: tuple[str, ...] = ("sdp",)
-    # metric guard in every result (estimators.guards): against this θ_ref, else against a WLS fit
+    fallback: tuple[str, ...] = ("cvxpy",)
+    # metric guard in every result (dualid.metric_guard): against this θ_ref, else against a WLS fit
     guard_reference: tuple | None = field(default=None, kw_only=True)
     guard_bound: float = field(default=DEFAULT_BOUND, kw_only=True)
     name = "dual_metric"
 
     def __post_init__(self) -> None:
-        from dualid.estimators.base import SOLVERS
-
-        if self.solver not in SOLVER_NAMES:
-            raise SolverOptionError(f"solver: expected one of {SOLVER_NAMES}, got {self.solver!r}")
-        if self.sdp_solver not in SOLVERS:
-            raise SolverOptionError(f"sdp_solver: expected one of {SOLVERS}, got {self.sdp_solver!r}")
+        check_solver(self.solver, self.cvxpy_solver, "DualMetric")
         fallback = (self.fallback,) if isinstance(self.fallback, str) else self.fallback
         try:
             fallback = tuple(fallback or ())
@@ -268,11 +250,7 @@ class DualMetric:
             raise SolverOptionError(f"{both[0]}: given both as an argument and in solver_options; give it once")
 
     def _chain(self) -> tuple[str, ...]:
-        chain = [self.solver]
-        for f in self.fallback:
-            if f not in chain and not (f == "sdp" and _sdp_name(self, f) in [_sdp_name(self, c) for c in chain]):
-                chain.append(f)
-        return tuple(chain)
+        return tuple(dict.fromkeys((self.solver, *self.fallback)))
 
     def _fit_with(self, problem: IdentificationProblem, solver: str, first: bool) -> IdentificationResult:
         options = dict(self.solver_options or {}) if first else {}
@@ -282,7 +260,7 @@ class DualMetric:
             if first and self.max_iter is not None:
                 options["max_iter"] = self.max_iter
             return fit_dual_metric_newton(problem, constrained=self.constrained, method=self.name, **options)
-        cvx_solver = _sdp_name(self, solver)
+        cvx_solver = self.cvxpy_solver
         if not isinstance(problem, IdentificationProblem):  # streamed: the SDP needs every sample at once
             problem = problem.materialise()
         if first and self.tol is not None:
@@ -299,10 +277,8 @@ class DualMetric:
         ref, label = given_reference(problem, self.guard_reference, "DualMetric"), "given guard_reference"
         solved_by = {}
         if ref is None:
-            from dualid.estimators.guard_reference import wls_reference
-
             some, count = guard_sample(problem)  # the reference on the samples the guard looks at
-            try:  # dualid's interior point on the statistics (cvxpy only if it fails: guard_reference.py)
+            try:  # dualid's interior point on the statistics (cvxpy only if it fails: least_squares.wls_reference)
                 ref, how = wls_reference(some, self.constrained)
                 label = "wls fit" + ("" if count is None else f" on {count} strided samples")
                 solved_by = {"metric_guard_solver": how}
@@ -331,20 +307,16 @@ class DualMetric:
                 failures.append(f"{solver} returned optimal_inaccurate (objective {result.objective:.10g})")
                 inaccurate = inaccurate or (result, notes)
                 continue
-            return _with_chain(result, solver, failures, notes)
+            return _with_chain(result, failures, notes)
         if inaccurate is not None:  # no later solver did better: the inaccurate result, reported as such
             result, notes = inaccurate
-            return _with_chain(result, result.solver, failures, notes)
+            return _with_chain(result, failures, notes)
         raise SolverError(
             "dual-metric fit: every solver failed: " + "; then ".join(failures), status="all_solvers_failed"
         )
 
 
-def _sdp_name(est: DualMetric, solver: str) -> str:
-    return {"sdp": est.sdp_solver, "sdp_clarabel": "CLARABEL", "sdp_scs": "SCS"}.get(solver, solver)
-
-
-def _with_chain(result: IdentificationResult, solver: str, failures: list[str], notes: list[str]) -> IdentificationResult:
+def _with_chain(result: IdentificationResult, failures: list[str], notes: list[str]) -> IdentificationResult:
     """result with info: solver_chain (what failed first, why, and which solver produced θ̂), fallback_used,
     solver_warnings (captured instead of printed)."""
     info = dict(result.info)

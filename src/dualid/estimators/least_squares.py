@@ -3,6 +3,9 @@
 Each minimises Σ r_iᵀ W_i r_i (+ γ R(θ)) with r_i = Y_i θ − τ_i. The data enter only through the
 sufficient statistics H = Σ Y_iᵀ W_i Y_i, g = Σ Y_iᵀ W_i τ_i, c = Σ τ_iᵀ W_i τ_i (one pass over
 the samples), so the conic problem handed to the solver has the size of θ, not of the data.
+
+Also the WLS references: of the dual-metric fit's metric guard (``wls_reference``) and of the chart-invariant
+margin (``with_margin``).
 """
 
 from __future__ import annotations
@@ -14,17 +17,15 @@ from typing import Any
 
 import numpy as np
 
-from dualid.errors import ConfigError, ConsistencyError, DataError
-from dualid.estimators.base import (
-    SOLVERS,
-    check_covariance,
-    check_nominal,
-    freeze_options,
-)
-from dualid.estimators.metric_guard import DEFAULT_BOUND, check_guard_options, given_reference, reference_guard
+from dualid.errors import ConfigError, ConsistencyError, DataError, DualidError, SolverError
+from dualid.estimators.base import check_covariance, check_solver, freeze_options
+from dualid.estimators.newton.objective import energy_statistics, statistics
 from dualid.estimators.quadratic_fit import closed_fit, fit_quadratic
+from dualid.estimators.quadratic_newton import fit_quadratic_newton
 from dualid.estimators.result import IdentificationResult
-from dualid.estimators.statistics import energy_statistics, statistics
+from dualid.metric_guard import DEFAULT_BOUND, check_guard_options, given_reference, reference_guard
+from dualid.model.consistency import check_nominal
+from dualid.model.margin import check_margin
 from dualid.model.prior_lift import DEFAULT_FLOOR as PRIOR_FLOOR
 from dualid.model.prior_lift import lift_prior
 from dualid.problem import IdentificationProblem, additive, sample_blocks
@@ -36,15 +37,17 @@ class _Common:
     values: arrays and option mappings are stored as tuples, so equality and hashing work."""
 
     constrained: bool = True  # physical-consistency constraints (pseudo-inertia ⪰ 0, drag ⪰ 0, bounds)
-    solver: str = "CLARABEL"  # or "SCS"
-    solver_options: Mapping[str, Any] | None = None
+    # "cvxpy": the conic problem by cvxpy_solver, certified or polished by dualid's interior point (quadratic_newton.
+    # polish), which also takes over when it fails; "newton": dualid's interior point alone
+    solver: str = "cvxpy"
+    solver_options: Mapping[str, Any] | None = None  # cvxpy_solver's options; for "newton": tol, max_iter
     allow_unidentifiable: bool = False  # accept one minimiser when the data do not determine θ
-    # metric guard recorded in every result (estimators.guards): against this θ_ref (e.g. a prior), else the
+    cvxpy_solver: str = field(default="CLARABEL", kw_only=True)  # or "SCS"
+    # metric guard recorded in every result (dualid.metric_guard): against this θ_ref (e.g. a prior), else the
     # estimator's own pilot or prior when it has one (WLS: its OLS fit; RegularizedWLS: θ₀)
     guard_reference: tuple | None = field(default=None, kw_only=True)
     guard_bound: float = field(default=DEFAULT_BOUND, kw_only=True)
-    # a class constant, not a field: fitted (with its Σ̂'s OLS) on the closed feasible set where the infimum is not
-    # attained (quadratic_fit.closed_fit); WLS only: OLS, energy and the priors keep the original set (estimators.md)
+    # a class constant: fitted (with its Σ̂'s OLS) by quadratic_fit.closed_fit (WLS only; docs/estimators.md)
     closed_set = False
 
     def __post_init__(self) -> None:
@@ -55,9 +58,16 @@ class _Common:
         for flag in ("constrained", "allow_unidentifiable"):
             if not isinstance(getattr(self, flag), (bool, np.bool_)):
                 raise ConfigError(f"{name}: {flag} must be True or False, got {getattr(self, flag)!r}")
-        if self.solver not in SOLVERS:
-            raise ConfigError(f"{name}: solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
+        check_solver(self.solver, self.cvxpy_solver, name)
         object.__setattr__(self, "solver_options", freeze_options(self.solver_options, f"{name}: solver_options"))
+        unknown = sorted(set(dict(self.solver_options or ())) - {"tol", "max_iter"}) if self.solver == "newton" else []
+        if unknown:
+            raise ConfigError(f"{name}: solver 'newton' accepts the solver_options tol and max_iter, got {unknown}")
+
+    @property
+    def engine(self) -> str:
+        """What solves the fit: "newton", or the cvxpy solver's name."""
+        return "newton" if self.solver == "newton" else self.cvxpy_solver
 
     def _guarded(self, result: IdentificationResult, problem: IdentificationProblem, own=None,
                  own_label: str = "") -> IdentificationResult:
@@ -80,7 +90,7 @@ class OLS(_Common):
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
         return self._guarded(fit_quadratic(
-            problem, statistics(problem), method=self.name, constrained=self.constrained, solver=self.solver,
+            problem, statistics(problem), method=self.name, constrained=self.constrained, solver=self.engine,
             solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
         ), problem)
 
@@ -117,7 +127,7 @@ def covariance_weight(problem: IdentificationProblem, covariance, reference: _Co
             theta_ols = closed_fit(problem, statistics(problem), np.eye(problem.n), "ols", reference).theta
         else:
             ols = OLS(reference.constrained, reference.solver, reference.solver_options,
-                      reference.allow_unidentifiable)
+                      reference.allow_unidentifiable, cvxpy_solver=reference.cvxpy_solver)
             theta_ols = ols.fit(problem).theta
         covariance = residual_covariance(problem, theta_ols)
         source = "ols residuals"
@@ -160,7 +170,7 @@ class EnergyLS(_Common):
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
         return self._guarded(fit_quadratic(
-            problem, energy_statistics(problem), method=self.name, constrained=self.constrained, solver=self.solver,
+            problem, energy_statistics(problem), method=self.name, constrained=self.constrained, solver=self.engine,
             solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
         ), problem)
 
@@ -221,9 +231,69 @@ class RegularizedWLS(_Common):
         W, info = covariance_weight(problem, self.covariance, self)
         gamma = float(self.gamma) * (problem.N * problem.n if self.per_equation else 1.0)
         return self._guarded(fit_quadratic(
-            problem, statistics(problem, W), method=self.name, constrained=self.constrained, solver=self.solver,
+            problem, statistics(problem, W), method=self.name, constrained=self.constrained, solver=self.engine,
             solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
             regularizer=(self.regularizer, theta0, gamma),
             info={"covariance": info["covariance"], "covariance_matrix": info["covariance_matrix"], "gamma": gamma,
                   "prior_floor": float(self.prior_floor), "prior_lifted": lifted},
         ), problem, theta0, "prior θ₀")
+
+
+REFERENCE_TOL = 1e-6  # relative: the guard compares eigenvalue ratios against [1/100, 100], far coarser than this …
+REFERENCE_MAX_ITER = 30  # … and a jam (rank-deficient arm7 at N = 100: stuck at a gap of 8.7e-7 after 100
+# iterations, 1e-6 not reached in 40) costs at most this many cheap iterations before cvxpy takes over
+
+
+def wls_reference(problem: IdentificationProblem, constrained: bool) -> tuple[np.ndarray, str]:
+    """(θ_wls, how it was solved): OLS → Σ̂ of its residuals → WLS with W = Σ̂⁻¹, both by dualid's interior-point
+    method to REFERENCE_TOL; if that fails, the cvxpy WLS estimator (recorded in the second element). Raises
+    SolverError when both fail.
+
+    The WLS reference of the dual-metric fit's metric guard (``DualMetric.fit``): two p-sized quadratic problems on
+    the sufficient statistics, solved in milliseconds (through cvxpy they cost more than the Newton fit itself). The
+    guard compares generalised eigenvalues against [1/100, 100], so the same convex problem to 1e-6 relative will do.
+    """
+    try:
+        ols = statistics(problem)
+        theta_ols, _ = fit_quadratic_newton(ols.H, ols.g, ols.c, problem.parameters, constrained=constrained,
+                                            tol=REFERENCE_TOL, max_iter=REFERENCE_MAX_ITER)
+        W = np.linalg.inv(residual_covariance(problem, theta_ols))
+        wls = statistics(problem, 0.5 * (W + W.T))
+        theta, _ = fit_quadratic_newton(wls.H, wls.g, wls.c, problem.parameters, constrained=constrained,
+                                        tol=REFERENCE_TOL, max_iter=REFERENCE_MAX_ITER)
+        return theta, f"newton (tol {REFERENCE_TOL:g})"
+    except (SolverError, np.linalg.LinAlgError) as exc:
+        theta = WLS(constrained=constrained, allow_unidentifiable=True).fit(problem).theta
+        return theta, f"cvxpy (dualid's interior point failed: {str(exc)[:120]})"
+
+
+REFERENCES = ("wls", "prior")  # the margin's θ_ref (``with_margin``)
+
+
+def margin_reference(problem: IdentificationProblem, reference="wls", prior=None) -> tuple[np.ndarray, str]:
+    """(θ_ref, label): "wls" — a constrained WLS pilot on the problem without its margin (null space allowed);
+    "prior" — the given prior θ₀; an array — that θ_ref."""
+    if isinstance(reference, str):
+        if reference == "prior":
+            if prior is None:
+                raise ConfigError("margin.reference: 'prior' needs a prior θ₀, and this fit has none")
+            return np.asarray(prior, dtype=float), "prior"
+        if reference != "wls":
+            raise ConfigError(f"margin.reference: expected one of {REFERENCES} or a vector θ_ref, got {reference!r}")
+        plain = dataclasses.replace(problem, parameters=problem.parameters.without_margin())
+        try:
+            pilot = WLS(allow_unidentifiable=True).fit(plain)
+        except DualidError as exc:
+            raise ConfigError(f"margin.reference: the WLS pilot failed ({type(exc).__name__}: {exc})") from exc
+        return pilot.theta, "wls pilot"
+    return np.asarray(reference, dtype=float), "given θ_ref"
+
+
+def with_margin(problem: IdentificationProblem, epsilon: float, reference="wls", prior=None) -> IdentificationProblem:
+    """The problem with the margin C_b(θ) ⪰ ε·C_b(θ_ref) on every constrained block (ConfigError on bad input), θ_ref
+    from ``margin_reference``; it lives in the problem's ParameterSpace, so every estimator applies it alike and
+    records it in its result's info (``margin_epsilon``, ``margin_reference``, ``margin_min_ratio``, …)."""
+    check_margin(problem.parameters, np.zeros(problem.p), epsilon)  # ε first: before any pilot fit
+    theta_ref, label = margin_reference(problem, reference, prior)
+    parameters = problem.parameters.with_margin(theta_ref, epsilon, label)
+    return dataclasses.replace(problem, parameters=parameters)

@@ -101,7 +101,7 @@ def make_estimator(
 ):
     """The estimator behind ``key``; logdet/pullback need the nominal θ₀ and the prior weight γ
     (absolute, or per equation when per_equation=True, see RegularizedWLS). ``options`` are further
-    constructor arguments of the estimator (e.g. {"solver": "sdp", "tol": 1e-8} for dm), checked by it."""
+    constructor arguments of the estimator (e.g. {"solver": "cvxpy", "tol": 1e-8} for dm-paper), checked by it."""
     m = method(key)
     if m is TRUTH:
         raise ConfigError("method 'truth' is the simulator's reference, not an estimator")

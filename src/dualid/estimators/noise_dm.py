@@ -1,7 +1,7 @@
 """``dm``: the dual-metric fit with a physical noise model, min_θ Σ r_iᵀ (Σ_τ + M_i(θ) Σ_a M_i(θ))⁻¹ r_i.
 
 Torque noise (Σ_τ) and the acceleration noise that differentiated encoders put into the regressor (Σ_a) give the
-residual at the true θ the covariance C_i(θ) = Σ_τ + M_i(θ) Σ_a M_i(θ) (``newton.noise_objective``). Minimising
+residual at the true θ the covariance C_i(θ) = Σ_τ + M_i(θ) Σ_a M_i(θ) (``noise_model``). Minimising
 Σ r_iᵀ C_i(θ)⁻¹ r_i with C depending on θ is weighted total least squares: least squares shrinks the inertia under
 noise in the accelerations (errors-in-variables attenuation), the paper's Σ r_iᵀ M_i(θ)⁻¹ r_i inflates it under
 torque noise; this objective is consistent under both when the noise levels are right. The weights frozen at a θ
@@ -11,14 +11,17 @@ The fit, in the problem's sensor chart (so every chart the problem records, conf
 the same fit; the objective is invariant when Σ_τ, Σ_a are carried covariantly):
 1. pilot: least squares in weights 1/mean τ_j² (unconstrained; constrained where M(θ) is not positive definite);
    with a passive coordinate (τ_j ≡ 0), the paper's dual-metric optimum;
-2. the noise levels from its residuals (``noise_level.estimate_noise``: Σ_τ per joint, Σ_a = σ_a² diag(mean v²),
+2. the noise levels from its residuals (``noise_model.estimate_noise``: Σ_τ per joint, Σ_a = σ_a² diag(mean v²),
    equivariant under per-coordinate units). When the likelihood does not support acceleration noise, Σ_a = 0 and
    the noise model is WLS's: ``dm`` returns the pilot;
-3. ROUNDS times: θ by dualid's primal–dual interior point on f (gradient and Hessian of ``newton.noise_objective``)
+3. ROUNDS times: θ by dualid's primal–dual interior point on f (gradient and Hessian of ``noise_model``)
    under the physical-consistency constraints, from the pilot moved strictly inside them, then from the last θ
    with the levels re-estimated at it;
-4. the held-out check (``noise_check``): WLS when the residual is not the modelled noise;
+4. the held-out check (``noise_model.check_noise_model``): WLS when the residual is not the modelled noise;
 5. the result records the noise levels (sensor chart), their residual shares and the rounds in ``result.noise``.
+
+solver="cvxpy" makes step 3's θ-solves by majorize–minimize instead, each step one conic problem (a batched SDP):
+the reference the interior point is checked against (``solve_noise_model_cvxpy``; tests/test_dm_cvxpy.py).
 """
 
 from __future__ import annotations
@@ -31,24 +34,29 @@ import numpy as np
 import warnings
 
 from dualid.errors import ConfigError, MetricError, OptimumAtInfinityWarning, SolverError
-from dualid.estimators.base import check_identifiable
-from dualid.estimators.metric_guard import reference_guard
-from dualid.estimators.newton.closure import on_closure
+from dualid.estimators.base import captured_warnings, check_solver, solve_cvxpy
 from dualid.estimators.newton.fit import fit_dual_metric_newton
 from dualid.estimators.newton.interior_point import run_interior_point
-from dualid.estimators.newton.noise_objective import (
+from dualid.estimators.newton.objective import CHUNK
+from dualid.estimators.noise_model import (
+    NoiseCheck,
+    NoiseLevels,
+    check_noise_model,
+    estimate_noise,
+    given_levels,
     noise_model_derivatives,
     noise_model_objective,
     noise_model_scale,
 )
-from dualid.estimators.newton.objective import CHUNK, NotPositiveDefinite
-from dualid.estimators.newton.start import central_point
-from dualid.estimators.noise_check import NoiseCheck, check_noise_model
-from dualid.estimators.noise_level import NoiseLevels, estimate_noise, given_levels
 from dualid.estimators.result import IdentificationResult, NoiseRecord
-from dualid.model.consistency import feasible_set
-from dualid.problem import IdentificationProblem
+from dualid.identifiability import check_identifiable
+from dualid.linalg import NotPositiveDefinite
+from dualid.metric_guard import reference_guard
+from dualid.model.closure import ZERO_CURVATURE, on_closure
+from dualid.model.consistency import FeasibleSet, central_point, cvxpy_feasible_set, feasible_set
+from dualid.problem import IdentificationProblem, additive
 
+LIFT = 1e-12  # solver="cvxpy": θ's consistency blocks end at least this far (relative) inside (``_lifted``)
 ROUNDS = 2  # noise levels at the pilot, θ; the levels at that θ, θ again (unless the first round finds Σ_a = 0)
 
 
@@ -69,7 +77,9 @@ class NoiseModelDM:
     """Σ r_iᵀ (Σ_τ + M_i(θ) Σ_a M_i(θ))⁻¹ r_i with Σ_τ, Σ_a estimated from the data (module doc).
 
     sigma_tau, sigma_a: fix the noise levels ((n, n), in the sensor chart: force² and acceleration² units) instead
-    of estimating them; tol, max_iter: the interior point's.
+    of estimating them; tol, max_iter: the interior point's (solver="newton"), or for solver="cvxpy" (majorize–minimize,
+    ``solve_noise_model_cvxpy``, each step a conic problem for ``cvxpy_solver``: the reference, slow for large N) the
+    relative decrease of f that ends it and the number of conic solves.
     """
 
     constrained: bool = True
@@ -79,9 +89,12 @@ class NoiseModelDM:
     tol: float = 1e-9
     max_iter: int = 300  # per solve: the non-convex fit converges linearly (Crazyflie, 21,000 samples: 265)
     chunk: int = field(default=CHUNK, kw_only=True)
+    solver: str = field(default="newton", kw_only=True)
+    cvxpy_solver: str = field(default="CLARABEL", kw_only=True)
     name = "dm"  # the result's method
 
     def __post_init__(self) -> None:
+        check_solver(self.solver, self.cvxpy_solver, "NoiseModelDM")
         if (self.sigma_tau is None) != (self.sigma_a is None):
             raise ConfigError("NoiseModelDM: give both sigma_tau and sigma_a, or neither")
         for key in ("sigma_tau", "sigma_a"):
@@ -121,7 +134,7 @@ class NoiseModelDM:
         check = self._check(sample, theta, noise)
         if check is not None and check.rejected:
             n = sensor.n
-            wls = NoiseLevels(np.diag(np.mean(sensor.residual(theta) ** 2, axis=0)), np.zeros((n, n)), 1.0, 0.0, 0)
+            wls = NoiseLevels(np.diag(residual_squares(sensor, theta) / sensor.N), np.zeros((n, n)), 1.0, 0.0, 0)
             theta = self._solve(sensor, cons, start, wls)[0]
             f = noise_model_objective(sensor, theta, wls.sigma_tau, wls.sigma_a, self.chunk)
             choice = (f"wls: the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's "
@@ -145,7 +158,7 @@ class NoiseModelDM:
         return theta, noise, iterations, rounds
 
     def _closure(self, sensor, Yw, tw):
-        """The feasible set to solve on, closed over the parameters f cannot see (``newton.closure``: a link mass that
+        """The feasible set to solve on, closed over the parameters f cannot see (``model.closure``: a link mass that
         enters only its consistency block would otherwise grow without bound), and the completion of θ after; Yw, tw:
         the equations on their force scales (``_scaled``)."""
         H, c = Yw.T @ Yw, float(tw @ tw)
@@ -160,7 +173,8 @@ class NoiseModelDM:
                              np.nan if check is None else check.measured_gap,
                              np.nan if check is None else check.predicted_gap)
         guard = reference_guard(problem.in_sensor_chart(), theta, theta_pilot, "pilot (wls)")
-        return IdentificationResult(self.name, theta, problem.parameters, f, "optimal", "newton",
+        solver = "newton" if self.solver == "newton" else f"cvxpy-mm/{self.cvxpy_solver}"
+        return IdentificationResult(self.name, theta, problem.parameters, f, "optimal", solver,
                                     time.perf_counter() - t0, iterations, self.constrained,
                                     {"rounds": rounds, "start": "wls", **guard, **completed}, noise=record)
 
@@ -202,6 +216,8 @@ class NoiseModelDM:
         """θ minimising f with the noise levels fixed, from θ, on ``cons`` (the closed set of ``_closure``); f is not
         convex, so the interior point runs in its non-convex mode."""
         S, A = noise.sigma_tau, noise.sigma_a
+        if self.solver == "cvxpy":
+            return solve_noise_model_cvxpy(problem, cons, theta, S, A, self.tol, self.max_iter, self.cvxpy_solver)
 
         def objective(th, order):
             return noise_model_derivatives(problem, th, S, A, order, self.chunk)
@@ -213,6 +229,126 @@ class NoiseModelDM:
         theta, _, _, info = run_interior_point(problem, cons, theta, None, None, self.tol, self.max_iter, self.chunk,
                                                False, objective=objective, f_scale=scale, convex=False)
         return theta, info
+
+
+@additive
+def residual_squares(problem, theta: np.ndarray) -> np.ndarray:
+    """(n,) Σ_i r_ij² per coordinate (one pass, run where the data live): N times the WLS fallback's torque variances."""
+    return sum(np.sum(block.residual(theta) ** 2, axis=0) for block in problem.blocks())
+
+
+# --- the conic reference (solver="cvxpy"): majorize–minimize -------------------------------------------------------
+def majorizer_blocks(problem, theta_k, sigma_tau, sigma_a) -> tuple[np.ndarray, np.ndarray]:
+    """(A0 (N, n, n), A (N, p, n, n)) with A0_i + Σ_j θ_j A_ij = Σ_τ + L_k,i(θ), the majorizer's covariance at θ_k:
+    L_k(θ) = M_k Σ_a M(θ) + M(θ) Σ_a M_k − M_k Σ_a M_k (M_k = M(θ_k), M affine in θ). As (M − M_k) Σ_a (M − M_k) ⪰ 0,
+    M Σ_a M ⪰ L_k(θ), so C_i(θ) ⪰ Σ_τ + L_k,i(θ), with equality at θ_k."""
+    M0, Mj = problem.metric.basis()
+    Mk = problem.metric.evaluate(theta_k)
+    K = Mk @ sigma_a  # M_k Σ_a
+    KM = K @ M0
+    A0 = sigma_tau + KM + np.swapaxes(KM, 1, 2) - K @ Mk
+    KMj = K[:, None] @ Mj
+    return 0.5 * (A0 + np.swapaxes(A0, 1, 2)), KMj + np.swapaxes(KMj, 2, 3)
+
+
+def majorizer_value(problem, theta, theta_k, sigma_tau, sigma_a) -> float:
+    """g_k(θ) = Σ r_iᵀ (Σ_τ + L_k,i(θ))⁻¹ r_i ≥ f(θ) (``majorizer_blocks``); +inf where a block is not positive
+    definite."""
+    A0, Aj = majorizer_blocks(problem, theta_k, sigma_tau, sigma_a)
+    try:
+        L = np.linalg.cholesky(A0 + np.einsum("j,ijab->iab", theta, Aj))
+    except np.linalg.LinAlgError:
+        return np.inf
+    z = np.linalg.solve(L, problem.residual(theta)[..., None])
+    return float(np.sum(z * z))
+
+
+def _majorizer_step(problem, cons, theta_k, f_k, sigma_tau, sigma_a, solver, options):
+    """argmin g_k on ``cons``: min Σ t_i s.t. [[A_i(θ), r_i(θ)], [r_iᵀ, t_i]] ⪰ 0 (one batched PSD constraint, A_i ⪰ 0
+    with it), each block whitened by C_i(θ_k) = L_i L_iᵀ (I at θ_k), θ and t on their scales. (θ, cvxpy status)."""
+    import cvxpy as cp
+    import scipy.sparse as sp
+
+    A0, Aj = majorizer_blocks(problem, theta_k, sigma_tau, sigma_a)
+    Li = np.linalg.inv(np.linalg.cholesky(A0 + np.einsum("j,ijab->iab", theta_k, Aj)))
+    N, n, p = problem.Y.shape
+    m = n + 1
+    K, b = np.zeros((N, m, m, p)), np.zeros((N, m, m))
+    K[:, :n, :n] = np.einsum("iac,ijcd,ibd->iabj", Li, Aj, Li)
+    K[:, :n, :n] = 0.5 * (K[:, :n, :n] + np.swapaxes(K[:, :n, :n], 1, 2))
+    K[:, :n, n] = K[:, n, :n] = Li @ problem.Y
+    b[:, :n, :n] = Li @ A0 @ np.swapaxes(Li, 1, 2)
+    b[:, :n, n] = b[:, n, :n] = tw = -np.einsum("iab,ib->ia", Li, problem.tau)
+    b = 0.5 * (b + np.swapaxes(b, 1, 2))
+    s = np.linalg.norm(K[:, :n, n].reshape(N * n, p), axis=0)  # θ = s ⊙ φ: unit whitened regressor columns, but
+    s = 1.0 / np.where(s**2 > ZERO_CURVATURE * np.sum(tw**2), s, 1.0)  # 1 where f cannot see θ_k (model.closure)
+    slack = f_k / N  # t_i = slack · σ_i: σ is O(1) near θ_k
+    E = sp.csr_matrix((K * s).reshape(N * m * m, p))
+    Es = sp.csr_matrix((np.full(N, slack), (np.arange(N) * m * m + n * m + n, np.arange(N))), shape=(N * m * m, N))
+    phi, sigma = cp.Variable(p), cp.Variable(N)
+    blocks = cp.reshape(E @ phi + Es @ sigma + b.reshape(-1), (N, m, m), order="C")
+    constraints = [cp.constraints.PSD(blocks)] + cvxpy_feasible_set(cp.multiply(s, phi), cons)
+    with captured_warnings():  # "Solution may be inaccurate": the status says so, and f is checked by the caller
+        solved = solve_cvxpy(cp.Problem(cp.Minimize(cp.sum(sigma) / N), constraints), phi, solver, options,
+                             what="dm majorizer")
+    return s * solved.value, solved.status
+
+
+def solve_noise_model_cvxpy(problem, cons, theta0, sigma_tau, sigma_a, tol: float = 1e-9, max_iter: int = 300,
+                            cvxpy_solver: str = "CLARABEL", solver_options: dict | None = None):
+    """θ minimising f(θ) = Σ r_iᵀ (Σ_τ + M_i(θ) Σ_a M_i(θ))⁻¹ r_i on the FeasibleSet ``cons`` by majorize–minimize:
+    step k minimises the jointly convex g_k ≥ f (``majorizer_blocks``; g_k(θ_k) = f(θ_k)) by cvxpy, so f never
+    increases, and a fixed point is a KKT point of f on ``cons`` (g_k and f touch at θ_k, where A_i = C_i ≻ 0, so the
+    majorizer's own domain A_i ⪰ 0 is inactive). Stops when f decreases by less than tol·f (or not at all: the conic
+    solver's accuracy); SolverError after max_iter solves, as the interior point (``fit`` then restarts from the paper's
+    optimum). (θ, info): iterations (conic solves), objective, history (f at the start and
+    at every step, the last one rejected when it did not decrease f), status (why it stopped),
+    cvxpy_status (per solve)."""
+    if not isinstance(problem, IdentificationProblem):  # streamed: the conic problem needs every sample at once
+        problem = problem.materialise()
+    S, A = np.asarray(sigma_tau, dtype=float), np.asarray(sigma_a, dtype=float)
+    theta = np.asarray(theta0, dtype=float)
+    f = noise_model_objective(problem, theta, S, A)
+    if not np.isfinite(f):
+        raise MetricError("dm: the noise model's covariance is not positive definite at the start")
+    history, statuses, status = [f], [], "converged: f = 0"
+    for _ in range(max_iter if f > 0 else 0):
+        step, cvx_status = _majorizer_step(problem, cons, theta, f, S, A, cvxpy_solver, solver_options)
+        statuses.append(cvx_status)
+        f_step = noise_model_objective(problem, step, S, A)
+        history.append(f_step)
+        if not f_step < f:  # no decrease left that the conic solver resolves: θ_k stays
+            status = "converged: no decrease"
+            break
+        theta, decrease, f = step, f - f_step, f_step
+        if decrease < tol * f:
+            status = "converged: decrease < tol·f"
+            break
+    else:
+        if f > 0:
+            last = (history[-2] - f) / f if len(history) > 1 else np.nan
+            raise SolverError(f"dm majorize–minimize: no convergence in {max_iter} conic solves (f {f:.10g}, last "
+                              f"relative decrease {last:.3g}, tol {tol:g})", status="max_iterations")
+    lifted = _lifted(theta, cons)
+    if np.any(lifted != theta):
+        theta, f = lifted, noise_model_objective(problem, lifted, S, A)
+    return theta, {"iterations": len(statuses), "objective": f, "history": history, "status": status,
+                   "cvxpy_status": statuses}
+
+
+def _lifted(theta: np.ndarray, cons: FeasibleSet, floor: float = LIFT) -> np.ndarray:
+    """θ with every consistency block whose smallest eigenvalue is below floor × its largest lifted to it, by the least
+    change of its parameters. A conic solver meets its constraints only to its tolerance (a closed block's smallest
+    eigenvalue −1e-11 seen), and the closure's completion needs θ strictly inside."""
+    theta = np.array(theta, dtype=float)
+    for c in cons.lmis:
+        lam, U = np.linalg.eigh(c.C(theta))
+        low = floor * np.abs(lam).max()
+        if lam[0] < low:
+            k, m, _ = c.V.shape
+            lift = (U * (np.maximum(lam, low) - lam)) @ U.T
+            theta[c.idx] += np.linalg.lstsq(c.V.reshape(k, m * m).T, lift.reshape(-1), rcond=None)[0]
+    return theta
 
 
 def _scaled(problem) -> tuple[np.ndarray, np.ndarray]:
@@ -230,4 +366,4 @@ def _in_memory(problem, samples: int = CHECK_SAMPLES):
     return problem.subset(slice(0, None, max(1, -(-problem.N // samples))))
 
 
-__all__ = ["NoiseModelDM"]
+__all__ = ["NoiseModelDM", "majorizer_blocks", "majorizer_value", "solve_noise_model_cvxpy"]

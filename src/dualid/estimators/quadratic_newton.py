@@ -1,4 +1,4 @@
-"""Least squares and geometric-prior fits by dualid's own interior-point method (the fallback of cvxpy).
+"""Least squares and geometric-prior fits by dualid's own interior-point method (solver "newton"; cvxpy's fallback).
 
     min_θ f(θ) = (θ − θ_ls)ᵀ H (θ − θ_ls) + f_min  [+ γ R(θ)]     s.t. the physical-consistency constraints
 
@@ -16,6 +16,23 @@ pseudo-inertia LMIs, a line search that keeps every C_b ≻ 0); only f, ∇f, �
 
 Newton steps are affine-invariant, so the badly scaled cones that make Clarabel stop ("CLARABEL failed",
 ``optimal_inaccurate``) on arms with thin links or priors on the cone boundary cost nothing here.
+
+``polish``: the independent check of every cvxpy solution of a quadratic or regularized fit. Clarabel can stop with
+status ``optimal`` well above the optimum (1e-5 … 4e-2 on log-det / pullback fits whose prior is on the consistency
+boundary): its stopping test is relative to the size of the conic reformulation, not to f. So every cvxpy solution
+is polished by ``fit_quadratic_newton`` started from it (moved just inside the cones), whose stopping test is the
+duality gap plus the Newton decrement relative to f (tol 1e-9). Then
+- the polish is lower by more than ``TOL`` (relative): the polished θ is returned, the chain says by how much the
+  cvxpy solution was above;
+- otherwise the cvxpy solution is kept, certified by the polish (the measured gap is recorded);
+- the polish fails: the cvxpy status is kept only as ``optimal_inaccurate`` (uncertified), the chain says why.
+
+A least-squares fit (no prior) whose f is already below ``ROUNDING`` · f(0) (exact data) is certified without the
+polish: f ≥ 0, and a polish there is rounding-dominated. With ``closure`` (dm's fits) and a parameter the closure
+projects out (``model.closure``: the infimum is approached only as it grows) the polish on the closed set is the
+answer ("→ newton on the closed set"): cvxpy's θ is a stopping point along that ray placed by rounding. Except
+when the closed run ends more than ``TOL`` above a cvxpy θ that is in the set exactly (that run missed its
+infimum): then as above; a cvxpy θ outside the set by rounding does not count ("outside the set by rounding").
 """
 
 from __future__ import annotations
@@ -23,20 +40,21 @@ from __future__ import annotations
 import numpy as np
 
 from dualid.errors import SolverError
-from dualid.estimators.newton.closure import on_closure
 from dualid.estimators.newton.interior_point import run_interior_point
-from dualid.estimators.newton.linalg import solve_psd
-from dualid.estimators.newton.objective import Derivatives, NotPositiveDefinite
-from dualid.estimators.newton.start import central_point
-from dualid.model.consistency import feasible_set
+from dualid.estimators.newton.objective import Derivatives
+from dualid.linalg import NotPositiveDefinite
+from dualid.linalg import solve_psd
+from dualid.model.closure import close, on_closure
+from dualid.model.consistency import central_point, feasible_set, prior_blocks, pullback_metric
+
+TOL = 1e-7  # a cvxpy objective this far (relative) above the certified optimum is not optimal
+ROUNDING = 1e-12  # a least-squares f(θ) ≤ this × f(0) (exact data) is optimal to that accuracy: f ≥ 0 (no iterations)
 
 
 def _blocks(regularizer, parameters):
     """[(idx, V (k, m, m), C0 (m, m), C0⁻¹, g (k, k))] of the prior's blocks (empty without a prior)."""
     if regularizer is None:
         return []
-    from dualid.model.consistency import prior_blocks, pullback_metric
-
     kind, theta0, _ = regularizer
     out = []
     for idx, V, C0 in prior_blocks(kind, parameters, theta0):
@@ -95,9 +113,8 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
 
     ``start`` (e.g. a cvxpy solution on the cone's boundary): tried first, moved just inside the cones and started
     close to the central path (a polish); when that does not converge, the cold start below runs as without it.
-    closure=True (without a prior): on the closed feasible set of ``newton.closure`` (dm's cvxpy path; OLS, energy
-    and the priors keep the original set, whose stopping points along an unbounded unseen mass are moderate, e.g. as
-    priors; WLS fits such a problem by ``quadratic_fit.closed_fit``)."""
+    closure=True (without a prior): on the closed feasible set of ``model.closure`` (dm's cvxpy path; WLS fits such a
+    problem by ``quadratic_fit.closed_fit``; OLS, energy and the priors keep the original set)."""
     cons, done = on_closure(feasible_set(parameters, constrained), np.asarray(H), c, parameters.names,
                             enabled=closure and regularizer is None)
     objective, theta_ls = quadratic_objective(H, g, c, parameters, regularizer)
@@ -116,7 +133,7 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
         warm = central_point(np.asarray(start, dtype=float), cons, eps=1e-7)
         if np.isfinite(value(warm)):
             try:
-                theta, info = _run(cons, warm, tol, max_iter, objective, f_scale, gap0=1e-6)
+                theta, info = run_quadratic(cons, warm, tol, max_iter, objective, f_scale, gap0=1e-6)
                 info["start"] = "warm"
                 return done(theta, info)
             except SolverError as exc:
@@ -129,23 +146,20 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
     k = int(np.argmin(values))
     if not np.isfinite(values[k]):
         raise SolverError("quadratic Newton: found no strictly feasible start", status="no_start")
-    theta, info = _run(cons, candidates[k], tol, max_iter, objective, f_scale)
+    theta, info = run_quadratic(cons, candidates[k], tol, max_iter, objective, f_scale)
     info["start"] = "cold" + (f" ({failure})" if failure else "")
     return done(theta, info)
 
 
 # Retried with exact Newton steps (no Levenberg term; the eigen pseudo-inverse only where Cholesky fails) when the
-# Levenberg-damped run fails: with 1e-12 the fit crawls along directions whose Jacobi-scaled curvature is below it
-# (LandSalp pullback/logdet with the OLS prior: pivots² ~1e-22, f falling 0.027 per iteration 1,000 above the
-# optimum; units-1e6 pullback: 150 iterations). Not the first choice: those exact steps are rounding-dominated and
-# chart-dependent (dm's re-chart change on the sensor-error arms 1e-11–1e-4 → 1e-7–3e-4 when used for every fit).
+# Levenberg-damped run fails: with 1e-12 the fit crawls along directions whose Jacobi-scaled curvature is below it.
+# Not the first choice: exact steps are rounding-dominated and chart-dependent (docs/performance.md)
 RETRY_LEVENBERG = 0.0
 
 
-def _run(cons, theta, tol, max_iter, objective, f_scale, gap0=1.0):
-    """run_interior_point on the module's f; an arithmetic failure inside it (e.g. a duality gap that underflows to 0)
-    is a SolverError of this solver, so that the caller's fallback or certification sees a failed solve. A failed
-    run is retried once with RETRY_LEVENBERG (recorded as info["newton_levenberg"])."""
+def run_quadratic(cons, theta, tol, max_iter, objective, f_scale, gap0=1.0):
+    """run_interior_point on the module's f, an arithmetic failure inside it a SolverError (a failed solve for the
+    caller's fallback or certificate); a failed run is retried once with RETRY_LEVENBERG (info["newton_levenberg"])."""
     failure = None
     for levenberg in (1e-12, RETRY_LEVENBERG):
         try:
@@ -166,3 +180,60 @@ def _run(cons, theta, tol, max_iter, objective, f_scale, gap0=1.0):
     theta = theta_out
     info.pop("f_history", None)
     return theta, info
+
+
+# --- the certificate of a cvxpy solution ---------------------------------------------------------------------------
+
+
+def certified_objective(stats, parameters, regularizer):
+    """f(θ) of quadratic_newton (∞ outside log det's domain): the value both solutions are compared in."""
+    objective, _ = quadratic_objective(stats.H, stats.g, stats.c, parameters, regularizer)
+
+    def f(theta):
+        try:
+            return objective(np.asarray(theta, dtype=float), 0).f
+        except NotPositiveDefinite:
+            return np.inf
+    return f
+
+
+def polish(theta_cvx, stats, parameters, constrained, regularizer, solver, closure: bool = False):
+    """(θ, label, polished, certified, info) — see the module doc."""
+    f = certified_objective(stats, parameters, regularizer)
+    f_cvx = f(theta_cvx)
+    floor = ROUNDING * max(float(stats.c), 0.0)
+    if regularizer is None and abs(f_cvx) <= floor:  # f ≥ 0 (below 0: rounding), so f(θ_cvx) − f* ≤ f(θ_cvx): a certificate by itself
+        info = {"certified_gap": float(abs(f_cvx) / max(float(stats.c), 1e-300)), "cvxpy_above_certified": 0.0,
+                "certify_iterations": 0}
+        return theta_cvx, f"{solver} optimal (certified: f at the rounding floor, {info['certified_gap']:.1e} of f(0))", \
+            False, True, info
+    try:
+        theta, ipm = fit_quadratic_newton(stats.H, stats.g, stats.c, parameters, constrained=constrained,
+                                          regularizer=regularizer, start=theta_cvx, closure=closure)
+    except SolverError as exc:
+        closed = closure and regularizer is None and constrained and projects(stats, parameters)
+        where = " on the closed set (newton.closure)" if closed else ""
+        return theta_cvx, f"{solver} optimal, not certified: newton check{where} failed ({exc.status})", False, False, {}
+    f_new = f(theta)
+    above = (f_cvx - f_new) / max(abs(f_new), 1e-300) if np.isfinite(f_cvx) else np.inf
+    info = {"certified_gap": float(ipm["relative_gap"]), "cvxpy_above_certified": float(above),
+            "certify_iterations": int(ipm["iterations"])}
+    # the closure's completion (describes θ, not θ_cvx): present exactly when the fit ran on a closed set that
+    # projected a parameter out (model.closure.on_closure, enabled by closure without a prior)
+    projected = {k: v for k, v in ipm.items() if k.startswith("projected_")}
+    if projected:
+        outside = feasible_set(parameters, True).margin(theta_cvx) < 0
+        if above >= -TOL or outside:  # cvxpy's θ counts against the closed run only as a point of the set (exactly,
+            # no tolerance: along the ray a relative one admits an axis inertia below 0, i.e. f below the infimum)
+            why = "outside the set by rounding" if above < -TOL else f"{above:.1e} above"
+            return theta, f"{solver} optimal ({why}) → newton on the closed set (newton.closure)", True, True, \
+                {**info, **projected}
+        # else the closed run did not reach its infimum and cvxpy's θ is checked as below
+    if above > TOL:
+        return theta, f"{solver} optimal but {above:.1e} above → newton polished", True, True, {**info, **projected}
+    return theta_cvx, f"{solver} optimal (certified by newton: {max(above, 0.0):.1e})", False, True, info
+
+
+def projects(stats, parameters) -> bool:
+    """Does the closure project some parameter out of this fit (``model.closure.close`` on its statistics)?"""
+    return bool(close(feasible_set(parameters, True), stats.H, stats.c)[1])

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dualid.estimators.newton.closure import NOT_DETERMINED
+from dualid.model.closure import NOT_DETERMINED
 from dualid.model.consistency import BodyProperties, body_properties
 from dualid.model.margin import margin_info
 from dualid.model.parameters import ParameterSpace
@@ -25,7 +25,7 @@ class NoiseRecord:
     rounds: int  # noise-level / θ alternations
     pilot_objective: float  # the pilot's objective
     choice: str = "noise model"  # what θ̂ is: "noise model", or "wls: …" when the check rejected the noise model
-    check_excess: float = float("nan")  # held-out loss beyond the noise model's prediction, share of WLS's (noise_check)
+    check_excess: float = float("nan")  # held-out loss beyond the noise model's prediction, share of WLS's (noise_model)
     check_measured_gap: float = float("nan")  # held-out loss dm − WLS, share of WLS's
     check_predicted_gap: float = float("nan")  # … as the noise model predicts it
 
@@ -67,7 +67,7 @@ class IdentificationResult:
 
     def not_determined(self, names: Collection[str] | None = None) -> dict[str, str]:
         """{parameter label: NOT_DETERMINED} for every parameter the data do not determine: one the fit completed on
-        the closed feasible set (estimators.newton.closure; info["projected_names"]); only those among ``names`` when
+        the closed feasible set (model.closure; info["projected_names"]); only those among ``names`` when
         given (e.g. the rigid-body parameters a URDF carries)."""
         return {n: NOT_DETERMINED for n in self.info.get("projected_names", ()) if names is None or n in names}
 

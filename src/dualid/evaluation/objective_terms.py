@@ -7,12 +7,12 @@ import numpy as np
 
 from dualid.errors import ConfigError, MetricError
 from dualid.estimators.dual_metric import DualMetric
-from dualid.estimators.guards import Guarded
 from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS, covariance_weight
-from dualid.estimators.newton.noise_objective import noise_model_covariance, noise_model_derivatives
 from dualid.estimators.newton.objective import NotPositiveDefinite, dual_metric_derivatives
 from dualid.estimators.noise_dm import NoiseModelDM
+from dualid.estimators.noise_model import noise_model_covariance, noise_model_derivatives
 from dualid.estimators.result import IdentificationResult
+from dualid.evaluation.guards import Guarded
 from dualid.linalg import pinv_psd
 from dualid.model.consistency import prior_blocks, pullback_metric
 from dualid.problem import IdentificationProblem

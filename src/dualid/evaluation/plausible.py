@@ -37,8 +37,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualid.errors import ConfigError, ConsistencyError, DataError, SolverError
-from dualid.estimators.base import SOLVERS, captured_warnings, check_nominal, is_problem_property, solve_cvxpy
-from dualid.model.consistency import prior_blocks, pullback_metric, regularizer_value
+from dualid.estimators.base import SOLVERS, captured_warnings, is_problem_property, solve_cvxpy
+from dualid.model.consistency import check_nominal, prior_blocks, pullback_metric, regularizer_value
 from dualid.problem import IdentificationProblem
 
 DATA, PRIOR = "data", "prior"
@@ -159,7 +159,7 @@ def _min_margin(P, theta: np.ndarray) -> float:
     return float(out)
 
 
-def _clear_boundary(theta_p: np.ndarray, theta_hat: np.ndarray, P) -> tuple[np.ndarray, float]:
+def clear_boundary(theta_p: np.ndarray, theta_hat: np.ndarray, P) -> tuple[np.ndarray, float]:
     """θ_p, or the first point θ_p + t(θ̂ − θ_p), t = 1e-8 … 1, with every block's constraint matrix ⪰ 0
     (both ends have θ̂'s predictions, so every point between does): a solver's 1e-10-size violation
     would make the URDF writer refuse the body. Returns (θ, t)."""
@@ -306,7 +306,7 @@ def plausible_parameters(problem: IdentificationProblem, theta_hat, theta0, solv
                           f"was found: {' → '.join(chain)}", status="all_solvers_failed")
     fallback_used = len(chain) > 1  # another solver or objective than the first
     try:
-        theta_p, pulled = _clear_boundary(centre + NG @ solved.value, theta_hat, P)
+        theta_p, pulled = clear_boundary(centre + NG @ solved.value, theta_hat, P)
     except SolverError as exc:
         raise SolverError(f"{exc} ({' → '.join(chain)})", status=exc.status) from None
     if pulled:

@@ -35,7 +35,7 @@ import pinocchio as pin
 
 from dualid.errors import SolverError
 from dualid.estimators.newton.objective import Derivatives, NotPositiveDefinite
-from dualid.estimators.quadratic_newton import _run
+from dualid.estimators.quadratic_newton import run_quadratic
 from dualid.model.consistency import FeasibleSet, feasible_set, pullback_metric
 from dualid.problem import IdentificationProblem
 
@@ -236,7 +236,7 @@ def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: n
             return Derivatives(f, g + 2.0 * mu * (W.T @ u), 0.5 * (H + H.T))
 
         try:
-            return _run(cons, start, TOL, 200, objective, 1.0)[0]
+            return run_quadratic(cons, start, TOL, 200, objective, 1.0)[0]
         except NotPositiveDefinite:  # a start outside the prior's domain (a body not strictly consistent)
             raise SolverError("plausible parameters: the start is not strictly consistent",
                               status="no_start") from None

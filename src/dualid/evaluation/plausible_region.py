@@ -45,7 +45,7 @@ from dualid.evaluation.plausible import (
     PRIOR,
     PRIOR_SHARE,
     PlausibleParameters,
-    _clear_boundary,
+    clear_boundary,
     checked_prior,
     plausible_parameters,
 )
@@ -134,7 +134,7 @@ def plausible_in_region(problem: IdentificationProblem, theta_hat, theta0, uncer
     out = solve_region(problem, theta0, beta_hat, base.C, Sigma, radius2, scale, s_ind)
     chain = [out["chain"]]
     try:
-        theta_p, pulled = _clear_boundary(out["theta"], theta_hat, P)  # the segment stays in the region
+        theta_p, pulled = clear_boundary(out["theta"], theta_hat, P)  # the segment stays in the region
     except SolverError as exc:
         raise SolverError(f"{exc} ({' → '.join(chain)})", status=exc.status) from None
     if pulled:

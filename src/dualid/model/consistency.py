@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from dualid.errors import ModelError
+from dualid.errors import ConsistencyError, ModelError
 from dualid.model.parameters import ParameterSpace
 
 
@@ -130,11 +130,11 @@ class FeasibleSet:
         """Largest α with every constraint strictly feasible on [θ, θ + α d) (inf if unbounded)."""
         alpha = np.inf
         if self.lmis and len({c.C0.shape for c in self.lmis}) == 1:  # equal blocks: one batched call
-            alpha = _max_step_psd_batched(np.stack([c.C(theta) for c in self.lmis]),
+            alpha = max_step_psd_batched(np.stack([c.C(theta) for c in self.lmis]),
                                           np.stack([c.dC(d) for c in self.lmis]))
         else:
             for c in self.lmis:
-                alpha = min(alpha, _max_step_psd(c.C(theta), c.dC(d)))
+                alpha = min(alpha, max_step_psd(c.C(theta), c.dC(d)))
         if len(self.h):
             s, ds = self.G @ theta + self.h, self.G @ d
             neg = ds < 0
@@ -143,7 +143,7 @@ class FeasibleSet:
         return alpha
 
 
-def _repair_psd(X: np.ndarray, floor: float = 1e-14) -> np.ndarray:
+def repair_psd(X: np.ndarray, floor: float = 1e-14) -> np.ndarray:
     """X itself if it is numerically positive definite, else its eigenvalues lifted to ≥ floor·λ_max."""
     X = 0.5 * (X + X.T)
     try:
@@ -154,18 +154,18 @@ def _repair_psd(X: np.ndarray, floor: float = 1e-14) -> np.ndarray:
         return (U * np.maximum(lam, floor * max(lam.max(), 1e-300))) @ U.T
 
 
-def _max_step_psd(X: np.ndarray, dX: np.ndarray) -> float:
+def max_step_psd(X: np.ndarray, dX: np.ndarray) -> float:
     """Largest α with X + α dX ≻ 0 for X ≻ 0."""
-    return _max_step_psd_batched(X[None], dX[None])
+    return max_step_psd_batched(X[None], dX[None])
 
 
-def _max_step_psd_batched(X: np.ndarray, dX: np.ndarray) -> float:
+def max_step_psd_batched(X: np.ndarray, dX: np.ndarray) -> float:
     """Largest α with X_b + α dX_b ≻ 0 for every b, X (B, m, m) ≻ 0 (one batched Cholesky / inverse / eigvalsh)."""
     X = 0.5 * (X + np.swapaxes(X, 1, 2))
     try:
         L = np.linalg.cholesky(X)
     except np.linalg.LinAlgError:  # some X_b PD only up to rounding: repaired one by one (rare)
-        L = np.linalg.cholesky(np.stack([_repair_psd(x) for x in X]))
+        L = np.linalg.cholesky(np.stack([repair_psd(x) for x in X]))
     Li = np.linalg.inv(L)
     lam = float(np.linalg.eigvalsh(Li @ dX @ np.swapaxes(Li, 1, 2))[:, 0].min())
     return np.inf if lam >= 0 else float(-1.0 / lam)
@@ -236,6 +236,21 @@ def cvxpy_constraints(theta, parameters: ParameterSpace) -> list:
     return cons
 
 
+def cvxpy_feasible_set(theta, cons: FeasibleSet) -> list:
+    """cvxpy constraints of a FeasibleSet (e.g. one closed over unseen parameters): C0 + Σ θ[idx_k] V_k ⪰ 0 per LMI
+    and G θ + h ≥ 0."""
+    import cvxpy as cp
+
+    out = []
+    for c in cons.lmis:
+        k, m, _ = c.V.shape
+        C = c.C0 + cp.reshape(c.V.reshape(k, m * m).T @ theta[[int(i) for i in c.idx]], (m, m), order="C")
+        out.append(0.5 * (C + C.T) >> 0)
+    if len(cons.h):
+        out.append(cons.G @ theta + cons.h >= 0)
+    return out
+
+
 # --- geometric priors on the constraint matrices ------------------------------------------------
 def prior_blocks(kind: str, parameters: ParameterSpace, theta0: np.ndarray):
     """Per block: (indices, V (k, m, m), C0 (m, m)) for the blocks a geometric prior applies to."""
@@ -270,3 +285,45 @@ def regularizer_value(kind: str, parameters: ParameterSpace, theta: np.ndarray, 
             d = theta[idx] - theta0[idx]
             total += float(d @ pullback_metric(V, C0) @ d)
     return float(total)
+
+
+def _clip_psd(C: np.ndarray, eps: float = 1e-2) -> np.ndarray:
+    lam, U = np.linalg.eigh(C)
+    top = np.abs(lam).max()
+    top = top if top > 0 else 1.0
+    return (U * np.maximum(lam, eps * top)) @ U.T
+
+
+def central_point(theta_ols: np.ndarray, cons: FeasibleSet, eps: float = 1e-2) -> np.ndarray:
+    """A strictly feasible point near θ_ols: each block's matrix with its eigenvalues lifted to ≥ eps·λ_max."""
+    theta = theta_ols.copy()
+    for c in cons.lmis:
+        k, m, _ = c.V.shape
+        target = _clip_psd(c.C(theta), eps) - c.C0
+        theta[c.idx] = np.linalg.lstsq(c.V.reshape(k, m * m).T, target.reshape(-1), rcond=None)[0]
+    if len(cons.h):
+        for j in range(len(cons.h)):
+            g = cons.G[j]
+            i = int(np.flatnonzero(g)[0])
+            s = g[i] * theta[i] + cons.h[j]
+            scale = max(abs(theta[i]), abs(cons.h[j]), 1e-6)
+            if s < 1e-2 * scale:
+                theta[i] += (1e-2 * scale - s) / g[i]
+    return theta
+
+
+def check_nominal(parameters: ParameterSpace, theta0: np.ndarray, strict: bool) -> np.ndarray:
+    """θ₀ must have p finite entries and be physically consistent (strictly, for log-det priors)."""
+    theta0 = np.asarray(theta0, dtype=float)
+    if theta0.shape != (parameters.p,):
+        raise ConsistencyError(f"nominal θ₀: expected shape ({parameters.p},), got {theta0.shape}")
+    if not np.all(np.isfinite(theta0)):
+        raise ConsistencyError("nominal θ₀ has non-finite entries (NaN or inf)")
+    for name, margin in parameters.consistency_margins(theta0).items():
+        if margin < 0 or (strict and margin <= 0):
+            need = "positive definite" if strict else "positive semidefinite"
+            raise ConsistencyError(
+                f"nominal θ₀ is not physically consistent: block {name!r} has constraint-matrix "
+                f"smallest eigenvalue {margin:.3g}; it must be {need}"
+            )
+    return theta0

@@ -86,7 +86,7 @@ def _merged_links(root: ET.Element, link: str) -> list[str]:
 def not_determined_comments(model: RigidBodyModel, not_determined: Mapping[str, str] | None,
                             where: str = "write_urdf") -> dict[str, list[str]]:
     """{body (block name): [comment text]} for the parameters ``not_determined`` names ({parameter label: why it is
-    not determined by the data}, e.g. a mass the fit completed: estimators.newton.closure), found through the
+    not determined by the data}, e.g. a mass the fit completed: model.closure), found through the
     model's parameter blocks; a label that is not one of the model's parameters is refused."""
     not_determined = dict(not_determined or {})
     P = model.parameters

@@ -41,8 +41,8 @@ import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
 from dualid.errors import ConfigError, DataError, SolverError
-from dualid.estimators.newton.linalg import solve_psd
 from dualid.estimators.quadratic_newton import fit_quadratic_newton
+from dualid.linalg import solve_psd
 from dualid.model.base import Model
 from dualid.model.consistency import feasible_set
 from dualid.model.metric import AffineMetric

@@ -31,10 +31,10 @@ import numpy as np
 
 from dualid.errors import ConfigError, DualidError, IdentifiabilityError
 from dualid.estimators import methods as methods_table
-from dualid.estimators.guards import guard_info
-from dualid.estimators.margin import with_margin
+from dualid.estimators.least_squares import with_margin
 from dualid.evaluation.prediction import PredictionData, measured_signal
 from dualid.evaluation.scores import metric_rmse, rmse, score_run, shift_window
+from dualid.metric_guard import guard_info
 from dualid.paper.results import FitRecord, StudyResult, Summary, Trace
 from dualid.problem import IdentificationProblem, build_problem
 from dualid.systems.base import SystemData
@@ -180,7 +180,7 @@ def run_study(
     progress: a callback progress(done, total, description) or a rich Progress.
     ablation: None, "units" (see ``units_chart``) or a constant chart B ((n,) diagonal or (n, n)).
     trace_run: index of the test run whose predicted signals are kept for trajectory plots.
-    margin: ε of the chart-invariant margin C_b(θ) ⪰ ε·C_b(θ_WLS) on every method (dualid.estimators.margin),
+    margin: ε of the chart-invariant margin C_b(θ) ⪰ ε·C_b(θ_WLS) on every method (dualid.estimators.least_squares),
     against a constrained WLS pilot on each training set in the simulated chart (before an ablation's chart).
     """
     plan = StudyPlan.of(system, case, seeds, methods, ablation, trace_run, margin)

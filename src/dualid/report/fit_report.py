@@ -45,7 +45,7 @@ SCORE_NOTE = ("τ: inverse dynamics τ̂ = Y(q, v, a)θ̂ from measured q, v and
               "accelerations. NCC: normalized cross-correlation, maximum over shifts within ±{window} s.")
 SOLVER_NOTES = ("fallback_reason", "solver_warnings", "fallback", "pilot", "projected_parameters", "projected_note",
                 "diverging_direction")  # the last three: an
-# infimum approached only as parameters grow (estimators.newton.closure; dm-paper's optimum at infinity)
+# infimum approached only as parameters grow (model.closure; dm-paper's optimum at infinity)
 
 
 NOTE_LABELS = {  # SOLVER_NOTES keys in a reader's words

@@ -51,7 +51,7 @@ def method_entry_record(m: str, f, P) -> dict:
         "solve_time_s": r.solve_time,
         "objective": r.objective,
         "physically_consistent": bool(r.is_consistent),
-        "parameters": r.parameter_records(f.uncertainty),  # the completed ones say so (newton.closure)
+        "parameters": r.parameter_records(f.uncertainty),  # the completed ones say so (model.closure)
         "base_parameters": method_record(f),
         "validation": None if f.validation is None else f.validation.as_dict(),
     }
@@ -77,7 +77,7 @@ def parameters_record(outcome: FitOutcome, urdfs: dict[str, str], meta: dict | N
             **({"margin": {k.removeprefix("margin_"): v for k, v in r.info.items() if k.startswith("margin_")}}
                if "margin_epsilon" in r.info else {}),  # C_b(θ) ⪰ ε·C_b(θ_ref) (dualid.model.margin)
             **({"projected_parameters": {"values": r.info["projected_parameters"], "note": r.info.get("projected_note")}}
-               if "projected_parameters" in r.info else {}),  # unseen masses completed (estimators.newton.closure)
+               if "projected_parameters" in r.info else {}),  # unseen masses completed (model.closure)
             "iterations": r.iterations,
             "urdf": urdfs.get(m),
             "mjcf": (files or {}).get(m, {}).get("mjcf"),

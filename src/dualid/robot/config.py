@@ -235,7 +235,7 @@ class FitConfig:
 
         solver = d.get("solver") or {}
         if not isinstance(solver, Mapping) or not all(isinstance(v, Mapping) for v in solver.values()):
-            raise ConfigError("solver: expected a mapping {method: {option: value}}, e.g. {dm: {solver: sdp, tol: 1e-8}}; "
+            raise ConfigError("solver: expected a mapping {method: {option: value}}, e.g. {dm-paper: {solver: cvxpy, tol: 1e-8}}; "
                               f"got {solver!r}")
         for m in solver:
             if m not in METHODS:

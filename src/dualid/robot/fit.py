@@ -28,20 +28,20 @@ from dualid.data.bag_inspect import bag_summary, default_topics
 from dualid.data.bags import is_bag
 from dualid.data.checks import check_efforts
 from dualid.data.files import read_mapping
-from dualid.data.lie import BASE_COORDINATES
 from dualid.data.io import ColumnMap, load_log, read_table
+from dualid.data.lie import BASE_COORDINATES
 from dualid.data.preprocessing import preprocess
 from dualid.data.tables import reading_once
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError, DualidError, DualidWarning, MissingFileError, PlausibleWarning
 from dualid.estimators import IdentificationResult
-from dualid.estimators.guards import guard_info
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.methods import method as method_entry
 from dualid.evaluation.plausible import PlausibleParameters
 from dualid.evaluation.plausible_newton import ball_prior
 from dualid.evaluation.uncertainty import BaseUncertainty
 from dualid.evaluation.validation import Validation, prepare_runs, validate, validate_each
+from dualid.metric_guard import guard_info
 from dualid.model.external_wrench import apply_wrenches
 from dualid.model.joint_terms import JointTermsModel, with_joint_terms
 from dualid.model.rigid_body import RigidBodyModel
@@ -159,7 +159,7 @@ def urdf_joint_terms(urdf: Path, joints: tuple[str, ...]) -> dict[str, dict[str,
 # --- prior ------------------------------------------------------------------------------------
 def _guarded(result: IdentificationResult, problem: IdentificationProblem, rigid: RigidBodyModel, model):
     """The result with the metric guard against the URDF's own inertials (joint terms at zero) in its info:
-    how far the identified mass matrix collapsed or blew up (dualid.estimators.guards)."""
+    how far the identified mass matrix collapsed or blew up (dualid.evaluation.guards)."""
     theta_urdf = np.zeros(model.parameters.p)
     theta_urdf[: rigid.parameters.p] = rigid.nominal
     try:

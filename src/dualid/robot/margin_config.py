@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from dualid.errors import ConfigError
-from dualid.estimators.margin import REFERENCES, with_margin
+from dualid.estimators.least_squares import REFERENCES, with_margin
 from dualid.model.margin import check_margin
 from dualid.model.parameters import ParameterSpace
 

@@ -167,8 +167,10 @@ class FitConfigSchema(_Section):
     bounds: dict[str, tuple[float | None, float | None]] | None = None
     methods: list[Method] | Method | None = None
     solver: dict[Method, dict[str, Any]] | None = Field(
-        None, description="estimator options per method, e.g. {dm: {solver: sdp, tol: 1e-8, fallback: []}, "
-                          "wls: {solver: SCS}}; checked by the estimator")
+        None, description="estimator options per method, e.g. {dm-paper: {solver: cvxpy, tol: 1e-8, fallback: []}, "
+                          "wls: {solver: cvxpy, cvxpy_solver: SCS}, ols: {solver: newton}}; solver: newton (dualid's "
+                          "interior point) or cvxpy (the conic reference, with cvxpy_solver CLARABEL or SCS); "
+                          "checked by the estimator")
     prior: PriorSection | str | None = None
     validation: ValidationSection | None = None
     references: dict[str, str] | None = None

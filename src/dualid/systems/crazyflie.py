@@ -32,8 +32,8 @@ from dualid.systems.crazyflie_control import (
     Z_CENTRE,
     GeometricController,
     Reference,
-    _random_reference,
-    _rotation,
+    random_reference,
+    rotation,
 )
 from dualid.systems.crazyflie_model import NOMINAL_THETA, TRUE_THETA, build_model
 
@@ -219,7 +219,7 @@ def simulate(
     v = np.zeros((B, model.nv))
     q[:, :3] = r[:, :3]
     q[:, 3:7] = np.column_stack([np.zeros((B, 2)), np.sin(r[:, 3] / 2), np.cos(r[:, 3] / 2)])
-    v[:, :3] = np.einsum("bji,bj->bi", _rotation(q[:, 3:7]), dr[:, :3])
+    v[:, :3] = np.einsum("bji,bj->bi", rotation(q[:, 3:7]), dr[:, :3])
     q[:, 7:9] = rng.uniform(-0.4, 0.4, size=(B, 2))  # [rad] initial swing (invented)
     V0 = rng.uniform(3.95, 4.1, size=B)  # [V] battery voltage at the start (invented)
     integral = np.zeros((B, 3))
@@ -270,7 +270,7 @@ def measure_states(q: np.ndarray, noise: CrazyflieNoise, rng: np.random.Generato
     and the pendulum at 100 Hz, shape angles from their relative orientation, zero-phase low-pass,
     Savitzky–Golay derivatives, and body velocities from the quaternion and position derivatives."""
     T = q.shape[0]
-    R = _rotation(q[:, 3:7])
+    R = rotation(q[:, 3:7])
     R_pend = R @ Rotation.from_euler("XY", q[:, 7:9]).as_matrix()  # intrinsic x then y: Rx(α1) Ry(α2)
     p_m = q[:, :3] + noise.position_std * rng.standard_normal((T, 3))
     R_m = R @ Rotation.from_rotvec(noise.angle_std * rng.standard_normal((T, 3))).as_matrix()
@@ -282,7 +282,7 @@ def measure_states(q: np.ndarray, noise: CrazyflieNoise, rng: np.random.Generato
     x = lowpass(np.column_stack([p_m, quat, alpha_m]), RATE, noise.cutoff)
     xs, dx, ddx = savgol_derivatives(x, RATE, noise.window)
     qs = xs[:, 3:7] / np.linalg.norm(xs[:, 3:7], axis=1, keepdims=True)
-    Rs = _rotation(qs)
+    Rs = rotation(qs)
     conj = qs * np.array([-1.0, -1.0, -1.0, 1.0])
     omega = 2 * _quat_mul(conj, dx[:, 3:7])[:, :3]  # body angular velocity [rad/s]
     omega_dot = 2 * _quat_mul(conj, ddx[:, 3:7])[:, :3]
@@ -347,7 +347,7 @@ def dataset(seed: int = 0, n_train: int = 6, n_test: int = 6, duration: float = 
     lo, hi = noise.gain_error
     # true thrust / calibrated thrust: one calibration error for the batch of motors plus a small spread
     gains = 1.0 + rng.choice([-1.0, 1.0]) * rng.uniform(lo, hi) + noise.motor_spread * rng.standard_normal(4)
-    reference = _random_reference(rng, n_train + n_test)
+    reference = random_reference(rng, n_train + n_test)
     raw = simulate(reference, duration, noise, rng, gains=gains)
     model = RigidBodyModel(build_model())
     names = [f"train_{k}" for k in range(n_train)] + [f"test_{k}" for k in range(n_test)]

@@ -36,7 +36,7 @@ class Reference:
         return r, (w * cos) @ _AXIS_OF, -(w * w * sin) @ _AXIS_OF
 
 
-def _random_reference(rng: np.random.Generator, B: int) -> Reference:
+def random_reference(rng: np.random.Generator, B: int) -> Reference:
     lo = np.array([0.35, 0.3, 0.15, 0.6, 0.08, 0.08])  # [m, m, m, rad, m, m] (invented; the two short
     # components swing the pendulum by about 5–8° rms, 0.1–0.2 rad at the peaks)
     hi = np.array([0.5, 0.45, 0.25, 1.0, 0.12, 0.12])
@@ -44,7 +44,7 @@ def _random_reference(rng: np.random.Generator, B: int) -> Reference:
     return Reference(rng.uniform(lo, hi, size=(B, K)), rng.uniform(0, 2 * np.pi, size=(B, K)))
 
 
-def _rotation(quat: np.ndarray) -> np.ndarray:
+def rotation(quat: np.ndarray) -> np.ndarray:
     """R (B, 3, 3) from Pinocchio quaternions (B, 4) stored (x, y, z, w)."""
     x, y, z, w = quat.T
     R = np.empty((quat.shape[0], 3, 3))
@@ -77,7 +77,7 @@ class GeometricController:
                  V_meas: np.ndarray, dt: float):
         """(PWM (B, 4) integers as float, updated integral (B, 3))."""
         r, dr, ddr = ref(t)
-        R = _rotation(q[:, 3:7])
+        R = rotation(q[:, 3:7])
         p, pdot = q[:, :3], (R @ v[:, :3, None])[..., 0]
         e_p, e_v = p - r[:, :3], pdot - dr[:, :3]
         integral = integral + dt * e_p

@@ -4,21 +4,16 @@ from __future__ import annotations
 
 import time
 import warnings
+from dataclasses import replace
 
 import numpy as np
 
 from dualid.errors import OptimumAtInfinityWarning, SolverError
-from dualid.estimators.newton.interior_point import run_interior_point
-from dualid.estimators.newton.objective import (
-    CHUNK,
-    _force_scale,
-    NotPositiveDefinite,
-    _objective,
-    dual_metric_derivatives,
-)
+from dualid.estimators.newton.interior_point import direction_label, run_interior_point
+from dualid.estimators.newton.objective import CHUNK, dual_metric_derivatives, force_scale, objective_value
 from dualid.estimators.newton.start import starting_point
-from dualid.estimators.newton.trace import direction_label
 from dualid.estimators.result import IdentificationResult
+from dualid.linalg import NotPositiveDefinite
 from dualid.model.consistency import feasible_set
 from dualid.problem import IdentificationProblem
 
@@ -27,20 +22,14 @@ MIN_WARM = 5_000  # smallest default warm-start subsample
 WARM_GAP = 1e-6  # … and the duality gap (× f) the full problem's dual variables are re-centred at
 WARM_MAX_ITER = 10  # full-data iterations a warm start may take before the cold start takes over (it needs 3–4 where
 # it helps; where the subsample's optimum is no guide — e.g. an optimum at infinity — each further one is a wasted pass)
-
-
 PUSH = 10.0  # the re-solve's lower bound: this many times the main components' values at θ̂
 
 
 def pushed_out(problem, theta, f, d, tol, max_iter, chunk) -> dict | None:
-    """Is f lower still farther out along the direction d the iterations ran off in? Re-solve from θ̂ with the
-    main components of d (those ≥ 5 % of its largest; e.g. Joint1's mass) bounded below at PUSH × their values
-    at θ̂: the other parameters may follow (on DFKI the second moments spend the consistency margin the mass
-    buys, so no fixed ray stays feasible). If that optimum is lower than f(θ̂) by more than the tolerance, the
-    infimum lies beyond θ̂: {"objective_pushed_out", "pushed_out_bound"}; else (or if it cannot be tested,
-    e.g. streamed data or a main component not growing away from 0) None."""
-    from dataclasses import replace
-
+    """Is f lower still farther out along the direction d the iterations ran off in? Re-solve from θ̂ with the main
+    components of d (≥ 5 % of its largest; e.g. Joint1's mass) bounded below at PUSH × their values at θ̂, the other
+    parameters free to follow. If that optimum is lower than f(θ̂) by more than the tolerance, the infimum lies
+    beyond θ̂: {"objective_pushed_out", "pushed_out_bound"}; else (or if it cannot be tested) None."""
     if not isinstance(problem, IdentificationProblem):
         return None
     main = np.flatnonzero(np.abs(d) >= 0.05 * np.abs(d).max())
@@ -59,19 +48,18 @@ def pushed_out(problem, theta, f, d, tol, max_iter, chunk) -> dict | None:
     cons = feasible_set(pushed.parameters, True)
     start = theta.copy()
     start[main] = PUSH * (1 + 1e-3) * theta[main]
-    near = cons.margin(start) > 0 and np.isfinite(_objective(pushed, start, chunk))
+    near = cons.margin(start) > 0 and np.isfinite(objective_value(pushed, start, chunk))
     if not near:  # θ̂ on a cone's boundary (DFKI: a margin of ±4e-12, its sign set by rounding): the pushed problem's
         # own strictly feasible start instead, solved cold below
         try:
             start, _ = starting_point(pushed, cons, chunk)
         except (SolverError, NotPositiveDefinite, np.linalg.LinAlgError):
             return None
-        if cons.margin(start) <= 0 or not np.isfinite(_objective(pushed, start, chunk)):
+        if cons.margin(start) <= 0 or not np.isfinite(objective_value(pushed, start, chunk)):
             return None
     info = None
     if near:  # θ̂ pushed out is usually near the pushed optimum (f cannot see the pushed directions): duals centred at
-        # a small gap, as the warm start's; the cold re-solve if that fails (same optimum; arm7 N = 1,000: 3 instead
-        # of 11 iterations, the fit's total 24 → 16)
+        # a small gap, as the warm start's; the cold re-solve if that fails (same optimum)
         try:
             _, _, _, info = run_interior_point(pushed, cons, start, None, None, tol, min(max_iter, WARM_MAX_ITER), chunk,
                                             False, gap0=WARM_GAP, balance=0.0)
@@ -117,14 +105,10 @@ def fit_dual_metric_newton(
 ) -> IdentificationResult:
     """Dual-metric least squares by a primal–dual interior-point Newton method (see module doc).
 
-    tol: relative tolerance on f for (duality gap + squared Newton decrement of the Lagrangian);
-    chunk: samples per pass (memory O(chunk·n·p)); raises SolverError after max_iter iterations.
-    warm_start_samples: when N > 4× this (or N ≥ 8 × MIN_WARM: then an eighth of the samples), first solve
-    on an evenly strided subsample of about this size (to WARM_TOL = 1e-8) and start the full problem
-    from its θ, with the dual variables re-centred there at a small gap (WARM_GAP = 1e-6 f) and the
-    objective's scale from the subsample; 0 disables it. On the benchmark Crazyflie at N = 300,000 this
-    takes 3 passes over the data instead of 7 (the earlier 1e-4 / 1e-3: 5 full iterations plus a scale
-    pass), with the same objective to 12 digits; at N = 100,000, 4.4 s instead of 8.0 s (cold).
+    tol: relative tolerance on f for (duality gap + squared Newton decrement of the Lagrangian); chunk: samples per
+    pass (memory O(chunk·n·p)); raises SolverError after max_iter iterations. warm_start_samples: when N > 4× this
+    (or N ≥ 8 × MIN_WARM: an eighth of the samples), first solve on an evenly strided subsample of that size (to
+    WARM_TOL) and start from its θ, the duals re-centred at a small gap (WARM_GAP); 0 disables it.
     """
     t0 = time.perf_counter()
     cons = feasible_set(problem.parameters, constrained)
@@ -139,7 +123,7 @@ def fit_dual_metric_newton(
         try:
             th, _, _, info_sub = run_interior_point(sub, cons, theta, None, None, WARM_TOL, max_iter, chunk, verbose)
             try:  # the objective's scale, from the subsample (saves a pass over all samples)
-                f_scale = _force_scale(sub, th, chunk) * problem.N / sub.N
+                f_scale = force_scale(sub, th, chunk) * problem.N / sub.N
             except np.linalg.LinAlgError:
                 f_scale = None
             der = dual_metric_derivatives(problem, th, 2, chunk)  # M_i(θ) ≻ 0 on every sample?

@@ -5,54 +5,39 @@ from __future__ import annotations
 import numpy as np
 
 from dualid.errors import SolverError
-from dualid.estimators.newton.linalg import _NewtonSystem, positive_definite, SecantCorrection
-from dualid.estimators.newton.objective import (
-    _force_scale,
-    NotPositiveDefinite,
-    dual_metric_derivatives,
+from dualid.estimators.newton.linalg import (
+    NewtonSystem,
+    SecantCorrection,
+    barrier,
+    dual_direction,
+    dual_max_step,
+    duality_gap,
+    min_centrality,
 )
-from dualid.estimators.newton.trace import constraint_only_direction, constraint_only_growth, iteration_diagnostics
-from dualid.model.consistency import (
-    FeasibleSet,
-    _max_step_psd,
-    _max_step_psd_batched,
-    _repair_psd,
-)
+from dualid.estimators.newton.objective import dual_metric_derivatives, force_scale
+from dualid.linalg import NotPositiveDefinite, positive_definite
+from dualid.model.consistency import FeasibleSet, repair_psd
 
 RESTART = 1.0  # non-convex f only: after a step that lowered f by Δf > the duality gap, the barrier restarts at
-# μ = RESTART · Δf / ν with the dual re-centred (Z_b = μ C_b⁻¹, z = μ / s). For convex f the gap bounds f − f*, so
-# no later step can lower f by more than it; on the noise-model objective (``dm``, exact Hessian indefinite, the
-# Gauss–Newton part used) the paper's optimum it starts from is not a local minimum: by iteration 4 the gap was
-# 2e-4 (μ ≈ 1e-5), then f found descent and, with that μ and a dual fitted to the old point (centrality 1e-7), the
-# steps crawled along the block boundaries (10⁻⁵…10⁻², 95 iterations, f 636.19 → 635.51, no convergence). The
-# restart follows the barrier update of Nocedal & Wright §19.3 and IPOPT's monotone μ (not below the optimality error),
-# with the observed decrease as that error's size. Measured on tests/test_margin.py's binding-margin Crazyflie
-# (N = 80, noise 0.3), seeds 2–8: 5 failures (max iterations; seeds 5, 8: 94, 46 iterations) before → 1 failure
-# (seed 6: θ runs off, now reported as an optimum at infinity) and 32–98 iterations after (seeds 5, 8: 32, 40);
-# RESTART = 1 (gap := Δf) is the smallest reset the bound motivates. The ``dm-paper`` path (convex) never restarts.
+# μ = RESTART · Δf / ν with the dual re-centred (Z_b = μ C_b⁻¹, z = μ / s), as the barrier update of Nocedal & Wright
+# §19.3 and IPOPT's monotone μ (not below the optimality error, here the observed decrease). For convex f the gap
+# bounds f − f*, so the ``dm-paper`` path never restarts; ``dm`` starts at the paper's optimum, which is not a local
+# minimum of its objective, and a μ fitted to that point left the steps crawling along the block boundaries
 DIVERGENCE_RATIO = 0.95  # each of the last primal steps at least this times the one before (not shrinking) …
 DIVERGENCE_STEPS = 5  # … this many in a row, along one direction, |θ| growing and f falling: optimum at infinity
 CENTRALITY_MIN = 0.0075  # below this × μ, the smallest eigenvalue of C_b^½ Z_b C_b^½ (or s_j z_j) calls for a centring
-# step (σ = 1). Where a block is rank-deficient at the optimum (a point mass, a body of unidentifiable mass), Mehrotra's
-# σ ≤ 0.5 lets one eigen-pair of C_b Z_b collapse far ahead of μ; every later primal and dual step is then blocked by
-# that block's boundary (steps of 0.01–0.2 for dozens of iterations, "no convergence in 100 iterations" on 5 stress-
-# corpus problems). Re-centring first: 0 failures there; on their well-posed versions (benchmarks/newton_unattained.py)
-# 64/26/51/40/33/15 → 37/23/29/32/30/16 iterations.
+# step (σ = 1): at a rank-deficient optimum (a point mass) Mehrotra's σ ≤ 0.5 lets one eigen-pair of C_b Z_b collapse
+# far ahead of μ, and every later step is blocked by that block's boundary
 SHORT_STEP = 0.5  # … and only after a step shorter than this (primal or dual): well-centred runs keep Mehrotra's σ
 GAP_BALANCE = 3.0  # the centring target σμ is kept ≥ GAP_BALANCE · λ²/ν (λ² the Lagrangian's squared Newton
-# decrement, the stationarity error in units of f; at most μ). Mehrotra's σ comes from the affine predictor of f's
-# local quadratic model; on the dual metric (M(θ)⁻¹ inside f) and at rank-deficient optima it cut the gap 10–20×
-# per step while λ² stayed put, the iterates reached a block's boundary far from the optimum and crawled along it
-# (σ = 1 centring steps of 0.01–0.1 for 20 iterations). Stress corpus (benchmarks/stress_corpus.py --no-large):
-# dm-paper Newton median/max 27/54 → 20.5/32 iterations (docs/performance.md, "What keeps the solvers converging").
+# decrement, the stationarity error in units of f; at most μ), so that the gap cannot run ahead of stationarity
+# (docs/performance.md, "What keeps the solvers converging", for these rules and their measurements)
 
 
 def diverging_iterates(thetas: list[np.ndarray], f_history: list[float]) -> dict:
-    """Does the iteration run off to infinity? Near a finite minimiser Newton's steps shrink (quadratically, or at
-    worst linearly while it is jammed). When the infimum is approached as θ → ∞ along a ray (e.g. f = S_A/m + S_B as
-    a mass m grows, the metric loosening without bound: DFKI Joint1) the steps keep their length and direction
-    (×1.5 per step on the pure hyperbola c/m; about constant once the Levenberg term of the Newton matrix limits
-    them) while |θ| grows and f keeps falling. Flags it when the last DIVERGENCE_STEPS steps each keep ≥
+    """Does the iteration run off to infinity? Near a finite minimiser Newton's steps shrink; when the infimum is
+    approached as θ → ∞ along a ray (e.g. f = S_A/m + S_B as a mass m grows: DFKI Joint1) they keep their length and
+    direction while |θ| grows and f keeps falling. Flags it when the last DIVERGENCE_STEPS steps each keep ≥
     DIVERGENCE_RATIO of the previous one's length, point the same way (cosine ≥ 0.99), |θ| increases at every one
     of them and f decreases; ``diverging_direction`` is the last step, normalised."""
     out = {"optimum_at_infinity": False}
@@ -100,79 +85,16 @@ def barrier_restart(decrease, gap, floor, nu, Cinv, s):
     return [mu * Ci for Ci in Cinv], (mu / s if len(s) else np.zeros(0))
 
 
-def _dual_direction(cons: FeasibleSet, Z, z, Cinv, s, d, target):
-    """HKM direction: ΔZ = σμ C⁻¹ − Z − sym(Z ΔC C⁻¹); Δz = σμ/s − z − (z/s) G d."""
-    dZ = []
-    for c, Zb, Ci in zip(cons.lmis, Z, Cinv):
-        X = Zb @ c.dC(d) @ Ci
-        dZ.append(target * Ci - Zb - 0.5 * (X + X.T))
-    dz = target / s - z - (z / s) * (cons.G @ d) if len(s) else np.zeros(0)
-    return dZ, dz
-
-
-def _dual_max_step(Z, z, dZ, dz) -> float:
-    alpha = np.inf
-    if Z and len({Zb.shape for Zb in Z}) == 1:  # equal blocks: one batched call
-        alpha = _max_step_psd_batched(np.stack(Z), np.stack(dZ))
-    else:
-        for Zb, dZb in zip(Z, dZ):
-            alpha = min(alpha, _max_step_psd(Zb, dZb))
-    neg = dz < 0
-    if neg.any():
-        alpha = min(alpha, float(np.min(-z[neg] / dz[neg])))
-    return alpha
-
-
-def min_centrality(cons: FeasibleSet, theta, Z, z, s) -> float:
-    """min over blocks of λ_min(L_bᵀ Z_b L_b) (C_b = L_b L_bᵀ) and over rows of s_j z_j: μ on the central path.
-    0 when a block no longer factors (an iterate that reached its boundary by rounding: on the DFKI pendubot tiled
-    three times, a mass pushed out by ``fit.pushed_out``): the least central point there is, so a centring step."""
-    try:
-        w = [float(np.linalg.eigvalsh(L.T @ Zb @ L)[0])
-             for L, Zb in ((np.linalg.cholesky(c.C(theta)), Zb) for c, Zb in zip(cons.lmis, Z))]
-    except np.linalg.LinAlgError:
-        return 0.0
-    if len(s):
-        w.append(float(np.min(s * z)))
-    return min(w) if w else np.inf
-
-
-def _gap(cons: FeasibleSet, theta, Z, z) -> float:
-    gap = sum(float(np.sum(c.C(theta) * Zb)) for c, Zb in zip(cons.lmis, Z))
-    if len(z):
-        gap += float((cons.G @ theta + cons.h) @ z)
-    return gap
-
-
-def _barrier(cons: FeasibleSet, theta) -> float:
-    """−Σ log det C_b(θ) − Σ log s_j(θ); +inf outside the interior."""
-    val = 0.0
-    for c in cons.lmis:
-        sign, logdet = np.linalg.slogdet(c.C(theta))
-        if sign <= 0:
-            return np.inf
-        val -= logdet
-    if len(cons.h):
-        s = cons.G @ theta + cons.h
-        if np.any(s <= 0):
-            return np.inf
-        val -= float(np.sum(np.log(s)))
-    return val
-
-
 def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, chunk, verbose, der=None, gap0=1.0,
                     objective=None, f_scale=None, levenberg=1e-12, balance: float = GAP_BALANCE, convex: bool = True):
     """Primal–dual iterations from a strictly feasible θ (and dual Z, z, or None: centred at θ, gap0·f).
 
     Returns (θ, Z, z, info) at relative gap ≤ tol; raises SolverError otherwise. objective(θ, order) → Derivatives
-    (raising NotPositiveDefinite outside its domain) replaces the dual-metric f, with f_scale its size
-    (then problem is unused): the same method for any smooth convex f under these constraints. convex=False (an
-    objective whose Hessian is indefinite somewhere, handed as a PSD part such as Gauss–Newton) lets the barrier
-    parameter restart when f falls by more than the duality gap in one step (RESTART) and adds the curvature that
-    the handed Hessian leaves out, learnt by secant updates, where that keeps the Newton matrix positive definite
-    (``linalg.SecantCorrection``); the stopping test is the same — gap plus the Lagrangian's squared Newton
-    decrement in the metric of that Newton matrix ≤ tol · f: a KKT point of f's local model, as small relative to
-    f as in the convex case.
+    (raising NotPositiveDefinite outside its domain) replaces the dual-metric f, with f_scale its size (then problem
+    is unused): the same method for any smooth convex f under these constraints. convex=False (a Hessian handed as a
+    PSD part such as Gauss–Newton) lets the barrier restart (RESTART) and adds the curvature the handed Hessian leaves
+    out, learnt by secant updates (``linalg.SecantCorrection``), where the Newton matrix stays positive definite; the
+    stopping test is the same, a KKT point of f's local model to tol · f.
     """
     p = len(theta)
     dual_metric = objective is None  # the candidate direction below is for fit_dual_metric_newton (fit.pushed_out)
@@ -183,7 +105,7 @@ def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, c
     der = objective(theta, 2) if der is None else der
     f_start = der.f
     if f_scale is None:
-        f_scale = _force_scale(problem, theta, chunk)
+        f_scale = force_scale(problem, theta, chunk)
     f_scale = max(f_start, f_scale)  # exact data drive f → 0
     if Z is None:
         mu = gap0 * max(der.f, 1e-300) / max(nu, 1)  # dual start on the central path: Z_b = μ C_b⁻¹, z = μ / s
@@ -222,19 +144,14 @@ def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, c
         if not convex and positive_definite(K + secant.A):
             # the Lagrangian's Hessian with the learnt curvature, where it is positive definite (the inertia test
             # of IPOPT, on the whole Newton matrix: the barrier's curvature may cover f's negative part); else the
-            # handed PSD Hessian alone. On the binding-margin Crazyflie (N = 80, seeds 2–8) the Gauss–Newton
-            # Hessian's linear rate left 98/52/43/32/—/52/40 iterations (seed 6: stopped as diverging); with
-            # the correction 51/47/37/30/75/44/46 (seed 6 at a finite optimum, f 606.17 against 635.9 and
-            # falling); N = 30/40/60 × seeds 2, 3, 4, 7: 9 → 12 of 12 converged
-            system = _NewtonSystem(0.5 * (K + K.T), levenberg)
+            # handed PSD Hessian alone
+            system = NewtonSystem(0.5 * (K + K.T), levenberg)
             K = K + secant.A
         # the stop is measured in the handed Hessian's metric too, and the larger decrement counts: a learnt
-        # curvature with spurious positive directions cannot make the test pass early. On N = 60, seed 3 of
-        # the binding-margin Crazyflie the corrected metric alone stopped at 61 iterations with the Gauss–Newton
-        # metric's decrement 100× over the tolerance; with both, 95 (the other 18 runs above: ±3 iterations)
+        # curvature with spurious positive directions cannot make the test pass early
         kkt = 0.0 if system is None else float(r_dual @ system.solve(r_dual))
-        system = _NewtonSystem(0.5 * (K + K.T), levenberg)
-        gap = _gap(cons, theta, Z, z)
+        system = NewtonSystem(0.5 * (K + K.T), levenberg)
+        gap = duality_gap(cons, theta, Z, z)
         kkt = float(max(r_dual @ system.solve(r_dual), kkt, 0.0))  # squared Newton decrement of the Lagrangian
         f_ref = max(f, 1e-12 * f_scale, 1e-300)
         history.append(f)
@@ -265,9 +182,9 @@ def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, c
         if mu > 0:  # a gap that underflowed to 0 (the dual iterates at 0) leaves nothing to centre: σ = 0
             d_aff = system.solve(-grad)
             a_p = min(1.0, cons.max_step(theta, d_aff))
-            dZa, dza = _dual_direction(cons, Z, z, Cinv, s, d_aff, 0.0)
-            a_d = min(1.0, _dual_max_step(Z, z, dZa, dza))
-            mu_aff = _gap(cons, theta + a_p * d_aff, [Zb + a_d * dZb for Zb, dZb in zip(Z, dZa)], z + a_d * dza) / nu
+            dZa, dza = dual_direction(cons, Z, z, Cinv, s, d_aff, 0.0)
+            a_d = min(1.0, dual_max_step(Z, z, dZa, dza))
+            mu_aff = duality_gap(cons, theta + a_p * d_aff, [Zb + a_d * dZb for Zb, dZb in zip(Z, dZa)], z + a_d * dza) / nu
             sigma = float(np.clip((max(mu_aff, 0.0) / mu) ** 3, 0.05, 0.5))
         if mu > 0 and last_step < SHORT_STEP and min_centrality(cons, theta, Z, z, s) < CENTRALITY_MIN * mu:
             sigma = 1.0  # a pure centring step: see CENTRALITY_MIN
@@ -279,7 +196,7 @@ def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, c
         slope = -float(rhs @ d)
         alpha = min(1.0, 0.99 * cons.max_step(theta, d)) if nu else 1.0
         alpha_max = alpha  # fraction to the boundary, before the line search
-        phi0 = f + target * _barrier(cons, theta)
+        phi0 = f + target * barrier(cons, theta)
         der_trial, first = None, True
         while True:  # backtracking: every C_b ≻ 0, every Cholesky of M_i succeeds, Armijo on φ
             n_evals += 1
@@ -299,7 +216,7 @@ def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, c
                     phi1 = np.inf
             first = False
             if np.isfinite(phi1):
-                phi1 += target * _barrier(cons, trial)
+                phi1 += target * barrier(cons, trial)
             # Armijo, with a tolerance for the rounding of f: batched solves with ill-conditioned M_i make
             # f jitter by a few 1e-12 relative; 1e-10 stays 10× below the stopping tolerance (1e-9)
             if phi1 <= phi0 + 1e-4 * alpha * slope + 1e-10 * abs(phi0):
@@ -311,15 +228,14 @@ def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, c
                     f"{(gap + kkt) / f_ref:.3g}); the problem may be badly scaled",
                     status="line_search_failed",
                 )
-        dZ, dz = _dual_direction(cons, Z, z, Cinv, s, d, target)
-        alpha_dual = min(1.0, 0.99 * _dual_max_step(Z, z, dZ, dz))
+        dZ, dz = dual_direction(cons, Z, z, Cinv, s, d, target)
+        alpha_dual = min(1.0, 0.99 * dual_max_step(Z, z, dZ, dz))
         # separate primal and dual step lengths: with one common length the primal step (blocked by a nearly
-        # active block) and the dual step (blocked by a Z_b near its boundary) throttle each other in turn and
-        # the iteration crawls at α ≈ 0.05–0.15 (106 iterations on the DFKI pendubot, 37–42 on arm7)
+        # active block) and the dual step (blocked by a Z_b near its boundary) throttle each other in turn
         theta, der = trial, der_trial
         last_step = min(alpha, alpha_dual)
         thetas.append(np.array(theta, dtype=float))
-        Z = [_repair_psd(Zb + alpha_dual * dZb) for Zb, dZb in zip(Z, dZ)]  # PD up to rounding
+        Z = [repair_psd(Zb + alpha_dual * dZb) for Zb, dZb in zip(Z, dZ)]  # PD up to rounding
         z = z + alpha_dual * dz
         if verbose:
             print(f"            sigma {sigma:.3g} alpha {alpha:.3g} (to boundary {alpha_max:.3g}) "
@@ -339,3 +255,97 @@ def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, c
         + constraint_only_growth(cons, der, thetas, getattr(getattr(problem, "parameters", None), "names", None)),
         status="max_iterations",
     )
+
+
+
+def iteration_diagnostics(cons, theta, Z, gap, system) -> str:
+    """One iteration's diagnostics (``run_interior_point(verbose=True)``): per block the conditioning of C_b(θ) and
+    the spread of the eigenvalues of L_bᵀ Z_b L_b / μ (all 1 on the central path), and the Newton matrix's."""
+    mu = gap / max(cons.size, 1)
+    parts = []
+    for c, Zb in zip(cons.lmis, Z):
+        C = c.C(theta)
+        lam = np.linalg.eigvalsh(C)
+        try:
+            L = np.linalg.cholesky(C)
+            w = np.linalg.eigvalsh(L.T @ Zb @ L) / max(mu, 1e-300)
+            spread = f"[{w[0]:.2g}, {w[-1]:.2g}]"
+        except np.linalg.LinAlgError:
+            spread = "[C not PD]"
+        parts.append(f"{c.name}: cond {lam[0] / lam[-1]:.1e} centrality {spread}")
+    if system.L is not None:
+        dd = np.diag(system.L) ** 2
+        newton = f"Newton matrix cholesky, diag ratio {dd.max() / dd.min():.1e}"
+    else:
+        newton = f"Newton matrix eigen fallback, rank {len(system.lam)}"
+    return newton + (" | " + " | ".join(parts) if parts else "")
+
+
+GROWTH = 2.0  # a constraint-only parameter this many times farther from 0 at the end than at the start: "grew"
+
+
+def _constraint_only(cons, der, thetas) -> list[int]:
+    """Indices of the parameters f does not depend on (gradient and Hessian rows exactly 0) that enter an LMI."""
+    if der is None or der.grad is None or der.hess is None or len(thetas) < 2:
+        return []
+    free = np.flatnonzero((der.grad == 0) & np.all(der.hess == 0, axis=1))
+    in_lmi = set()
+    for c in cons.lmis:
+        in_lmi.update(int(k) for k in c.idx)
+    if len(cons.h):  # a parameter with a bound row against the way it moved cannot run off to infinity
+        move = thetas[-1] - thetas[0]
+        in_lmi -= {int(k) for k in np.flatnonzero(np.any(cons.G * move < 0, axis=0))}
+    return [int(k) for k in free if int(k) in in_lmi]
+
+
+def constraint_only_direction(cons, der, thetas) -> np.ndarray:
+    """The unit vector along the constraint-only parameter that loosens its LMI (V_k ⪰ 0, e.g. a body's mass) and
+    moved most, signed by the move; one coordinate, so that pushing it out alone keeps the LMI feasible."""
+    free = set(_constraint_only(cons, der, thetas))
+    move = thetas[-1] - thetas[0]
+    best, d = None, np.zeros_like(thetas[-1])
+    for c in cons.lmis:
+        for j, k in enumerate(int(i) for i in c.idx):
+            lam = np.linalg.eigvalsh(c.V[j])
+            if k in free and move[k] > 0 and lam[0] >= -1e-12 * max(abs(lam[-1]), 1e-300):
+                if best is None or move[k] > move[best]:
+                    best = k
+    if best is not None:
+        d[best] = 1.0
+    return d
+
+
+def constraint_only_growth(cons, der, thetas, names, growth_min: float = GROWTH) -> str:
+    """Why the iteration may not converge: parameters that f does not depend on (their gradient and Hessian
+    rows are exactly 0 — zero columns of Y and of the metric, e.g. the mass and off-axis second moments of the
+    link next to a fixed base) enter only the constraints, where growing loosens them. If such parameters grew
+    ≥ growth_min× (default GROWTH) over the iterations, the infimum is likely approached only as they go to
+    infinity (not attained); an SDP then stops at a tolerance-dependent θ. Returns a message suffix naming them, or ''."""
+    free = _constraint_only(cons, der, thetas)
+    if not free:
+        return ""
+    start, end = thetas[0][free], thetas[-1][free]
+    growth = float(np.linalg.norm(end)) / max(float(np.linalg.norm(start)), 1e-300)
+    if growth < growth_min:
+        return ""
+    label = ", ".join(names[k] if names is not None else f"θ[{k}]" for k in free[:6]) + (" …" if len(free) > 6 else "")
+    return (f"; the objective does not depend on {label} (they enter only the consistency constraints, which "
+            f"loosen as they grow) and they grew {growth:.3g}× over the iterations: the infimum is likely not "
+            "attained at a finite θ; fix or bound these parameters")
+
+
+def main_components(d: np.ndarray, top: int = 4) -> list[int]:
+    """Indices of direction d's largest components (at most ``top``, each above 1e-3 of |d|), largest first."""
+    d = np.asarray(d, dtype=float)
+    size = float(np.linalg.norm(d))
+    return [int(k) for k in np.argsort(-np.abs(d))[:top] if abs(d[k]) > 1e-3 * size]
+
+
+def direction_names(d: np.ndarray, names) -> list[str]:
+    """The parameter names of d's main components (a plain, JSON-friendly list for result.info)."""
+    return [names[k] for k in main_components(d)]
+
+
+def direction_label(d: np.ndarray, names) -> str:
+    """d's main components as "+0.707·name …" (result.info["diverging_direction"])."""
+    return " ".join(f"{d[k]:+.3f}·{names[k]}" for k in main_components(d))

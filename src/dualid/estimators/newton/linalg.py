@@ -1,34 +1,21 @@
-"""Solves with the (PSD, possibly singular) Newton matrices: Jacobi-scaled, with a pseudo-inverse fallback."""
+"""The linear algebra of the interior-point iterations: the (PSD, possibly singular) Newton matrices (Jacobi-scaled,
+with a pseudo-inverse fallback) and their secant correction, and the duality gap, barrier and HKM dual steps."""
 
 from __future__ import annotations
 
 import numpy as np
 
-
-def solve_psd(K: np.ndarray, b: np.ndarray, rtol: float = 1e-13) -> np.ndarray:
-    """K⁺ b for K ⪰ 0 (Jacobi-scaled; directions with eigenvalue < rtol·max are left out)."""
-    d = _jacobi(K)
-    lam, U = np.linalg.eigh(K / np.outer(d, d))
-    keep = lam > rtol * max(lam.max(), 1e-300)
-    x = U[:, keep] @ ((U[:, keep].T @ (b / d)) / lam[keep])
-    return x / d
+from dualid.linalg import jacobi_psd
+from dualid.model.consistency import FeasibleSet, max_step_psd, max_step_psd_batched
 
 
-def _jacobi(K: np.ndarray) -> np.ndarray:
-    """√diag(K), with (numerically) empty columns given the largest scale so they drop out."""
-    d = np.sqrt(np.abs(np.diag(K)))
-    top = d.max() if d.size and d.max() > 0 else 1.0
-    d[d <= 1e-7 * top] = top
-    return d
-
-
-class _NewtonSystem:
+class NewtonSystem:
     """Solves K x = b for the PSD Newton matrix K: Jacobi-scaled Cholesky of K + δ·diag(K), δ = 1e-12 (a
     Levenberg term that leaves non-identifiable directions with a zero step instead of failing); eigen
     pseudo-inverse if even that is not positive definite numerically."""
 
     def __init__(self, K: np.ndarray, levenberg: float = 1e-12):
-        self.d = _jacobi(K)
+        self.d = jacobi_psd(K)
         Ks = K / np.outer(self.d, self.d)
         if levenberg:
             Ks[np.diag_indices_from(Ks)] += levenberg
@@ -51,30 +38,18 @@ class _NewtonSystem:
         return x / self.d
 
 
-def positive_definite(K: np.ndarray, rtol: float = 1e-10) -> bool:
-    """Is K (Jacobi-scaled) positive definite with a margin of rtol? A Cholesky attempt: the inertia test."""
-    d = _jacobi(K)
-    try:
-        np.linalg.cholesky(K / np.outer(d, d) - rtol * np.eye(len(K)))
-    except np.linalg.LinAlgError:
-        return False
-    return True
-
-
 class SecantCorrection:
-    """A ≈ ∇²f − H, the curvature that the handed Hessian H leaves out (e.g. the indefinite second-order part of a
-    Gauss–Newton H), learnt from the gradients along the steps: the structured secant update of NL2SOL (Dennis,
-    Gay & Welsch; Nocedal & Wright §10.3), A₊ s = y# with y# = ∇f₊ − ∇f − H₊ s and s the step, as the symmetric
-    rank-2 (PSB) correction of least change in the metric W = diag(H) (Jacobi, so that it does not depend on the
-    parameters' units, and defined where f's curvature along s is negative, unlike the y-weighted DGW/BFGS form),
-    A first sized by min(1, |sᵀy#| / |sᵀAs|) as in NL2SOL."""
+    """A ≈ ∇²f − H, the curvature that the handed Hessian H leaves out (e.g. a Gauss–Newton H's), learnt along the
+    steps by NL2SOL's structured secant update (Dennis, Gay & Welsch; Nocedal & Wright §10.3): A₊ s = y#, y# = ∇f₊ −
+    ∇f − H₊ s, as the symmetric rank-2 (PSB) correction of least change in the unit-free metric W = diag(H) (defined
+    also where f's curvature along s is negative), A first sized by min(1, |sᵀy#| / |sᵀAs|)."""
 
     def __init__(self, p: int):
         self.A = np.zeros((p, p))
 
     def update(self, s: np.ndarray, y: np.ndarray, hess_new: np.ndarray) -> None:
         y_sharp = y - hess_new @ s
-        v = _jacobi(hess_new) ** 2 * s  # W s
+        v = jacobi_psd(hess_new) ** 2 * s  # W s
         vs = float(v @ s)
         if not vs > 0:  # a zero step
             return
@@ -83,3 +58,62 @@ class SecantCorrection:
             self.A *= min(1.0, abs(float(s @ y_sharp)) / abs(sAs))
         r = y_sharp - self.A @ s
         self.A += (np.outer(r, v) + np.outer(v, r)) / vs - float(r @ s) * np.outer(v, v) / vs**2
+
+
+def dual_direction(cons: FeasibleSet, Z, z, Cinv, s, d, target):
+    """HKM direction: ΔZ = σμ C⁻¹ − Z − sym(Z ΔC C⁻¹); Δz = σμ/s − z − (z/s) G d."""
+    dZ = []
+    for c, Zb, Ci in zip(cons.lmis, Z, Cinv):
+        X = Zb @ c.dC(d) @ Ci
+        dZ.append(target * Ci - Zb - 0.5 * (X + X.T))
+    dz = target / s - z - (z / s) * (cons.G @ d) if len(s) else np.zeros(0)
+    return dZ, dz
+
+
+def dual_max_step(Z, z, dZ, dz) -> float:
+    alpha = np.inf
+    if Z and len({Zb.shape for Zb in Z}) == 1:  # equal blocks: one batched call
+        alpha = max_step_psd_batched(np.stack(Z), np.stack(dZ))
+    else:
+        for Zb, dZb in zip(Z, dZ):
+            alpha = min(alpha, max_step_psd(Zb, dZb))
+    neg = dz < 0
+    if neg.any():
+        alpha = min(alpha, float(np.min(-z[neg] / dz[neg])))
+    return alpha
+
+
+def min_centrality(cons: FeasibleSet, theta, Z, z, s) -> float:
+    """min over blocks of λ_min(L_bᵀ Z_b L_b) (C_b = L_b L_bᵀ) and over rows of s_j z_j: μ on the central path; 0
+    when a block no longer factors (an iterate on its boundary by rounding), so that a centring step follows."""
+    try:
+        w = [float(np.linalg.eigvalsh(L.T @ Zb @ L)[0])
+             for L, Zb in ((np.linalg.cholesky(c.C(theta)), Zb) for c, Zb in zip(cons.lmis, Z))]
+    except np.linalg.LinAlgError:
+        return 0.0
+    if len(s):
+        w.append(float(np.min(s * z)))
+    return min(w) if w else np.inf
+
+
+def duality_gap(cons: FeasibleSet, theta, Z, z) -> float:
+    gap = sum(float(np.sum(c.C(theta) * Zb)) for c, Zb in zip(cons.lmis, Z))
+    if len(z):
+        gap += float((cons.G @ theta + cons.h) @ z)
+    return gap
+
+
+def barrier(cons: FeasibleSet, theta) -> float:
+    """−Σ log det C_b(θ) − Σ log s_j(θ); +inf outside the interior."""
+    val = 0.0
+    for c in cons.lmis:
+        sign, logdet = np.linalg.slogdet(c.C(theta))
+        if sign <= 0:
+            return np.inf
+        val -= logdet
+    if len(cons.h):
+        s = cons.G @ theta + cons.h
+        if np.any(s <= 0):
+            return np.inf
+        val -= float(np.sum(np.log(s)))
+    return val

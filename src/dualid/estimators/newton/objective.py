@@ -1,4 +1,13 @@
-"""f(θ) = Σ r_iᵀ M_i(θ)⁻¹ r_i with its gradient and (exact) Hessian, accumulated over chunks of samples."""
+"""The objectives' sums over the samples, in one pass each: f(θ) = Σ r_iᵀ M_i(θ)⁻¹ r_i with its gradient and (exact)
+Hessian, and the sufficient statistics of the quadratic objectives H = Σ Y_iᵀ W Y_i, g = Σ Y_iᵀ W τ_i,
+c = Σ τ_iᵀ W τ_i (or the energy residual's, v_iᵀ r_i).
+
+The dual-metric derivatives use per-chunk kernels arranged for numpy's batched small products (the same mathematics
+as ``AffineMetric.apply_quad``, which the tests compare with; measured in benchmarks/derivatives_speed.md): M_i(θ)
+without explicit symmetrisation (``AffineMetric.evaluate(θ, rows, symmetric=False)``: the Cholesky reads the lower
+triangle only), [M_ik w_i]_k written straight into one (c, n, p) array, and Σ_i w_iᵀ M_ik w_i by one GEMM for the
+terms whose E_k are shared by all samples.
+"""
 
 from __future__ import annotations
 
@@ -6,56 +15,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dualid.estimators.newton.kernels import residual_jacobian
+from dualid.linalg import NotPositiveDefinite, cholesky_batch, forward_substitute, tri_inverse
+from dualid.model.metric import AffineMetric
 from dualid.problem import IdentificationProblem, additive, sample_blocks
 
-CHUNK = 1024  # samples per block of a pass: the per-chunk temporaries (Y_i, D_i, L⁻¹D_i: c·n·p floats each) stay in
-# cache; on the benchmark Crazyflie a pass costs 2.7 µs per sample with 1,024 against 3.1 µs with 4,096
-# (benchmarks/derivatives_speed.md)
-
-
-class NotPositiveDefinite(Exception):
-    """Some M_i(θ) is not positive definite (θ outside the domain)."""
-
-
-# Per-sample matrices are tiny (n ≲ 10) and numerous, where LAPACK's per-matrix calls are slow: the
-# kernels below loop over the small dimensions and vectorise over the samples of a chunk instead.
-def cholesky_batch(M: np.ndarray) -> np.ndarray:
-    """L (c, n, n) lower triangular with M_i = L_i L_iᵀ; raises NotPositiveDefinite."""
-    try:
-        L = np.linalg.cholesky(M)
-    except np.linalg.LinAlgError:
-        raise NotPositiveDefinite from None
-    if not np.all(np.isfinite(np.diagonal(L, axis1=1, axis2=2))):
-        raise NotPositiveDefinite
-    return L
-
-
-def tri_inverse(L: np.ndarray) -> np.ndarray:
-    """L⁻¹ (c, n, n) of lower-triangular L, by substitution vectorised over the samples."""
-    Lt = np.ascontiguousarray(np.moveaxis(L, 0, -1))  # (n, n, c): contiguous per-entry sample vectors
-    n = Lt.shape[0]
-    X = np.zeros_like(Lt)
-    inv_diag = 1.0 / np.diagonal(Lt).T  # (n, c)
-    for a in range(n):
-        X[a, a] = inv_diag[a]
-        for b in range(a):
-            acc = Lt[a, b] * X[b, b]
-            for k in range(b + 1, a):
-                acc += Lt[a, k] * X[k, b]
-            X[a, b] = -acc * inv_diag[a]
-    return np.moveaxis(X, -1, 0)
-
-
-def forward_substitute(L: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """L⁻¹ r for r (c, n)."""
-    z = np.empty_like(r)
-    for a in range(L.shape[1]):
-        acc = r[:, a].copy()
-        for b in range(a):
-            acc -= L[:, a, b] * z[:, b]
-        z[:, a] = acc / L[:, a, a]
-    return z
+CHUNK = 1024  # samples per block of a pass: the per-chunk temporaries (c·n·p floats each) stay in cache
+# (benchmarks/derivatives_speed.md: 2.7 µs per sample against 3.1 µs with 4,096 on the benchmark Crazyflie)
 
 
 @dataclass(frozen=True)
@@ -105,7 +70,7 @@ def _derivative_sums(problem, theta: np.ndarray, order: int, chunk: int):
     return f, grad, hess
 
 
-def _objective(problem, theta, chunk) -> float:
+def objective_value(problem, theta, chunk) -> float:
     """f(θ), +inf outside the domain."""
     try:
         return dual_metric_derivatives(problem, theta, order=0, chunk=chunk).f
@@ -114,7 +79,7 @@ def _objective(problem, theta, chunk) -> float:
 
 
 @additive
-def _force_scale(problem, theta, chunk) -> float:
+def force_scale(problem, theta, chunk) -> float:
     """Σ τ_iᵀ M_i(θ)⁻¹ τ_i: the size of the measured forces in the dual metric (the objective's scale)."""
     total = 0.0
     for block, rows, _ in sample_blocks(problem, chunk):
@@ -122,3 +87,100 @@ def _force_scale(problem, theta, chunk) -> float:
         z = forward_substitute(L, block.tau[rows])  # L⁻¹ τ_i
         total += float(np.sum(z * z))
     return total
+
+
+def residual_jacobian(metric: AffineMetric, Y: np.ndarray, w: np.ndarray, rows) -> tuple[np.ndarray, np.ndarray]:
+    """(D = Y_i − [M_ik w_i]_k (c, n, p), Σ_i w_iᵀ M_ik w_i (p,)): ``AffineMetric.apply_quad(w, rows, Y.copy())``
+    without the copy of Y. Y (c, n, p) is not modified."""
+    c, n, p = Y.shape
+    A = np.zeros((c, n, p))  # [M_ik w_i]_k; columns no term touches stay 0
+    wMw = np.zeros(p)
+    written = np.zeros(p, dtype=bool)
+    for t, u, Eu in metric.factors(w, rows):  # u_i = J_i w_i (c, d), E_k u_i (c, k, d)
+        J = t.J[rows]  # (c, d, n)
+        k = len(t.indices)
+        quad = np.einsum("ckd,cd->k", Eu, u) if t.per_sample else np.einsum("kde,de->k", t.E, u.T @ u)
+        idx = list(t.indices)
+        wMw[idx] += quad
+        JtEu = np.swapaxes(J, 1, 2), np.swapaxes(Eu, 1, 2)  # J_iᵀ E_k u_i = (n, d)(d, k)
+        consecutive = idx == list(range(idx[0], idx[0] + k))
+        if consecutive and not written[idx].any():
+            np.matmul(*JtEu, out=A[:, :, idx[0]:idx[0] + k])
+        else:  # parameters shared with an earlier term: accumulate
+            A[:, :, idx] += np.matmul(*JtEu)
+        written[idx] = True
+    return np.subtract(Y, A, out=A), wMw
+
+
+
+@dataclass(frozen=True)
+class Statistics:
+    """Sufficient statistics of Σ r_iᵀ W_i r_i = θᵀHθ − 2gᵀθ + c, and the weight they came from."""
+
+    H: np.ndarray  # (p, p)
+    g: np.ndarray  # (p,)
+    c: float
+    W: np.ndarray | None = None  # (n, n) constant weight; None: identity (or energy if energy=True)
+    energy: bool = False
+
+    def objective(self, problem: IdentificationProblem, theta: np.ndarray) -> float:
+        """Σ r_iᵀ W_i r_i from the residuals (no cancellation, unlike θᵀHθ − 2gᵀθ + c)."""
+        return _residual_sum(problem, theta, self.W, self.energy)
+
+
+@additive
+def _residual_sum(problem, theta: np.ndarray, W: np.ndarray | None, energy: bool) -> float:
+    f = 0.0
+    for block, rows, _ in sample_blocks(problem, 16384):
+        r = block.Y[rows] @ theta - block.tau[rows]
+        if energy:
+            f += float(np.sum(np.einsum("na,na->n", block.v[rows], r) ** 2))
+        elif W is None:
+            f += float(np.sum(r * r))
+        else:
+            f += float(np.einsum("na,ab,nb->", r, W, r))
+    return f
+
+
+def statistics(problem: IdentificationProblem, W: np.ndarray | None = None, chunk: int = 16384) -> Statistics:
+    """H, g, c for a constant weight W (n, n) (None: identity), accumulated in chunks of samples."""
+    F = None
+    if W is not None:  # W = F Fᵀ (eigen-factor, W ⪰ 0): Σ Y_iᵀ W Y_i = Σ (Fᵀ Y_i)ᵀ (Fᵀ Y_i), one GEMM per chunk
+        lam, U = np.linalg.eigh(0.5 * (np.asarray(W, dtype=float) + np.asarray(W, dtype=float).T))
+        F = U * np.sqrt(np.clip(lam, 0.0, None))
+    H, g, c = _sums(problem, F, chunk)
+    return Statistics(0.5 * (H + H.T), g, c, W)
+
+
+@additive
+def _sums(problem, F: np.ndarray | None, chunk: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """Σ A_iᵀA_i, Σ A_iᵀt_i, Σ t_iᵀt_i with A_i = FᵀY_i, t_i = Fᵀτ_i (F None: the identity)."""
+    p = problem.p
+    H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
+    for block, rows, _ in sample_blocks(problem, chunk):
+        Yc, tau = block.Y[rows], block.tau[rows]
+        if F is not None:
+            Yc, tau = np.matmul(F.T, Yc), tau @ F
+        A, t = Yc.reshape(-1, p), tau.reshape(-1)
+        H += A.T @ A
+        g += A.T @ t
+        c += float(t @ t)
+    return H, g, c
+
+
+def energy_statistics(problem: IdentificationProblem, chunk: int = 16384) -> Statistics:
+    """W_i = v_i v_iᵀ: the rows e_i = Y_iᵀ v_i and targets v_iᵀ τ_i, accumulated in chunks of samples."""
+    return Statistics(*_energy_sums(problem, chunk), energy=True)
+
+
+@additive
+def _energy_sums(problem, chunk: int) -> tuple[np.ndarray, np.ndarray, float]:
+    p = problem.p
+    H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
+    for block, rows, _ in sample_blocks(problem, chunk):
+        e = np.einsum("nap,na->np", block.Y[rows], block.v[rows])
+        y = np.einsum("na,na->n", block.tau[rows], block.v[rows])
+        H += e.T @ e
+        g += e.T @ y
+        c += float(y @ y)
+    return H, g, c

@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 from dualid.errors import MetricError, SolverError
-from dualid.estimators.newton.linalg import solve_psd
-from dualid.estimators.newton.objective import _objective
-from dualid.estimators.statistics import energy_statistics, statistics
-from dualid.model.consistency import FeasibleSet
+from dualid.estimators.base import parameter_scale, solve_cvxpy
+from dualid.estimators.newton.objective import energy_statistics, statistics
+from dualid.estimators.newton.objective import objective_value
+from dualid.linalg import solve_psd
+from dualid.model.consistency import FeasibleSet, central_point
 from dualid.problem import IdentificationProblem, additive, sample_blocks
 
 
@@ -18,31 +19,6 @@ def _ols(problem: IdentificationProblem, chunk: int) -> np.ndarray:
     return solve_psd(stats.H, stats.g, rtol=1e-10)
 
 
-def _clip_psd(C: np.ndarray, eps: float = 1e-2) -> np.ndarray:
-    lam, U = np.linalg.eigh(C)
-    top = np.abs(lam).max()
-    top = top if top > 0 else 1.0
-    return (U * np.maximum(lam, eps * top)) @ U.T
-
-
-def central_point(theta_ols: np.ndarray, cons: FeasibleSet, eps: float = 1e-2) -> np.ndarray:
-    """A strictly feasible point near θ_ols: each block's matrix with its eigenvalues lifted to ≥ eps·λ_max."""
-    theta = theta_ols.copy()
-    for c in cons.lmis:
-        k, m, _ = c.V.shape
-        target = _clip_psd(c.C(theta), eps) - c.C0
-        theta[c.idx] = np.linalg.lstsq(c.V.reshape(k, m * m).T, target.reshape(-1), rcond=None)[0]
-    if len(cons.h):
-        for j in range(len(cons.h)):
-            g = cons.G[j]
-            i = int(np.flatnonzero(g)[0])
-            s = g[i] * theta[i] + cons.h[j]
-            scale = max(abs(theta[i]), abs(cons.h[j]), 1e-6)
-            if s < 1e-2 * scale:
-                theta[i] += (1e-2 * scale - s) / g[i]
-    return theta
-
-
 def _phase_one(problem, cons: FeasibleSet, theta_ref: np.ndarray, samples: np.ndarray) -> tuple[np.ndarray, float]:
     """max t s.t. C_b(θ) ⪰ t·c_b I, Gθ + h ≥ t·c, M_i(θ) ⪰ t·m_i I (i in samples), t ≤ 1.
 
@@ -50,8 +26,6 @@ def _phase_one(problem, cons: FeasibleSet, theta_ref: np.ndarray, samples: np.nd
     start fails. Returns (θ, t); t ≤ 0 means no strictly feasible θ exists for these samples.
     """
     import cvxpy as cp
-
-    from dualid.estimators.base import parameter_scale, solve_cvxpy
 
     s = parameter_scale(problem)
     phi = cp.Variable(problem.p)
@@ -97,7 +71,7 @@ def _energy_ls(problem: IdentificationProblem, chunk: int) -> np.ndarray:
     return solve_psd(stats.H, stats.g, rtol=1e-10)
 
 
-def _frozen_metric_ls(problem: IdentificationProblem, theta_c: np.ndarray, chunk: int) -> np.ndarray | None:
+def frozen_metric_ls(problem: IdentificationProblem, theta_c: np.ndarray, chunk: int) -> np.ndarray | None:
     """min-norm argmin Σ r_iᵀ M_i(θ_c)⁻¹ r_i (the metric frozen at θ_c): chart-invariant; None if some
     M_i(θ_c) is not positive definite."""
     H, g, failed = _frozen_metric_sums(problem, theta_c, chunk)
@@ -143,34 +117,32 @@ def constant_metric_start(problem, cons: FeasibleSet, seed: np.ndarray) -> tuple
 def starting_point(problem, cons: FeasibleSet, chunk: int) -> tuple[np.ndarray, str]:
     """A strictly feasible θ with every M_i(θ) ≻ 0, computed from chart-invariant quantities only.
 
-    The energy least-squares θ picks a central point θ_c (each block's eigenvalues lifted); the
-    frozen-metric estimate argmin Σ rᵀM(θ_c)⁻¹r is then moved toward θ_c until it is strictly
-    feasible. Both estimates are the same in every chart, and Newton steps are affine-invariant in θ,
-    so the whole iteration (and hence the chosen point of a non-unique optimal face) does not
-    depend on the coordinates, units or scaling of the data. Falls back to the OLS seed (and to a
-    phase-I problem) only when that fails.
+    The energy least-squares θ picks a central point θ_c (each block's eigenvalues lifted); the frozen-metric estimate
+    argmin Σ rᵀM(θ_c)⁻¹r is then moved toward θ_c until it is strictly feasible. Both are the same in every chart and
+    Newton steps are affine-invariant, so the iteration (and the point chosen on a non-unique optimal face) does not
+    depend on coordinates, units or scaling. Falls back to the OLS seed (and phase I) only when that fails.
     """
     for seed_name, seed in (("energy", _energy_ls), ("ols", _ols)):
         theta_seed = seed(problem, chunk)
         theta_c = central_point(theta_seed, cons)
-        if cons.margin(theta_c) <= 0 or not np.isfinite(_objective(problem, theta_c, chunk)):
+        if cons.margin(theta_c) <= 0 or not np.isfinite(objective_value(problem, theta_c, chunk)):
             continue
-        theta_f = _frozen_metric_ls(problem, theta_c, chunk) if seed_name == "energy" else theta_seed
+        theta_f = frozen_metric_ls(problem, theta_c, chunk) if seed_name == "energy" else theta_seed
         target, label = (theta_f, f"{seed_name}→frozen-metric→central") if theta_f is not None else (theta_seed, f"{seed_name}→central")
         # θ(β) = θ_c + β (target − θ_c), β ≤ 0.9 of the way to the constraint boundary, every M_i ≻ 0
         d = target - theta_c
         beta = min(1.0, 0.9 * cons.max_step(theta_c, d))
         line = theta_c
         while beta > 1e-3:
-            if np.isfinite(_objective(problem, theta_c + beta * d, chunk)):
+            if np.isfinite(objective_value(problem, theta_c + beta * d, chunk)):
                 line = theta_c + beta * d
                 break
             beta *= 0.5
         # or the target with its blocks' eigenvalues lifted (it keeps the target's well-determined directions,
         # where the segment toward θ_c can stop far from it): whichever has the smaller f
         lifted = central_point(target, cons)
-        f_line = _objective(problem, line, chunk)
-        f_lifted = _objective(problem, lifted, chunk) if cons.margin(lifted) > 0 else np.inf
+        f_line = objective_value(problem, line, chunk)
+        f_lifted = objective_value(problem, lifted, chunk) if cons.margin(lifted) > 0 else np.inf
         return (lifted, f"{label}→lifted") if f_lifted < f_line else (line, label)
     theta_c = central_point(_ols(problem, chunk), cons)
     # phase I: a small conic problem over the constraints and the samples where M_i(θ_c) is not ≻ 0

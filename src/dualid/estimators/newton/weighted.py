@@ -4,15 +4,10 @@ With M_i(θ) = C_i independent of θ the dual-metric objective is the quadratic
 
     f(θ) = θᵀHθ − 2gᵀθ + c,   H = Σ Y_iᵀ C_i⁻¹ Y_i,  g = Σ Y_iᵀ C_i⁻¹ τ_i,  c = Σ τ_iᵀ C_i⁻¹ τ_i,
 
-so one pass over the samples (C_i = L_i L_iᵀ, whitened rows L_i⁻¹ Y_i, one GEMM per chunk) reduces the
-fit to a p-sized problem. The iterations, the start and the stopping rule are those of
-``fit_dual_metric_newton`` on the problem with M_i = C_i (the same chart-invariant start: energy LS →
-central point → frozen-metric LS, here the weighted LS itself), so the result is the same θ up to
-rounding, at the cost of two passes over the data instead of two per iteration. C_i is given as a
-function of a block of rows, so no N-sized (N, n, n) array is formed. A constant weight (the function returns
-one (1, n, n) block: the OLS and WLS pilots of ``dm``, and its final fit when κ = 0) is factored once per fit,
-C = L Lᵀ, and its rows whitened by the one L⁻¹ (a batched matmul), instead of a Cholesky per sample and per pass
-(result.info["weight"] says which path ran).
+so one pass over the samples (whitened rows L_i⁻¹ Y_i, C_i = L_i L_iᵀ) reduces the fit to a p-sized problem, solved
+with the iterations, chart-invariant start and stopping rule of ``fit_dual_metric_newton`` on M_i = C_i: the same θ
+up to rounding, for two passes over the data instead of two per iteration. C_i is a function of a block of rows (no
+(N, n, n) array); a constant weight (one (1, n, n) block) is factored once per fit (result.info["weight"]).
 """
 
 from __future__ import annotations
@@ -24,14 +19,15 @@ from collections.abc import Callable
 import numpy as np
 
 from dualid.errors import MetricError
-from dualid.estimators.newton.closure import on_closure
-from dualid.estimators.newton.interior_point import run_interior_point
-from dualid.estimators.newton.linalg import solve_psd
-from dualid.estimators.newton.objective import CHUNK, Derivatives, forward_substitute, tri_inverse
-from dualid.estimators.newton.start import central_point, constant_metric_start
-from dualid.estimators.newton.trace import direction_label, direction_names
+from dualid.estimators.newton.fit import check_bounds
+from dualid.estimators.newton.interior_point import direction_label, direction_names, run_interior_point
+from dualid.estimators.newton.objective import CHUNK, Derivatives
+from dualid.estimators.newton.start import constant_metric_start
 from dualid.estimators.result import IdentificationResult
-from dualid.model.consistency import feasible_set
+from dualid.linalg import forward_substitute, tri_inverse
+from dualid.linalg import solve_psd
+from dualid.model.closure import on_closure
+from dualid.model.consistency import central_point, feasible_set
 from dualid.problem import IdentificationProblem, additive, sample_blocks
 
 # (block, rows) → C_i (c, n, n) symmetric positive definite, for the samples ``rows`` of the in-memory ``block``
@@ -51,10 +47,9 @@ def _not_positive_definite(problem, what: str, bad: int, low: float) -> MetricEr
 
 
 class _Whitening:
-    """(block, rows) → the block's whitened rows (L_i⁻¹ Y_i (c, n, p), L_i⁻¹ τ_i (c, n)), C_i = L_i L_iᵀ, for one fit:
-    a constant weight (``weight`` returns one (1, n, n) block) is factored once and its L⁻¹ reused while the weight
-    returns the same C (one n×n Cholesky per fit, not one per sample and pass); otherwise a Cholesky per sample.
-    ``kind``: "constant", "per-sample", "mixed" (both, by block) or "factor" (the caller's W_i, below)."""
+    """(block, rows) → the block's whitened rows (L_i⁻¹ Y_i, L_i⁻¹ τ_i), C_i = L_i L_iᵀ, for one fit: a constant weight
+    (one (1, n, n) block) factored once, else a Cholesky per sample. ``kind``: "constant", "per-sample", "mixed" (both,
+    by block) or "factor" (the caller's W_i)."""
 
     def __init__(self, problem: IdentificationProblem, weight: Weight, what: str, whiten=None):
         self.problem, self.weight, self.what, self.whiten = problem, weight, what, whiten
@@ -212,13 +207,11 @@ def fit_weighted_newton(
     whiten: (block, rows) → W_i (c, n, n) with C_i⁻¹ = W_iᵀ W_i, when the caller has that factor (no Cholesky);
     objective_pass=False skips the pass for the result's objective (NaN: the caller computes it, e.g. the bounded
     fixed point in its own pass)."""
-    from dualid.estimators.newton.fit import check_bounds
-
     t0 = time.perf_counter()
     check_bounds(problem, constrained)
     white = _Whitening(problem, weight, what, whiten)
     H, g, c, H_e, g_e = weighted_statistics(problem, white, chunk, energy=True)
-    # parameters f cannot see that only loosen a block: solved on the closed set, then completed (newton.closure)
+    # parameters f cannot see that only loosen a block: solved on the closed set, then completed (model.closure)
     cons, done = on_closure(feasible_set(problem.parameters, constrained), H, c, problem.parameters.names)
     theta_f = solve_psd(H, g, rtol=1e-10)  # the unconstrained weighted LS (min-norm): the frozen-metric LS
     f_min = max(c - 2.0 * float(g @ theta_f) + float(theta_f @ H @ theta_f), 0.0)
@@ -243,7 +236,7 @@ def fit_weighted_newton(
         label = "energy→frozen-metric→central"
         start, theta0 = ((f"{label}→lifted", lifted) if f_lifted < f_of(line) else (label, line))
     if start is None:  # the same closed problem from the weighted LS's central point or phase I (not a fit without
-        # the closure: newton.closure)
+        # the closure: model.closure)
         theta0, start = constant_metric_start(problem, cons, theta_f)
     theta, _, _, info = run_interior_point(problem, cons, theta0, None, None, tol, max_iter, chunk, verbose,
                                         objective=objective, f_scale=c)

@@ -21,20 +21,16 @@ from __future__ import annotations
 import numpy as np
 
 from dualid.errors import ConfigError, DataError, MetricError
-from dualid.problem import IdentificationProblem, stacked, sample_blocks, strided_rows
+from dualid.linalg import tri_inverse
+from dualid.problem import IdentificationProblem, sample_blocks, stacked, strided_rows
 
-
-def tri_inverse(L):
-    from dualid.estimators.newton.objective import tri_inverse as inverse  # lazy: keeps this module light to import
-
-    return inverse(L)
 
 DEFAULT_BOUND = 100.0  # c: generalised eigenvalues outside [1/c, c] flag the fit as degenerate
 GUARD_SAMPLES = 20_000  # the guard an estimator records itself looks at most this many evenly strided samples
 # (at N = 10⁶ the full pass costs more than a least-squares fit); recorded in info["metric_guard_samples"]
 
 
-def _check_bound(bound: float) -> float:
+def check_bound(bound: float) -> float:
     bound = float(bound)
     if not (np.isfinite(bound) and bound > 1.0):
         raise ConfigError(f"bound: expected a finite number > 1 (the factor c of [1/c, c]), got {bound!r}")
@@ -87,7 +83,7 @@ def guard_info(
 
 def guard_from_ratios(lo: float, hi: float, bound: float = DEFAULT_BOUND, reference: str = "") -> dict:
     """``guard_info`` from the extreme generalised eigenvalues, when the caller has them (e.g. dm-bfp's pencil)."""
-    bound = _check_bound(bound)
+    bound = check_bound(bound)
     return {
         "metric_ratio_min": lo,
         "metric_ratio_max": hi,
@@ -138,7 +134,7 @@ def check_guard_options(guard_reference, guard_bound, name: str) -> tuple[tuple 
             raise ConfigError(f"{name}: guard_reference must be a finite vector θ_ref (p,), got shape {ref.shape}")
         guard_reference = tuple(float(x) for x in ref)
     try:
-        bound = _check_bound(guard_bound)
+        bound = check_bound(guard_bound)
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"{name}: guard_bound: expected a finite number > 1, got {guard_bound!r}") from exc
     except ConfigError as exc:

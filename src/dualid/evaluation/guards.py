@@ -1,7 +1,7 @@
-"""Metric guards attached after the fact: ``with_guard`` and the ``Guarded`` wrapper.
+"""Metric guards attached to a finished fit: ``with_guard`` and the ``Guarded`` wrapper.
 
 The measure itself (generalised eigenvalues of M_i(θ̂) against M_i(θ_ref), ``guard_info``) lives in
-``estimators.metric_guard``, which every estimator uses to record its own guard; it is re-exported here.
+``dualid.metric_guard``, which every estimator uses to record its own guard during its fit.
 """
 
 from __future__ import annotations
@@ -12,16 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualid.errors import ConfigError
-from dualid.estimators.metric_guard import (  # noqa: F401  (re-exported)
-    DEFAULT_BOUND,
-    _check_bound,
-    check_guard_options,
-    generalized_eigenvalues,
-    given_reference,
-    guard_info,
-    reference_guard,
-)
 from dualid.estimators.result import IdentificationResult
+from dualid.metric_guard import DEFAULT_BOUND, check_bound, guard_info
 from dualid.problem import IdentificationProblem
 
 
@@ -54,7 +46,7 @@ class Guarded:
     def __post_init__(self) -> None:
         if not hasattr(self.estimator, "fit"):
             raise ConfigError(f"Guarded: estimator must have a fit(problem) method, got {type(self.estimator).__name__}")
-        _check_bound(self.bound)
+        check_bound(self.bound)
         ref = self.reference
         if ref is not None and not hasattr(ref, "fit"):
             ref = tuple(float(x) for x in np.asarray(ref, dtype=float).ravel())

@@ -27,7 +27,7 @@ whose torques about the axis cancel) the column is rounding, H_kk = 7e-38·c on 
 tests/test_closure_paths.py, and a rule "row exactly 0" missed the ray. So a parameter is unseen when
 H_kk ≤ ZERO_CURVATURE · c, with H = Σ Y_iᵀW_iY_i and c = Σ τ_iᵀW_iτ_i = f(0) of the same fit: ‖Y_k‖_W/‖τ‖_W, the
 share of the weighted torques one SI unit of θ_k carries (the quadratic chart's √(c/H_kk) of
-``estimators.quadratic_chart``, read as a size: an unseen parameter would need more than 10¹² kg, kg m or kg m² to
+``signal_scale`` in estimators.quadratic_fit, read as a size: an unseen parameter would need more than 10¹² kg, kg m or kg m² to
 move the torques by their own size). H and c transform together under any change of force coordinates (both are
 Σ of a weighted product of covectors), and dm's fits are made in the sensor chart, so the set is the same in every
 chart the problem records. The rounding level scales like (ε·|d|·‖Y_mc‖_W/‖τ‖_W)², about (ε·|d|/|m c|)² with m c the
