@@ -28,8 +28,11 @@ KNOWN = {
     # stop at tolerance-dependent points
     ("rank-deficient 4 dof, N = 12", "dm-paper", "", "newton"): "infimum not attained: 1.4e-5 from the SDP's stop",
     ("point-mass link, 3 dof, 5 %", "dm-paper", "", "newton"): "infimum not attained: 2.3e-5 from the SDP's stop",
-    # the SDP itself on that unattained infimum: Clarabel 0.11 ends optimal_inaccurate (0.10 said optimal)
-    ("rank-deficient 4 dof, N = 12", "dm-paper", "", "sdp_clarabel"): "Clarabel ends optimal_inaccurate on the ray",
+}
+# Where the outcome is Clarabel's to decide, by release: the row is good, or it is not labelled optimal.
+SOLVER_DECIDES = {
+    # the SDP itself on that unattained infimum: Clarabel 0.11 ends optimal_inaccurate, 0.10 optimal
+    ("rank-deficient 4 dof, N = 12", "dm-paper", "", "sdp_clarabel"): "Clarabel's stop on the ray",
 }
 
 
@@ -53,6 +56,9 @@ def test_every_method_and_solver_is_optimal_and_agrees_with_its_reference(corpus
         key = (case, r["method"], r["variant"], r["solver_choice"])
         what = f"{key}: {r['status']} gap {r.get('rel_gap')} {r.get('error') or r.get('chain')}"
         assert r["raw_warnings"] == 0, what
+        if key in SOLVER_DECIDES:
+            assert _good(r) or r["status"] != "optimal", what
+            continue
         if key in KNOWN:
             assert not _good(r), f"{what}: fixed? remove it from KNOWN"
             # reported: a status other than optimal, a measured gap, or the failed reference recorded
@@ -95,8 +101,11 @@ def test_prior_lift_raises_small_second_moments_and_commutes_with_frame_and_unit
 def test_boundary_prior_fails_without_the_lift_and_is_solved_and_recorded_with_it():
     """A log-det / pullback prior taken from a constrained OLS fit (σ_min/σ_max ~ 1e-11): without the floor
     Clarabel fails or is inaccurate on both; the interior-point fallback (exact Newton steps, no Levenberg term:
-    quadratic_newton.QUADRATIC_LEVENBERG) now solves the log-det one and still fails on the pullback one; with the
-    floor both fits are optimal and the result says which bodies were lifted."""
+    quadratic_newton.QUADRATIC_LEVENBERG) solves the log-det one; on the pullback one it starts from Clarabel's
+    inaccurate point, and whether it gets to the optimum from there depends on the Clarabel release (0.10: optimal;
+    0.11: line search failed, the fit reported optimal_inaccurate): either way nothing inaccurate is called optimal.
+    With the floor Clarabel alone solves both (certified by the interior point) and the result says which bodies
+    were lifted."""
     from dualid.estimators.methods import make_estimator
 
     problem, _ = [c for c in cases(large=False) if c.name.startswith("chain RPR")][0].build()
@@ -108,14 +117,17 @@ def test_boundary_prior_fails_without_the_lift_and_is_solved_and_recorded_with_i
             failed, chain = r.status != "optimal", r.info["solver_chain"]
         except SolverError:
             failed, chain = True, ""
-        if kind == "logdet":  # Clarabel inaccurate (raw-regressor chart) or failed (the weighted fit's own chart,
-            # estimators.quadratic_fit.signal_scale): either way not optimal on its own, and the fallback solves it
+        # Clarabel inaccurate (raw-regressor chart) or failed (the weighted fit's own chart,
+        # estimators.quadratic_fit.signal_scale): either way not optimal on its own
+        assert chain.startswith(("CLARABEL returned optimal_inaccurate", "CLARABEL failed (solver_error)")) or (
+            failed and not chain), chain  # (no chain: the fit raised)
+        if kind == "logdet":  # and the fallback solves it
             assert not failed and chain.endswith("→ newton optimal"), chain
-            assert chain.startswith(("CLARABEL returned optimal_inaccurate", "CLARABEL failed (solver_error)")), chain
-        else:
-            assert failed, kind
+        else:  # optimal only where the fallback got there
+            assert failed or chain.endswith("→ newton optimal"), chain
         after = make_estimator(kind, theta0=theta_ols, allow_unidentifiable=True).fit(problem)
-        assert after.status == "optimal"
+        assert after.status == "optimal" and after.info["solver_chain"].startswith("CLARABEL optimal ("), \
+            after.info["solver_chain"]
         assert after.info["prior_floor"] == 1e-4 and set(after.info["prior_lifted"]) == {"j0", "j1", "j2"}
 
 
