@@ -27,7 +27,7 @@ from dualid.bench.arms import excitation, random_arm
 from dualid.data.trajectory import Trajectory
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.noise_model import noise_model_derivatives, noise_model_objective
-from dualid.estimators.noise_dm import NoiseModelDM, majorizer_blocks, majorizer_value, solve_noise_model_cvxpy
+from dualid.estimators.noise_dm import NoiseModelDM, majorizer_blocks, solve_noise_model_cvxpy
 from dualid.model.closure import on_closure
 from dualid.model.consistency import central_point, cvxpy_feasible_set, feasible_set
 from dualid.problem import build_problem
@@ -58,6 +58,18 @@ def _arm(seed):
 @pytest.fixture(scope="module")
 def rigid_arm():
     return _arm(2)
+
+
+def majorizer_value(problem, theta, theta_k, sigma_tau, sigma_a) -> float:
+    """g_k(θ) = Σ r_iᵀ (Σ_τ + L_k,i(θ))⁻¹ r_i ≥ f(θ) (``majorizer_blocks``); +inf where a block is not positive
+    definite."""
+    A0, Aj = majorizer_blocks(problem, theta_k, sigma_tau, sigma_a)
+    try:
+        L = np.linalg.cholesky(A0 + np.einsum("j,ijab->iab", theta, Aj))
+    except np.linalg.LinAlgError:
+        return np.inf
+    z = np.linalg.solve(L, problem.residual(theta)[..., None])
+    return float(np.sum(z * z))
 
 
 def _closed(problem):

@@ -11,8 +11,8 @@ secant equation for indefinite curvature and badly scaled parameters.
 import numpy as np
 
 from dualid.estimators.newton.interior_point import RESTART, barrier_restart
-from dualid.estimators.newton.linalg import SecantCorrection
 from dualid.estimators.noise_dm import NoiseModelDM
+from dualid.linalg import SecantCorrection
 from tests.test_margin import binding_reference, margined
 from tests.test_newton import crazyflie_like, rigid_body_problem
 

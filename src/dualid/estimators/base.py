@@ -165,11 +165,5 @@ def solve_cvxpy(problem, variable, solver: str, solver_options: dict | None, wha
         raise SolverError(f"{what}: {solver} returned status {status!r} without a solution", status=status)
     if variable.value is None or not np.all(np.isfinite(variable.value)):
         raise SolverError(f"{what}: {solver} reported {status!r} but returned no finite solution", status=status)
-    stats = problem.solver_stats
-    return Solved(
-        np.array(variable.value, dtype=float),
-        status,
-        solver,
-        elapsed,
-        getattr(stats, "num_iters", None) if stats is not None else None,
-    )
+    iterations = getattr(problem.solver_stats, "num_iters", None)  # None without solver stats too
+    return Solved(np.array(variable.value, dtype=float), status, solver, elapsed, iterations)

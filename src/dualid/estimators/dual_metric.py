@@ -42,26 +42,26 @@ from dualid.model.consistency import cvxpy_constraints
 from dualid.problem import IdentificationProblem
 
 
-def _schur_blocks(problem: IdentificationProblem, s_theta: np.ndarray, s_slack: float):
-    """Sparse A_θ, A_s, b with vec([[M_i, r_i], [r_iᵀ, s_i]]) = A_θ φ + A_s σ + b, θ = s_θ ⊙ φ, s = s_slack σ.
+def schur_psd(B0: np.ndarray, B: np.ndarray, Y: np.ndarray, tau: np.ndarray, s_theta: np.ndarray, s_slack: float):
+    """(φ, σ, one batched PSD constraint) [[A_i(θ), r_i], [r_iᵀ, s_i]] ⪰ 0, i.e. s_i ≥ r_iᵀ A_i⁻¹ r_i, for every sample:
+    A_i = B0_i + Σ_k θ_k B_ik (B0 (N, n, n), B (N, p, n, n)), r_i = Y_i θ − τ_i, θ = s_θ ⊙ φ, s_i = s_slack σ_i; stored
+    sparse (row-major blocks). The SDP of ``dm-paper`` (A = M) and of each step of ``dm``'s conic reference."""
+    import cvxpy as cp
 
-    Row-major vectorisation of N blocks of size m = n + 1.
-    """
-    N, n, p = problem.N, problem.n, problem.p
+    N, n, p = Y.shape
     m = n + 1
-    M0, Mk = problem.metric.basis()  # (N, n, n), (N, p, n, n)
     base = (np.arange(N) * m * m)[:, None, None]
-    ij = np.arange(n)[:, None] * m + np.arange(n)[None, :]  # (n, n) positions of M in a block
+    ij = np.arange(n)[:, None] * m + np.arange(n)[None, :]  # (n, n) positions of A in a block
     rows_M = (base + ij[None]).reshape(N, n * n)  # (N, n²)
-    # M part: entry (i, a, b) depends on φ_k with coefficient Mk[i, k, a, b] s_k
-    coef = np.transpose(Mk, (0, 2, 3, 1)).reshape(N, n * n, p) * s_theta  # (N, n², p)
+    # A part: entry (i, a, b) depends on φ_k with coefficient B[i, k, a, b] s_k
+    coef = np.transpose(B, (0, 2, 3, 1)).reshape(N, n * n, p) * s_theta  # (N, n², p)
     nz = coef != 0
     r_idx, e_idx, k_idx = np.nonzero(nz)
     rows = [rows_M[r_idx, e_idx]]
     cols = [k_idx]
     vals = [coef[nz]]
     # r part: entries (i, a, n) and (i, n, a) are Y_i[a] θ − τ_i[a]
-    Ys = problem.Y * s_theta  # (N, n, p)
+    Ys = Y * s_theta  # (N, n, p)
     for pos in (np.arange(n) * m + n, n * m + np.arange(n)):
         rows_r = (base[:, :, 0] + pos[None]).reshape(N, n)
         nzr = Ys != 0
@@ -73,10 +73,12 @@ def _schur_blocks(problem: IdentificationProblem, s_theta: np.ndarray, s_slack: 
     A_theta = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(size, p))
     A_s = sp.csr_matrix((np.full(N, s_slack), (np.arange(N) * m * m + n * m + n, np.arange(N))), shape=(size, N))
     b = np.zeros((N, m, m))
-    b[:, :n, :n] = M0
-    b[:, :n, n] = -problem.tau
-    b[:, n, :n] = -problem.tau
-    return A_theta, A_s, b.reshape(-1)
+    b[:, :n, :n] = B0
+    b[:, :n, n] = -tau
+    b[:, n, :n] = -tau
+    phi, sigma = cp.Variable(p), cp.Variable(N)
+    blocks = cp.reshape(A_theta @ phi + A_s @ sigma + b.reshape(-1), (N, m, m), order="C")
+    return phi, sigma, cp.constraints.PSD(blocks)
 
 
 def reference_theta(problem: IdentificationProblem) -> np.ndarray:
@@ -148,19 +150,14 @@ def fit_dual_metric_sdp(
     try:
         B, s_slack, chart = whitening_chart(problem)
     except (MetricError, SolverError, np.linalg.LinAlgError) as exc:  # no interior start: the diagonal chart
-        B, s_slack, chart = None, None, f"diagonal (whitening failed: {exc})"
-    if B is None:
         problem = problem.in_coordinates(internal_chart(problem), problem.coordinates)
-        s_slack = _slack_scale(problem)
+        s_slack, chart = _slack_scale(problem), f"diagonal (whitening failed: {exc})"
     else:
         problem = problem.in_coordinates(B, problem.coordinates)
-    N, n, p = problem.N, problem.n, problem.p
+    N = problem.N
     s_theta = parameter_scale(problem)
-    A_theta, A_s, b = _schur_blocks(problem, s_theta, s_slack)
-    phi = cp.Variable(p)
-    sigma = cp.Variable(N)
-    blocks = cp.reshape(A_theta @ phi + A_s @ sigma + b, (N, n + 1, n + 1), order="C")
-    constraints = [cp.constraints.PSD(blocks)]
+    phi, sigma, psd = schur_psd(*problem.metric.basis(), problem.Y, problem.tau, s_theta, s_slack)
+    constraints = [psd]
     if constrained:
         constraints += cvxpy_constraints(cp.multiply(s_theta, phi), problem.parameters)
     cvx = cp.Problem(cp.Minimize(cp.sum(sigma) / N), constraints)

@@ -69,6 +69,12 @@ class _Common:
         """What solves the fit: "newton", or the cvxpy solver's name."""
         return "newton" if self.solver == "newton" else self.cvxpy_solver
 
+    def _fit(self, problem: IdentificationProblem, stats, **extra) -> IdentificationResult:
+        """``fit_quadratic`` of these statistics with this estimator's hyperparameters."""
+        return fit_quadratic(problem, stats, method=self.name, constrained=self.constrained, solver=self.engine,
+                             solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
+                             **extra)
+
     def _guarded(self, result: IdentificationResult, problem: IdentificationProblem, own=None,
                  own_label: str = "") -> IdentificationResult:
         """result with the metric guard against guard_reference, else against ``own`` (a pilot or prior)."""
@@ -89,10 +95,7 @@ class OLS(_Common):
     name = "ols"
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
-        return self._guarded(fit_quadratic(
-            problem, statistics(problem), method=self.name, constrained=self.constrained, solver=self.engine,
-            solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
-        ), problem)
+        return self._guarded(self._fit(problem, statistics(problem)), problem)
 
 
 def residual_covariance(problem: IdentificationProblem, theta: np.ndarray, floor: float = 1e-9) -> np.ndarray:
@@ -169,10 +172,7 @@ class EnergyLS(_Common):
     name = "energy"
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
-        return self._guarded(fit_quadratic(
-            problem, energy_statistics(problem), method=self.name, constrained=self.constrained, solver=self.engine,
-            solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
-        ), problem)
+        return self._guarded(self._fit(problem, energy_statistics(problem)), problem)
 
 
 @dataclass(frozen=True)
@@ -230,10 +230,8 @@ class RegularizedWLS(_Common):
         theta0 = check_nominal(problem.parameters, theta0, strict=True)
         W, info = covariance_weight(problem, self.covariance, self)
         gamma = float(self.gamma) * (problem.N * problem.n if self.per_equation else 1.0)
-        return self._guarded(fit_quadratic(
-            problem, statistics(problem, W), method=self.name, constrained=self.constrained, solver=self.engine,
-            solver_options=self.solver_options, allow_unidentifiable=self.allow_unidentifiable,
-            regularizer=(self.regularizer, theta0, gamma),
+        return self._guarded(self._fit(
+            problem, statistics(problem, W), regularizer=(self.regularizer, theta0, gamma),
             info={"covariance": info["covariance"], "covariance_matrix": info["covariance_matrix"], "gamma": gamma,
                   "prior_floor": float(self.prior_floor), "prior_lifted": lifted},
         ), problem, theta0, "prior θ₀")

@@ -35,6 +35,7 @@ import warnings
 
 from dualid.errors import ConfigError, MetricError, OptimumAtInfinityWarning, SolverError
 from dualid.estimators.base import captured_warnings, check_solver, solve_cvxpy
+from dualid.estimators.dual_metric import schur_psd
 from dualid.estimators.newton.fit import fit_dual_metric_newton
 from dualid.estimators.newton.interior_point import run_interior_point
 from dualid.estimators.newton.objective import CHUNK
@@ -53,10 +54,10 @@ from dualid.identifiability import check_identifiable
 from dualid.linalg import NotPositiveDefinite
 from dualid.metric_guard import reference_guard
 from dualid.model.closure import ZERO_CURVATURE, on_closure
-from dualid.model.consistency import FeasibleSet, central_point, cvxpy_feasible_set, feasible_set
+from dualid.model.consistency import central_point, cvxpy_feasible_set, feasible_set, lifted_blocks
 from dualid.problem import IdentificationProblem, additive
 
-LIFT = 1e-12  # solver="cvxpy": θ's consistency blocks end at least this far (relative) inside (``_lifted``)
+LIFT = 1e-12  # solver="cvxpy": θ's consistency blocks end at least this far (relative) inside (``lifted_blocks``)
 ROUNDS = 2  # noise levels at the pilot, θ; the levels at that θ, θ again (unless the first round finds Σ_a = 0)
 
 
@@ -113,17 +114,12 @@ class NoiseModelDM:
         sample = _in_memory(sensor)  # pilot, closure, noise levels and check read sample subsets
         scaled = _scaled(sample)  # the equations on each coordinate's own force scale: closure and pilot
         cons, done = self._closure(sample, *scaled)
-        theta_pilot, iterations, rounds = self._pilot(sample, cons, *scaled), 0, 0
-        start = theta_pilot
-        if self.constrained and not cons.margin(start) > 0:
-            start = central_point(start, cons)
-        theta = start
+        theta_pilot = self._pilot(sample, cons, *scaled)
+        start = self._inside(theta_pilot, cons)
         try:
             theta, noise, iterations, rounds = self._rounds(sensor, sample, cons, start, theta_pilot)
         except SolverError:  # unseen parameters drifting outward from this start: from the paper's optimum instead
-            paper = self._paper_optimum(sensor)
-            if self.constrained and not cons.margin(paper) > 0:
-                paper = central_point(paper, cons)
+            paper = self._inside(self._paper_optimum(sensor), cons)
             theta, noise, iterations, rounds = self._rounds(sensor, sample, cons, paper, theta_pilot)
         f = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk)
         choice = "noise model"
@@ -133,13 +129,17 @@ class NoiseModelDM:
             return self._result(problem, done, theta, f, noise, rounds, theta_pilot, None, choice, iterations, t0)
         check = self._check(sample, theta, noise)
         if check is not None and check.rejected:
-            n = sensor.n
-            wls = NoiseLevels(np.diag(residual_squares(sensor, theta) / sensor.N), np.zeros((n, n)), 1.0, 0.0, 0)
+            S = np.diag(residual_squares(sensor, theta) / sensor.N)
+            wls = NoiseLevels(S, np.zeros_like(S), 1.0, 0.0, 0)
             theta = self._solve(sensor, cons, start, wls)[0]
             f = noise_model_objective(sensor, theta, wls.sigma_tau, wls.sigma_a, self.chunk)
             choice = (f"wls: the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's "
                       f"beyond the noise model's prediction, standard error {check.standard_error:.2g})")
         return self._result(problem, done, theta, f, noise, rounds, theta_pilot, check, choice, iterations, t0)
+
+    def _inside(self, theta, cons):
+        """θ, or (constrained, where θ is not strictly inside ``cons``) its central point: a start of the fit."""
+        return central_point(theta, cons) if self.constrained and not cons.margin(theta) > 0 else theta
 
     def _rounds(self, sensor, sample, cons, theta, theta_pilot):
         """The noise-level / θ alternations from θ (module doc, step 3): (θ, levels, iterations, rounds); the levels
@@ -167,11 +167,9 @@ class NoiseModelDM:
 
     def _result(self, problem, done, theta, f, noise, rounds, theta_pilot, check, choice, iterations, t0):
         theta, completed = done(theta, {})
+        gaps = (np.nan,) * 3 if check is None else (check.excess, check.measured_gap, check.predicted_gap)
         record = NoiseRecord(noise.sigma_tau, noise.sigma_a, noise.torque_share, noise.acceleration_share,
-                             "fixed" if self.sigma_tau is not None else "estimated", rounds, np.nan,
-                             choice, np.nan if check is None else check.excess,
-                             np.nan if check is None else check.measured_gap,
-                             np.nan if check is None else check.predicted_gap)
+                             "fixed" if self.sigma_tau is not None else "estimated", rounds, np.nan, choice, *gaps)
         guard = reference_guard(problem.in_sensor_chart(), theta, theta_pilot, "pilot (wls)")
         solver = "newton" if self.solver == "newton" else f"cvxpy-mm/{self.cvxpy_solver}"
         return IdentificationResult(self.name, theta, problem.parameters, f, "optimal", solver,
@@ -201,8 +199,7 @@ class NoiseModelDM:
             return theta
         except np.linalg.LinAlgError:
             pass
-        n = sensor.n
-        weights = NoiseLevels(np.diag(torque_scale(sensor)), np.zeros((n, n)), 1.0, 0.0, 0)
+        weights = NoiseLevels(np.diag(torque_scale(sensor)), np.zeros((sensor.n, sensor.n)), 1.0, 0.0, 0)
         return self._solve(sensor, cons, central_point(theta, cons) if self.constrained else theta, weights)[0]
 
     def _check(self, sensor, theta, noise) -> NoiseCheck | None:
@@ -251,43 +248,23 @@ def majorizer_blocks(problem, theta_k, sigma_tau, sigma_a) -> tuple[np.ndarray, 
     return 0.5 * (A0 + np.swapaxes(A0, 1, 2)), KMj + np.swapaxes(KMj, 2, 3)
 
 
-def majorizer_value(problem, theta, theta_k, sigma_tau, sigma_a) -> float:
-    """g_k(θ) = Σ r_iᵀ (Σ_τ + L_k,i(θ))⁻¹ r_i ≥ f(θ) (``majorizer_blocks``); +inf where a block is not positive
-    definite."""
-    A0, Aj = majorizer_blocks(problem, theta_k, sigma_tau, sigma_a)
-    try:
-        L = np.linalg.cholesky(A0 + np.einsum("j,ijab->iab", theta, Aj))
-    except np.linalg.LinAlgError:
-        return np.inf
-    z = np.linalg.solve(L, problem.residual(theta)[..., None])
-    return float(np.sum(z * z))
-
-
 def _majorizer_step(problem, cons, theta_k, f_k, sigma_tau, sigma_a, solver, options):
-    """argmin g_k on ``cons``: min Σ t_i s.t. [[A_i(θ), r_i(θ)], [r_iᵀ, t_i]] ⪰ 0 (one batched PSD constraint, A_i ⪰ 0
+    """argmin g_k on ``cons``: min Σ t_i s.t. [[A_i(θ), r_i(θ)], [r_iᵀ, t_i]] ⪰ 0 (``dual_metric.schur_psd``, A_i ⪰ 0
     with it), each block whitened by C_i(θ_k) = L_i L_iᵀ (I at θ_k), θ and t on their scales. (θ, cvxpy status)."""
     import cvxpy as cp
-    import scipy.sparse as sp
 
     A0, Aj = majorizer_blocks(problem, theta_k, sigma_tau, sigma_a)
     Li = np.linalg.inv(np.linalg.cholesky(A0 + np.einsum("j,ijab->iab", theta_k, Aj)))
     N, n, p = problem.Y.shape
-    m = n + 1
-    K, b = np.zeros((N, m, m, p)), np.zeros((N, m, m))
-    K[:, :n, :n] = np.einsum("iac,ijcd,ibd->iabj", Li, Aj, Li)
-    K[:, :n, :n] = 0.5 * (K[:, :n, :n] + np.swapaxes(K[:, :n, :n], 1, 2))
-    K[:, :n, n] = K[:, n, :n] = Li @ problem.Y
-    b[:, :n, :n] = Li @ A0 @ np.swapaxes(Li, 1, 2)
-    b[:, :n, n] = b[:, n, :n] = tw = -np.einsum("iab,ib->ia", Li, problem.tau)
-    b = 0.5 * (b + np.swapaxes(b, 1, 2))
-    s = np.linalg.norm(K[:, :n, n].reshape(N * n, p), axis=0)  # θ = s ⊙ φ: unit whitened regressor columns, but
+    B = np.einsum("iac,ijcd,ibd->iabj", Li, Aj, Li)
+    B = np.moveaxis(0.5 * (B + np.swapaxes(B, 1, 2)), 3, 1)  # L_i⁻¹ A_ij L_i⁻ᵀ (N, p, n, n)
+    B0 = Li @ A0 @ np.swapaxes(Li, 1, 2)
+    Yw, tw = Li @ problem.Y, np.einsum("iab,ib->ia", Li, problem.tau)
+    s = np.linalg.norm(Yw.reshape(N * n, p), axis=0)  # θ = s ⊙ φ: unit whitened regressor columns, but
     s = 1.0 / np.where(s**2 > ZERO_CURVATURE * np.sum(tw**2), s, 1.0)  # 1 where f cannot see θ_k (model.closure)
     slack = f_k / N  # t_i = slack · σ_i: σ is O(1) near θ_k
-    E = sp.csr_matrix((K * s).reshape(N * m * m, p))
-    Es = sp.csr_matrix((np.full(N, slack), (np.arange(N) * m * m + n * m + n, np.arange(N))), shape=(N * m * m, N))
-    phi, sigma = cp.Variable(p), cp.Variable(N)
-    blocks = cp.reshape(E @ phi + Es @ sigma + b.reshape(-1), (N, m, m), order="C")
-    constraints = [cp.constraints.PSD(blocks)] + cvxpy_feasible_set(cp.multiply(s, phi), cons)
+    phi, sigma, psd = schur_psd(0.5 * (B0 + np.swapaxes(B0, 1, 2)), B, Yw, tw, s, slack)
+    constraints = [psd] + cvxpy_feasible_set(cp.multiply(s, phi), cons)
     with captured_warnings():  # "Solution may be inaccurate": the status says so, and f is checked by the caller
         solved = solve_cvxpy(cp.Problem(cp.Minimize(cp.sum(sigma) / N), constraints), phi, solver, options,
                              what="dm majorizer")
@@ -301,9 +278,8 @@ def solve_noise_model_cvxpy(problem, cons, theta0, sigma_tau, sigma_a, tol: floa
     increases, and a fixed point is a KKT point of f on ``cons`` (g_k and f touch at θ_k, where A_i = C_i ≻ 0, so the
     majorizer's own domain A_i ⪰ 0 is inactive). Stops when f decreases by less than tol·f (or not at all: the conic
     solver's accuracy); SolverError after max_iter solves, as the interior point (``fit`` then restarts from the paper's
-    optimum). (θ, info): iterations (conic solves), objective, history (f at the start and
-    at every step, the last one rejected when it did not decrease f), status (why it stopped),
-    cvxpy_status (per solve)."""
+    optimum). (θ, info): iterations (conic solves), objective, history (f at the start and at every step, the last one
+    rejected when it did not decrease f), status (why it stopped), cvxpy_status (per solve)."""
     if not isinstance(problem, IdentificationProblem):  # streamed: the conic problem needs every sample at once
         problem = problem.materialise()
     S, A = np.asarray(sigma_tau, dtype=float), np.asarray(sigma_a, dtype=float)
@@ -329,26 +305,11 @@ def solve_noise_model_cvxpy(problem, cons, theta0, sigma_tau, sigma_a, tol: floa
             last = (history[-2] - f) / f if len(history) > 1 else np.nan
             raise SolverError(f"dm majorize–minimize: no convergence in {max_iter} conic solves (f {f:.10g}, last "
                               f"relative decrease {last:.3g}, tol {tol:g})", status="max_iterations")
-    lifted = _lifted(theta, cons)
+    lifted = lifted_blocks(theta, cons, LIFT)
     if np.any(lifted != theta):
         theta, f = lifted, noise_model_objective(problem, lifted, S, A)
     return theta, {"iterations": len(statuses), "objective": f, "history": history, "status": status,
                    "cvxpy_status": statuses}
-
-
-def _lifted(theta: np.ndarray, cons: FeasibleSet, floor: float = LIFT) -> np.ndarray:
-    """θ with every consistency block whose smallest eigenvalue is below floor × its largest lifted to it, by the least
-    change of its parameters. A conic solver meets its constraints only to its tolerance (a closed block's smallest
-    eigenvalue −1e-11 seen), and the closure's completion needs θ strictly inside."""
-    theta = np.array(theta, dtype=float)
-    for c in cons.lmis:
-        lam, U = np.linalg.eigh(c.C(theta))
-        low = floor * np.abs(lam).max()
-        if lam[0] < low:
-            k, m, _ = c.V.shape
-            lift = (U * (np.maximum(lam, low) - lam)) @ U.T
-            theta[c.idx] += np.linalg.lstsq(c.V.reshape(k, m * m).T, lift.reshape(-1), rcond=None)[0]
-    return theta
 
 
 def _scaled(problem) -> tuple[np.ndarray, np.ndarray]:
@@ -366,4 +327,4 @@ def _in_memory(problem, samples: int = CHECK_SAMPLES):
     return problem.subset(slice(0, None, max(1, -(-problem.N // samples))))
 
 
-__all__ = ["NoiseModelDM", "majorizer_blocks", "majorizer_value", "solve_noise_model_cvxpy"]
+__all__ = ["NoiseModelDM", "majorizer_blocks", "solve_noise_model_cvxpy"]

@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualid.errors import MetricError
-from dualid.estimators.newton.objective import CHUNK, Derivatives
+from dualid.estimators.newton.objective import CHUNK, Derivatives, value_or_inf
 from dualid.linalg import NotPositiveDefinite, cholesky_batch, forward_substitute, tri_inverse
 from dualid.problem import IdentificationProblem, additive, sample_blocks, strided_rows
 
@@ -127,10 +127,7 @@ def _positive_definite(K: np.ndarray) -> bool:
 
 def noise_model_objective(problem, theta, sigma_tau, sigma_a, chunk: int = CHUNK) -> float:
     """f(θ), +inf where some C_i(θ) is not positive definite."""
-    try:
-        return noise_model_derivatives(problem, theta, sigma_tau, sigma_a, 0, chunk).f
-    except NotPositiveDefinite:
-        return np.inf
+    return value_or_inf(lambda th, order: noise_model_derivatives(problem, th, sigma_tau, sigma_a, order, chunk), theta)
 
 
 @additive
@@ -178,10 +175,9 @@ def given_levels(problem, theta: np.ndarray, sigma_tau: np.ndarray, sigma_a: np.
                  max_samples: int = NOISE_SAMPLES) -> NoiseLevels:
     """Levels given by the user, with the share of the residual each explains at θ (on at most ``max_samples``
     evenly strided samples)."""
-    rows = strided_rows(problem.N, max_samples)
-    M = problem.metric.evaluate(theta, rows)
-    t, a = _shares(M, np.asarray(sigma_tau, dtype=float), np.asarray(sigma_a, dtype=float))
-    return NoiseLevels(np.asarray(sigma_tau, dtype=float), np.asarray(sigma_a, dtype=float), t, a, M.shape[0])
+    S, A = np.asarray(sigma_tau, dtype=float), np.asarray(sigma_a, dtype=float)
+    M = problem.metric.evaluate(theta, strided_rows(problem.N, max_samples))
+    return NoiseLevels(S, A, *_shares(M, S, A), M.shape[0])
 
 
 def estimate_noise(problem, theta: np.ndarray, start: NoiseLevels | None = None,
@@ -221,8 +217,7 @@ def estimate_noise(problem, theta: np.ndarray, start: NoiseLevels | None = None,
     if not lr > LR_ACCELERATION:
         return NoiseLevels(np.diag(v0), np.zeros((n, n)), 1.0, 0.0, N, lr)
     S, A = np.diag(v[:n]), v[n] * np.diag(D)
-    t, a = _shares(M, S, A)
-    return NoiseLevels(S, A, t, a, N, lr)
+    return NoiseLevels(S, A, *_shares(M, S, A), N, lr)
 
 
 def _scoring(r, a, owner, psi, weight, x) -> tuple[np.ndarray, float]:

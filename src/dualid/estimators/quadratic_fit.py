@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from dualid.errors import MetricError, SolverError
+from dualid.errors import SolverError
 from dualid.estimators import quadratic_newton
 from dualid.estimators.base import (
     captured_warnings,
@@ -25,7 +25,7 @@ from dualid.estimators.base import (
     solve_cvxpy,
 )
 from dualid.estimators.newton.objective import Statistics, statistics
-from dualid.estimators.newton.weighted import fit_weighted_newton
+from dualid.estimators.newton.weighted import fit_weighted_newton, not_positive_definite
 from dualid.estimators.result import IdentificationResult
 from dualid.identifiability import check_identifiable
 from dualid.linalg import gram_eigh, gram_rank
@@ -48,11 +48,9 @@ def fit_quadratic(
 ) -> IdentificationResult:
     """min θᵀHθ − 2gᵀθ + c (+ γ R(θ)) under the problem's constraints. solver: "newton" (dualid's interior point
     alone, cold start) or a cvxpy solver ("CLARABEL", "SCS": in scaled variables θ = s ⊙ φ, then certified)."""
-    info = dict(info or {})
-    rank = gram_rank(stats.H)
-    info["rank"] = rank
+    info = {**(info or {}), "rank": gram_rank(stats.H)}
     if regularizer is None and not allow_unidentifiable:
-        check_identifiable(problem, rank=rank, what=f"{method} weighted regressor")
+        check_identifiable(problem, rank=info["rank"], what=f"{method} weighted regressor")
     s = _chart(problem, stats, constrained, regularizer)
     if not constrained and regularizer is None:
         t0 = time.perf_counter()
@@ -62,9 +60,14 @@ def fit_quadratic(
             method, theta, problem.parameters, stats.objective(problem, theta), "optimal", "lstsq",
             time.perf_counter() - t0, None, False, info,
         )
-    if solver == "newton":
-        theta_hat, status, used, iterations, solve_time = _solve_newton(stats, problem, constrained, solver_options,
-                                                                        regularizer, info, closure)
+    if solver == "newton":  # dualid's interior point alone, from its cold start; options: tol, max_iter
+        t0 = time.perf_counter()
+        theta_hat, ipm = quadratic_newton.fit_quadratic_newton(
+            stats.H, stats.g, stats.c, problem.parameters, constrained=constrained, regularizer=regularizer,
+            closure=closure, **dict(solver_options or {}))
+        info.update(solver_chain="newton optimal", fallback_used=False, relative_gap=ipm["relative_gap"])
+        info.update({k: v for k, v in ipm.items() if k.startswith("projected_")})  # model.closure's completion
+        status, used, iterations, solve_time = "optimal", "newton", ipm["iterations"], time.perf_counter() - t0
     else:
         cvx, phi = _cvxpy_problem(problem, stats, s, constrained, regularizer)
         theta_hat, status, used, iterations, solve_time = _solve_with_fallback(
@@ -141,17 +144,6 @@ def _cvxpy_prior(problem, theta, regularizer):
             F = U * np.sqrt(np.maximum(w, 0.0))
             reg = reg + cp.sum_squares(F.T @ (th - theta0[idx]))
     return reg
-
-
-def _solve_newton(stats, problem, constrained, solver_options, regularizer, info, closure):
-    """dualid's interior point alone (solver "newton"), from its cold start; options: tol, max_iter."""
-    t0 = time.perf_counter()
-    theta, ipm = quadratic_newton.fit_quadratic_newton(
-        stats.H, stats.g, stats.c, problem.parameters, constrained=constrained, regularizer=regularizer,
-        closure=closure, **dict(solver_options or {}))
-    info.update(solver_chain="newton optimal", fallback_used=False, relative_gap=ipm["relative_gap"])
-    info.update({k: v for k, v in ipm.items() if k.startswith("projected_")})  # model.closure's completion
-    return theta, "optimal", "newton", ipm["iterations"], time.perf_counter() - t0
 
 
 def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solver, solver_options, regularizer, info,
@@ -261,11 +253,7 @@ def fit_weighted(sensor: IdentificationProblem, C, method: str, common: dict, in
         L = np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 1, 2)))
     except np.linalg.LinAlgError as exc:
         lam = np.linalg.eigvalsh(C)[:, 0]
-        raise MetricError(
-            f"{method}: {what} must be positive definite at every sample, but it is not at "
-            f"{int(np.sum(~(lam > 0)))} of {sensor.N} samples (smallest eigenvalue {lam.min():.3g}); give a "
-            "positive-definite Σ or a pilot with a positive-definite metric"
-        ) from exc
+        raise not_positive_definite(sensor, f"{method}: {what}", int(np.sum(~(lam > 0))), lam.min()) from exc
     white = sensor.in_coordinates(np.swapaxes(np.linalg.inv(L), 1, 2))
     return fit_quadratic(
         white, statistics(white), method=method, constrained=common["constrained"], solver=common["solver"],

@@ -41,7 +41,7 @@ import numpy as np
 
 from dualid.errors import SolverError
 from dualid.estimators.newton.interior_point import run_interior_point
-from dualid.estimators.newton.objective import Derivatives
+from dualid.estimators.newton.objective import Derivatives, value_or_inf
 from dualid.linalg import NotPositiveDefinite
 from dualid.linalg import solve_psd
 from dualid.model.closure import close, on_closure
@@ -122,10 +122,7 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
     def value(theta):
         if not cons.empty and cons.margin(theta) <= 0:
             return np.inf
-        try:
-            return objective(theta, 0).f
-        except NotPositiveDefinite:
-            return np.inf
+        return value_or_inf(objective, theta)
 
     f_scale = max(float(c), 1e-300)
     failure = None
@@ -188,13 +185,7 @@ def run_quadratic(cons, theta, tol, max_iter, objective, f_scale, gap0=1.0):
 def certified_objective(stats, parameters, regularizer):
     """f(θ) of quadratic_newton (∞ outside log det's domain): the value both solutions are compared in."""
     objective, _ = quadratic_objective(stats.H, stats.g, stats.c, parameters, regularizer)
-
-    def f(theta):
-        try:
-            return objective(np.asarray(theta, dtype=float), 0).f
-        except NotPositiveDefinite:
-            return np.inf
-    return f
+    return lambda theta: value_or_inf(objective, np.asarray(theta, dtype=float))
 
 
 def polish(theta_cvx, stats, parameters, constrained, regularizer, solver, closure: bool = False):

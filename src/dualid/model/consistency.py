@@ -312,6 +312,21 @@ def central_point(theta_ols: np.ndarray, cons: FeasibleSet, eps: float = 1e-2) -
     return theta
 
 
+def lifted_blocks(theta: np.ndarray, cons: FeasibleSet, floor: float) -> np.ndarray:
+    """θ with every LMI block whose smallest eigenvalue is below floor × its largest lifted to it, by the least change
+    of its parameters: a conic solver meets its constraints only to its tolerance (a closed block's smallest eigenvalue
+    −1e-11 seen), and ``model.closure``'s completion needs θ strictly inside."""
+    theta = np.array(theta, dtype=float)
+    for c in cons.lmis:
+        lam, U = np.linalg.eigh(c.C(theta))
+        low = floor * np.abs(lam).max()
+        if lam[0] < low:
+            k, m, _ = c.V.shape
+            lift = (U * (np.maximum(lam, low) - lam)) @ U.T
+            theta[c.idx] += np.linalg.lstsq(c.V.reshape(k, m * m).T, lift.reshape(-1), rcond=None)[0]
+    return theta
+
+
 def check_nominal(parameters: ParameterSpace, theta0: np.ndarray, strict: bool) -> np.ndarray:
     """θ₀ must have p finite entries and be physically consistent (strictly, for log-det priors)."""
     theta0 = np.asarray(theta0, dtype=float)

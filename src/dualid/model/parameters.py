@@ -142,6 +142,12 @@ class ParameterSpace:
     def p(self) -> int:
         return len(self.names)
 
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) as new (p,) arrays, −inf / +inf where there are no bounds."""
+        return (np.array(self.lower if self.lower is not None else [-np.inf] * self.p),
+                np.array(self.upper if self.upper is not None else [np.inf] * self.p))
+
     def index(self, name: str) -> int:
         try:
             return self._index[name]

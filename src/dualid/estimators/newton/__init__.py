@@ -11,9 +11,9 @@ and every M_i ≻ 0; it stops when the duality gap plus the squared Newton decre
 The start is chart-invariant (phase I by cvxpy only when it fails); large N is warm-started from a subsample
 (docs/performance.md, "How the Newton solver works").
 
-Modules: objective (f, ∇f, ∇²f and the sufficient statistics), start (starting point, phase I), linalg (Newton
-matrices, dual steps), interior_point (the iterations and their diagnostics), fit (fit_dual_metric_newton), weighted
-(a constant metric from sufficient statistics).
+Modules: objective (f, ∇f, ∇²f and the sufficient statistics), start (starting point, phase I), linalg (dual steps),
+interior_point (the iterations and their diagnostics), fit (fit_dual_metric_newton), weighted (a constant metric from
+sufficient statistics).
 """
 
 from dualid.estimators.newton.fit import fit_dual_metric_newton

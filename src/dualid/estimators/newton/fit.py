@@ -35,9 +35,7 @@ def pushed_out(problem, theta, f, d, tol, max_iter, chunk) -> dict | None:
     main = np.flatnonzero(np.abs(d) >= 0.05 * np.abs(d).max())
     if not np.all(d[main] * theta[main] > 0):  # only components growing away from zero in their own sign
         return None
-    lower = np.asarray(problem.parameters.lower if problem.parameters.lower is not None else [-np.inf] * problem.p)
-    upper = np.asarray(problem.parameters.upper if problem.parameters.upper is not None else [np.inf] * problem.p)
-    lower, upper = lower.copy(), upper.copy()
+    lower, upper = problem.parameters.bounds
     target = PUSH * theta[main]
     pos = target > 0
     lower[main[pos]] = np.maximum(lower[main[pos]], target[pos])
@@ -79,9 +77,7 @@ def check_bounds(problem: IdentificationProblem, constrained: bool) -> None:
     """SolverError (status infeasible) when some parameter's bounds admit no strictly feasible θ."""
     if not constrained:
         return
-    p = problem.p
-    lo = np.asarray(problem.parameters.lower if problem.parameters.lower is not None else [-np.inf] * p)
-    hi = np.asarray(problem.parameters.upper if problem.parameters.upper is not None else [np.inf] * p)
+    lo, hi = problem.parameters.bounds
     bad = np.flatnonzero(lo >= hi)
     if len(bad):
         k = int(bad[0])

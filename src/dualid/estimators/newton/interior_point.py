@@ -6,16 +6,14 @@ import numpy as np
 
 from dualid.errors import SolverError
 from dualid.estimators.newton.linalg import (
-    NewtonSystem,
-    SecantCorrection,
     barrier,
     dual_direction,
     dual_max_step,
     duality_gap,
     min_centrality,
 )
-from dualid.estimators.newton.objective import dual_metric_derivatives, force_scale
-from dualid.linalg import NotPositiveDefinite, positive_definite
+from dualid.estimators.newton.objective import dual_metric_derivatives, force_scale, value_or_inf
+from dualid.linalg import NewtonSystem, NotPositiveDefinite, SecantCorrection, positive_definite
 from dualid.model.consistency import FeasibleSet, repair_psd
 
 RESTART = 1.0  # non-convex f only: after a step that lowered f by Δf > the duality gap, the barrier restarts at
@@ -93,8 +91,8 @@ def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, c
     (raising NotPositiveDefinite outside its domain) replaces the dual-metric f, with f_scale its size (then problem
     is unused): the same method for any smooth convex f under these constraints. convex=False (a Hessian handed as a
     PSD part such as Gauss–Newton) lets the barrier restart (RESTART) and adds the curvature the handed Hessian leaves
-    out, learnt by secant updates (``linalg.SecantCorrection``), where the Newton matrix stays positive definite; the
-    stopping test is the same, a KKT point of f's local model to tol · f.
+    out, learnt by secant updates (``dualid.linalg.SecantCorrection``), where the Newton matrix stays positive definite;
+    the stopping test is the same, a KKT point of f's local model to tol · f.
     """
     p = len(theta)
     dual_metric = objective is None  # the candidate direction below is for fit_dual_metric_newton (fit.pushed_out)
@@ -209,11 +207,7 @@ def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, c
                 except NotPositiveDefinite:
                     der_trial, phi1 = None, np.inf
             else:
-                der_trial = None
-                try:
-                    phi1 = objective(trial, 0).f
-                except NotPositiveDefinite:
-                    phi1 = np.inf
+                der_trial, phi1 = None, value_or_inf(objective, trial)
             first = False
             if np.isfinite(phi1):
                 phi1 += target * barrier(cons, trial)
@@ -255,7 +249,6 @@ def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, c
         + constraint_only_growth(cons, der, thetas, getattr(getattr(problem, "parameters", None), "names", None)),
         status="max_iterations",
     )
-
 
 
 def iteration_diagnostics(cons, theta, Z, gap, system) -> str:

@@ -1,63 +1,11 @@
-"""The linear algebra of the interior-point iterations: the (PSD, possibly singular) Newton matrices (Jacobi-scaled,
-with a pseudo-inverse fallback) and their secant correction, and the duality gap, barrier and HKM dual steps."""
+"""The linear algebra of the interior-point iterations on the feasible set: the duality gap, barrier and HKM dual
+steps (the Newton matrices: ``dualid.linalg.NewtonSystem``, ``SecantCorrection``)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from dualid.linalg import jacobi_psd
 from dualid.model.consistency import FeasibleSet, max_step_psd, max_step_psd_batched
-
-
-class NewtonSystem:
-    """Solves K x = b for the PSD Newton matrix K: Jacobi-scaled Cholesky of K + δ·diag(K), δ = 1e-12 (a
-    Levenberg term that leaves non-identifiable directions with a zero step instead of failing); eigen
-    pseudo-inverse if even that is not positive definite numerically."""
-
-    def __init__(self, K: np.ndarray, levenberg: float = 1e-12):
-        self.d = jacobi_psd(K)
-        Ks = K / np.outer(self.d, self.d)
-        if levenberg:
-            Ks[np.diag_indices_from(Ks)] += levenberg
-        try:
-            self.L = np.linalg.cholesky(Ks)
-            self.U = None
-        except np.linalg.LinAlgError:
-            lam, U = np.linalg.eigh(Ks)
-            keep = lam > 1e-13 * max(lam.max(), 1e-300)
-            self.L, self.U, self.lam = None, U[:, keep], lam[keep]
-
-    def solve(self, b: np.ndarray) -> np.ndarray:
-        from scipy.linalg import solve_triangular
-
-        bs = b / self.d
-        if self.L is not None:
-            x = solve_triangular(self.L.T, solve_triangular(self.L, bs, lower=True), lower=False)
-        else:
-            x = self.U @ ((self.U.T @ bs) / self.lam)
-        return x / self.d
-
-
-class SecantCorrection:
-    """A ≈ ∇²f − H, the curvature that the handed Hessian H leaves out (e.g. a Gauss–Newton H's), learnt along the
-    steps by NL2SOL's structured secant update (Dennis, Gay & Welsch; Nocedal & Wright §10.3): A₊ s = y#, y# = ∇f₊ −
-    ∇f − H₊ s, as the symmetric rank-2 (PSB) correction of least change in the unit-free metric W = diag(H) (defined
-    also where f's curvature along s is negative), A first sized by min(1, |sᵀy#| / |sᵀAs|)."""
-
-    def __init__(self, p: int):
-        self.A = np.zeros((p, p))
-
-    def update(self, s: np.ndarray, y: np.ndarray, hess_new: np.ndarray) -> None:
-        y_sharp = y - hess_new @ s
-        v = jacobi_psd(hess_new) ** 2 * s  # W s
-        vs = float(v @ s)
-        if not vs > 0:  # a zero step
-            return
-        sAs = float(s @ self.A @ s)
-        if sAs:
-            self.A *= min(1.0, abs(float(s @ y_sharp)) / abs(sAs))
-        r = y_sharp - self.A @ s
-        self.A += (np.outer(r, v) + np.outer(v, r)) / vs - float(r @ s) * np.outer(v, v) / vs**2
 
 
 def dual_direction(cons: FeasibleSet, Z, z, Cinv, s, d, target):

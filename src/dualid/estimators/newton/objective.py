@@ -70,12 +70,17 @@ def _derivative_sums(problem, theta: np.ndarray, order: int, chunk: int):
     return f, grad, hess
 
 
-def objective_value(problem, theta, chunk) -> float:
-    """f(θ), +inf outside the domain."""
+def value_or_inf(objective, theta: np.ndarray) -> float:
+    """objective(θ, 0).f for an objective(θ, order) → Derivatives; +inf outside its domain (NotPositiveDefinite)."""
     try:
-        return dual_metric_derivatives(problem, theta, order=0, chunk=chunk).f
+        return objective(theta, 0).f
     except NotPositiveDefinite:
         return np.inf
+
+
+def objective_value(problem, theta, chunk) -> float:
+    """f(θ), +inf outside the domain."""
+    return value_or_inf(lambda th, order: dual_metric_derivatives(problem, th, order, chunk), theta)
 
 
 @additive
@@ -110,7 +115,6 @@ def residual_jacobian(metric: AffineMetric, Y: np.ndarray, w: np.ndarray, rows) 
             A[:, :, idx] += np.matmul(*JtEu)
         written[idx] = True
     return np.subtract(Y, A, out=A), wMw
-
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ def _phase_one(problem, cons: FeasibleSet, theta_ref: np.ndarray, samples: np.nd
     """max t s.t. C_b(θ) ⪰ t·c_b I, Gθ + h ≥ t·c, M_i(θ) ⪰ t·m_i I (i in samples), t ≤ 1.
 
     A small conic problem (size p plus the listed samples), solved by cvxpy only when the cheap
-    start fails. Returns (θ, t); t ≤ 0 means no strictly feasible θ exists for these samples.
+    start fails. Returns (θ, t); t ≤ 0 means no strictly feasible θ exists for these samples (``_infeasible``).
     """
     import cvxpy as cp
 
@@ -48,8 +48,17 @@ def _phase_one(problem, cons: FeasibleSet, theta_ref: np.ndarray, samples: np.nd
             Mi = M0[i] + cp.reshape(Mk[i].reshape(problem.p, n * n).T @ theta, (n, n), order="C")
             cons_list.append(0.5 * (Mi + Mi.T) >> t * scale * np.eye(n))
     cvx = cp.Problem(cp.Maximize(t), cons_list)
-    solved = solve_cvxpy(cvx, phi, "CLARABEL", None, what="dual-metric phase I")
+    try:
+        solved = solve_cvxpy(cvx, phi, "CLARABEL", None, what="dual-metric phase I")
+    except SolverError as exc:
+        raise SolverError(f"dual-metric Newton: phase I failed ({exc}); the constraints may admit no strictly "
+                          "feasible θ", status=exc.status) from exc
     return s * solved.value, float(t.value)
+
+
+def _infeasible(t: float) -> SolverError:
+    return SolverError("dual-metric Newton: the constraints (physical consistency and bounds) admit no strictly "
+                       f"feasible θ (phase-I margin {t:.3g} ≤ 0)", status="infeasible")
 
 
 def _not_pd_samples(problem, theta, chunk, limit=50) -> np.ndarray:
@@ -95,6 +104,24 @@ def _frozen_metric_sums(problem, theta_c: np.ndarray, chunk: int) -> tuple[np.nd
     return H, g, 0
 
 
+def toward(cons: FeasibleSet, theta_c: np.ndarray, target: np.ndarray, label: str, value) -> tuple[np.ndarray, str]:
+    """(θ, label): θ_c + β (target − θ_c), β ≤ 0.9 of the way to the boundary, halved while value (f, +inf outside
+    its domain) is infinite there; or the target with its blocks' eigenvalues lifted (it keeps the target's
+    well-determined directions, where the segment can stop far from it), whichever has the smaller f."""
+    d = target - theta_c
+    beta = min(1.0, 0.9 * cons.max_step(theta_c, d))
+    line = theta_c
+    while beta > 1e-3:
+        if np.isfinite(value(theta_c + beta * d)):
+            line = theta_c + beta * d
+            break
+        beta *= 0.5
+    lifted = central_point(target, cons)
+    f_line = value(line)
+    f_lifted = value(lifted) if cons.margin(lifted) > 0 else np.inf
+    return (lifted, f"{label}→lifted") if f_lifted < f_line else (line, label)
+
+
 def constant_metric_start(problem, cons: FeasibleSet, seed: np.ndarray) -> tuple[np.ndarray, str]:
     """A strictly feasible θ for a fit whose metric does not depend on θ (M_i = C_i ≻ 0, e.g. ``newton.weighted``),
     where only the constraints ``cons`` (possibly the closed set of ``newton.closure``) decide: the seed's central
@@ -103,14 +130,9 @@ def constant_metric_start(problem, cons: FeasibleSet, seed: np.ndarray) -> tuple
     theta_c = central_point(seed, cons)
     if cons.margin(theta_c) > 0:
         return theta_c, "weighted LS→central"
-    try:
-        theta, t = _phase_one(problem, cons, theta_c, np.zeros(0, dtype=int))
-    except SolverError as exc:
-        raise SolverError(f"dual-metric Newton: phase I failed ({exc}); the constraints may admit no strictly "
-                          "feasible θ", status=exc.status) from exc
+    theta, t = _phase_one(problem, cons, theta_c, np.zeros(0, dtype=int))
     if t <= 1e-9 or cons.margin(theta) <= 0:
-        raise SolverError("dual-metric Newton: the constraints (physical consistency and bounds) admit no strictly "
-                          f"feasible θ (phase-I margin {t:.3g} ≤ 0)", status="infeasible")
+        raise _infeasible(t)
     return theta, "phase-I"
 
 
@@ -129,34 +151,14 @@ def starting_point(problem, cons: FeasibleSet, chunk: int) -> tuple[np.ndarray, 
             continue
         theta_f = frozen_metric_ls(problem, theta_c, chunk) if seed_name == "energy" else theta_seed
         target, label = (theta_f, f"{seed_name}→frozen-metric→central") if theta_f is not None else (theta_seed, f"{seed_name}→central")
-        # θ(β) = θ_c + β (target − θ_c), β ≤ 0.9 of the way to the constraint boundary, every M_i ≻ 0
-        d = target - theta_c
-        beta = min(1.0, 0.9 * cons.max_step(theta_c, d))
-        line = theta_c
-        while beta > 1e-3:
-            if np.isfinite(objective_value(problem, theta_c + beta * d, chunk)):
-                line = theta_c + beta * d
-                break
-            beta *= 0.5
-        # or the target with its blocks' eigenvalues lifted (it keeps the target's well-determined directions,
-        # where the segment toward θ_c can stop far from it): whichever has the smaller f
-        lifted = central_point(target, cons)
-        f_line = objective_value(problem, line, chunk)
-        f_lifted = objective_value(problem, lifted, chunk) if cons.margin(lifted) > 0 else np.inf
-        return (lifted, f"{label}→lifted") if f_lifted < f_line else (line, label)
+        return toward(cons, theta_c, target, label, lambda th: objective_value(problem, th, chunk))
     theta_c = central_point(_ols(problem, chunk), cons)
     # phase I: a small conic problem over the constraints and the samples where M_i(θ_c) is not ≻ 0
     samples = np.zeros(0, dtype=int)
     if cons.margin(theta_c) > 0:
         samples = _not_pd_samples(problem, theta_c, chunk)
     for _ in range(20):
-        try:
-            theta_c, t = _phase_one(problem, cons, theta_c, samples)
-        except SolverError as exc:
-            raise SolverError(
-                f"dual-metric Newton: phase I failed ({exc}); the constraints may admit no strictly feasible θ",
-                status=exc.status,
-            ) from exc
+        theta_c, t = _phase_one(problem, cons, theta_c, samples)
         if t <= 1e-9:
             if len(samples):
                 raise MetricError(
@@ -164,11 +166,7 @@ def starting_point(problem, cons: FeasibleSet, chunk: int) -> tuple[np.ndarray, 
                     f"samples {samples[:10].tolist()} (phase-I margin {t:.3g} ≤ 0); check the metric's "
                     "constant part and the parameter bounds"
                 )
-            raise SolverError(
-                "dual-metric Newton: the constraints (physical consistency and bounds) admit no strictly "
-                f"feasible θ (phase-I margin {t:.3g} ≤ 0)",
-                status="infeasible",
-            )
+            raise _infeasible(t)
         more = _not_pd_samples(problem, theta_c, chunk)
         if not len(more):
             return theta_c, "phase-I"

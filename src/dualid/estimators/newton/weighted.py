@@ -22,7 +22,7 @@ from dualid.errors import MetricError
 from dualid.estimators.newton.fit import check_bounds
 from dualid.estimators.newton.interior_point import direction_label, direction_names, run_interior_point
 from dualid.estimators.newton.objective import CHUNK, Derivatives
-from dualid.estimators.newton.start import constant_metric_start
+from dualid.estimators.newton.start import constant_metric_start, toward
 from dualid.estimators.result import IdentificationResult
 from dualid.linalg import forward_substitute, tri_inverse
 from dualid.linalg import solve_psd
@@ -39,7 +39,8 @@ def _weight(weight: Weight, block: IdentificationProblem, rows: slice) -> np.nda
     return np.broadcast_to(weight(block, rows), (len(range(block.N)[rows]), block.n, block.n))
 
 
-def _not_positive_definite(problem, what: str, bad: int, low: float) -> MetricError:
+def not_positive_definite(problem, what: str, bad: int, low: float) -> MetricError:
+    """The error for a weight's covariance that is not ≻ 0 at ``bad`` of the problem's samples."""
     return MetricError(
         f"{what} must be positive definite at every sample, but it is not at {bad} of {problem.N} samples "
         f"(smallest eigenvalue {low:.3g}); give a positive-definite Σ or a pilot with a positive-definite metric"
@@ -109,7 +110,7 @@ class _Whitening:
             except np.linalg.LinAlgError:
                 L = None
             if L is None or not np.all(np.isfinite(L)):  # the same C at every sample: all of them fail
-                raise _not_positive_definite(self.problem, self.what, self.problem.N, float(np.linalg.eigvalsh(C)[0]))
+                raise not_positive_definite(self.problem, self.what, self.problem.N, float(np.linalg.eigvalsh(C)[0]))
             self.C, self.Li = C.copy(), tri_inverse(L[None])[0]
         return self.Li
 
@@ -127,7 +128,7 @@ def _factor(problem, block: IdentificationProblem, weight: Weight, rows: slice, 
         for b, r, _ in sample_blocks(problem, CHUNK):  # the whole count, for the message
             lam = np.linalg.eigvalsh(_weight(weight, b, r))[:, 0]
             bad, low = bad + int(np.sum(~(lam > 0))), min(low, float(lam.min()))
-        raise _not_positive_definite(problem, what, bad, low)
+        raise not_positive_definite(problem, what, bad, low)
     return L
 
 
@@ -228,13 +229,7 @@ def fit_weighted_newton(
     start = None
     theta_c = central_point(solve_psd(H_e, g_e, rtol=1e-10), cons)
     if cons.margin(theta_c) > 0:  # as newton.start.starting_point with the energy seed; every θ is in the domain
-        d = theta_f - theta_c
-        beta = min(1.0, 0.9 * cons.max_step(theta_c, d))
-        line = theta_c + beta * d if beta > 1e-3 else theta_c
-        lifted = central_point(theta_f, cons)
-        f_lifted = f_of(lifted) if cons.margin(lifted) > 0 else np.inf
-        label = "energy→frozen-metric→central"
-        start, theta0 = ((f"{label}→lifted", lifted) if f_lifted < f_of(line) else (label, line))
+        theta0, start = toward(cons, theta_c, theta_f, "energy→frozen-metric→central", f_of)
     if start is None:  # the same closed problem from the weighted LS's central point or phase I (not a fit without
         # the closure: model.closure)
         theta0, start = constant_metric_start(problem, cons, theta_f)
