@@ -58,6 +58,7 @@ from dualid.model.consistency import central_point, cvxpy_feasible_set, feasible
 from dualid.problem import IdentificationProblem, additive
 
 LIFT = 1e-12  # solver="cvxpy": θ's consistency blocks end at least this far (relative) inside (``lifted_blocks``)
+ACCEPTABLE = 1e-6  # a solve that reaches max_iter within this relative gap ends "optimal_inaccurate", not an error
 ROUNDS = 2  # noise levels at the pilot, θ; the levels at that θ, θ again (unless the first round finds Σ_a = 0)
 
 
@@ -117,34 +118,36 @@ class NoiseModelDM:
         theta_pilot = self._pilot(sample, cons, *scaled)
         start = self._inside(theta_pilot, cons)
         try:
-            theta, noise, iterations, rounds = self._rounds(sensor, sample, cons, start, theta_pilot)
+            theta, noise, run = self._rounds(sensor, sample, cons, start, theta_pilot)
         except SolverError:  # unseen parameters drifting outward from this start: from the paper's optimum instead
             paper = self._inside(self._paper_optimum(sensor), cons)
-            theta, noise, iterations, rounds = self._rounds(sensor, sample, cons, paper, theta_pilot)
+            theta, noise, run = self._rounds(sensor, sample, cons, paper, theta_pilot)
         f = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk)
         choice = "noise model"
         if not noise.acceleration_share > 0:
             why = "given" if self.sigma_tau is not None else f"2 log-likelihood ratio {noise.likelihood_ratio:.3g}"
             choice = f"no acceleration noise ({why}): WLS"
-            return self._result(problem, done, theta, f, noise, rounds, theta_pilot, None, choice, iterations, t0)
+            return self._result(problem, done, theta, f, noise, run, theta_pilot, None, choice, t0)
         check = self._check(sample, theta, noise)
         if check is not None and check.rejected:
             S = np.diag(residual_squares(sensor, theta) / sensor.N)
             wls = NoiseLevels(S, np.zeros_like(S), 1.0, 0.0, 0)
-            theta = self._solve(sensor, cons, start, wls)[0]
+            theta, info = self._solve(sensor, cons, start, wls)
+            run["status"] = _status(info)
             f = noise_model_objective(sensor, theta, wls.sigma_tau, wls.sigma_a, self.chunk)
             choice = (f"wls: the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's "
                       f"beyond the noise model's prediction, standard error {check.standard_error:.2g})")
-        return self._result(problem, done, theta, f, noise, rounds, theta_pilot, check, choice, iterations, t0)
+        return self._result(problem, done, theta, f, noise, run, theta_pilot, check, choice, t0)
 
     def _inside(self, theta, cons):
         """θ, or (constrained, where θ is not strictly inside ``cons``) its central point: a start of the fit."""
         return central_point(theta, cons) if self.constrained and not cons.margin(theta) > 0 else theta
 
     def _rounds(self, sensor, sample, cons, theta, theta_pilot):
-        """The noise-level / θ alternations from θ (module doc, step 3): (θ, levels, iterations, rounds); the levels
-        from ``sample`` (the problem itself in memory, a subsample of streamed data)."""
-        iterations, rounds, noise = 0, 0, None
+        """The noise-level / θ alternations from θ (module doc, step 3): (θ, levels, {iterations, rounds, status});
+        the levels from ``sample`` (the problem itself in memory, a subsample of streamed data). The status is
+        "optimal_inaccurate" when the last solve stopped at max_iter within ACCEPTABLE of its tolerance."""
+        noise, run = None, {"iterations": 0, "rounds": 0, "status": "optimal"}
         fixed = self.sigma_tau is not None
         if fixed:
             noise = given_levels(sample, theta, np.asarray(self.sigma_tau), np.asarray(self.sigma_a))
@@ -152,10 +155,11 @@ class NoiseModelDM:
             if not fixed:
                 noise = estimate_noise(sample, theta_pilot if k == 0 else theta, start=noise if k else None)
             theta, info = self._solve(sensor, cons, theta, noise)
-            iterations, rounds = iterations + info["iterations"], rounds + 1
+            run.update(iterations=run["iterations"] + info["iterations"], rounds=run["rounds"] + 1,
+                       status=_status(info))
             if not noise.acceleration_share > 0:  # no acceleration noise: the noise model is WLS's
                 break
-        return theta, noise, iterations, rounds
+        return theta, noise, run
 
     def _closure(self, sensor, Yw, tw):
         """The feasible set to solve on, closed over the parameters f cannot see (``model.closure``: a link mass that
@@ -165,16 +169,16 @@ class NoiseModelDM:
         return on_closure(feasible_set(sensor.parameters, self.constrained), H, c, sensor.parameters.names,
                           enabled=self.constrained)
 
-    def _result(self, problem, done, theta, f, noise, rounds, theta_pilot, check, choice, iterations, t0):
+    def _result(self, problem, done, theta, f, noise, run, theta_pilot, check, choice, t0):
         theta, completed = done(theta, {})
         gaps = (np.nan,) * 3 if check is None else (check.excess, check.measured_gap, check.predicted_gap)
         record = NoiseRecord(noise.sigma_tau, noise.sigma_a, noise.torque_share, noise.acceleration_share,
-                             "fixed" if self.sigma_tau is not None else "estimated", rounds, np.nan, choice, *gaps)
+                             "fixed" if self.sigma_tau is not None else "estimated", run["rounds"], np.nan, choice, *gaps)
         guard = reference_guard(problem.in_sensor_chart(), theta, theta_pilot, "pilot (wls)")
         solver = "newton" if self.solver == "newton" else f"cvxpy-mm/{self.cvxpy_solver}"
-        return IdentificationResult(self.name, theta, problem.parameters, f, "optimal", solver,
-                                    time.perf_counter() - t0, iterations, self.constrained,
-                                    {"rounds": rounds, "start": "wls", **guard, **completed}, noise=record)
+        return IdentificationResult(self.name, theta, problem.parameters, f, run["status"], solver,
+                                    time.perf_counter() - t0, run["iterations"], self.constrained,
+                                    {"rounds": run["rounds"], "start": "wls", **guard, **completed}, noise=record)
 
     def _paper_optimum(self, problem) -> np.ndarray:
         """The paper's dual-metric optimum (the same θ in every chart); where its infimum is at infinity, where the
@@ -224,8 +228,14 @@ class NoiseModelDM:
         except NotPositiveDefinite:
             raise MetricError("dm: the noise model's covariance is not positive definite at the start") from None
         theta, _, _, info = run_interior_point(problem, cons, theta, None, None, self.tol, self.max_iter, self.chunk,
-                                               False, objective=objective, f_scale=scale, convex=False)
+                                               False, objective=objective, f_scale=scale, convex=False,
+                                               acceptable=ACCEPTABLE)
         return theta, info
+
+
+def _status(info: dict) -> str:
+    """A θ-solve's result status: "optimal_inaccurate" where the interior point stopped within ACCEPTABLE."""
+    return "optimal_inaccurate" if info.get("status") == "optimal_inaccurate" else "optimal"
 
 
 @additive
