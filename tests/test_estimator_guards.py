@@ -12,7 +12,7 @@ from tests.factories import drag_problem, random_chart
 # what each method measures against when no guard_reference is given
 REFERENCES = {
     "ols": None, "ols_unconstrained": None, "energy": None, "wls": "pilot (ols)", "logdet": "prior θ₀",
-    "pullback": "prior θ₀", "dm": "pilot (wls)", "dm-paper": "wls fit",
+    "pullback": "prior θ₀", "dm": "pilot (unit-free least squares)", "dm-paper": "wls fit",
 }
 
 

@@ -139,9 +139,21 @@ def test_torque_noise_alone_keeps_no_acceleration_noise_and_is_wls():
     wls = WLS(covariance=res.noise.sigma_tau).fit(problem)  # WLS in the estimated torque-noise covariance
     assert res.noise.choice.startswith("no acceleration noise") and res.noise.acceleration_share == 0
     assert not np.any(res.noise.sigma_a) and rel(problem.Y @ res.theta, problem.Y @ wls.theta) < 1e-6
+    assert res.info["start"] == "unit-free least squares"  # every coordinate driven: the pilot is least squares
+    assert res.info["metric_guard_reference"] == "pilot (unit-free least squares)"
     noisy, _ = eiv_problem(7, N=1000, torque=0.05, regressor=0.1)
     kept = NoiseModelDM().fit(noisy)
     assert kept.noise.choice == "noise model" and kept.noise.acceleration_share > 0
+
+
+def test_a_passive_coordinate_starts_from_the_papers_optimum_and_says_so():
+    from dataclasses import replace
+
+    problem, _ = eiv_problem(7, N=300)
+    tau = problem.tau.copy()
+    tau[:, 0] = 0.0  # coordinate 0 passive (a floating base's, a pendulum's): τ ≡ 0 there
+    res = NoiseModelDM().fit(replace(problem, tau=tau))
+    assert res.info["start"].startswith("dm-paper") and "pilot (dm-paper)" == res.info["metric_guard_reference"]
 
 
 def test_the_estimator_has_few_settings():

@@ -117,11 +117,14 @@ class NoiseModelDM:
         cons, done = self._closure(sample, *scaled)
         theta_pilot = self._pilot(sample, cons, *scaled)
         start = self._inside(theta_pilot, cons)
+        pilot = "dm-paper" if np.any(np.all(sample.tau == 0, axis=0)) else "unit-free least squares"  # _pilot's
         try:
             theta, noise, run = self._rounds(sensor, sample, cons, start, theta_pilot)
+            run["start"] = pilot
         except SolverError:  # unseen parameters drifting outward from this start: from the paper's optimum instead
             paper = self._inside(self._paper_optimum(sensor), cons)
             theta, noise, run = self._rounds(sensor, sample, cons, paper, theta_pilot)
+            run.update(start=f"dm-paper (the fit from the {pilot} pilot failed)", pilot=pilot)
         f = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk)
         choice = "noise model"
         if not noise.acceleration_share > 0:
@@ -174,11 +177,11 @@ class NoiseModelDM:
         gaps = (np.nan,) * 3 if check is None else (check.excess, check.measured_gap, check.predicted_gap)
         record = NoiseRecord(noise.sigma_tau, noise.sigma_a, noise.torque_share, noise.acceleration_share,
                              "fixed" if self.sigma_tau is not None else "estimated", run["rounds"], np.nan, choice, *gaps)
-        guard = reference_guard(problem.in_sensor_chart(), theta, theta_pilot, "pilot (wls)")
+        guard = reference_guard(problem.in_sensor_chart(), theta, theta_pilot, f"pilot ({run.get('pilot', run['start'])})")
         solver = "newton" if self.solver == "newton" else f"cvxpy-mm/{self.cvxpy_solver}"
         return IdentificationResult(self.name, theta, problem.parameters, f, run["status"], solver,
                                     time.perf_counter() - t0, run["iterations"], self.constrained,
-                                    {"rounds": run["rounds"], "start": "wls", **guard, **completed}, noise=record)
+                                    {"rounds": run["rounds"], "start": run["start"], **guard, **completed}, noise=record)
 
     def _paper_optimum(self, problem) -> np.ndarray:
         """The paper's dual-metric optimum (the same θ in every chart); where its infimum is at infinity, where the
