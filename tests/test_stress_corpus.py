@@ -23,7 +23,7 @@ QUICK = [c for c in cases(large=False) if c.quick and c.name != "chain RR, 2 dof
 # (a status other than optimal, or an error), never passed off as optimal. A fix makes its entry fail here: remove it.
 KNOWN = {
     # (the dm-bfp Newton rows of these two cases were here, 1.4e-5 / 2.5e-6 above the CLARABEL solve: its weighted fits
-    # stopped along j0.m's ray; fixed by estimators/newton/closure.py)
+    # stopped along j0.m's ray; fixed by model/closure.py)
     # no finite minimiser (j0.m → ∞, tests/test_newton_unattained.py; flagged optimum_at_infinity): Newton and the SDP
     # stop at tolerance-dependent points
     ("rank-deficient 4 dof, N = 12", "dm-paper", "", "newton"): "infimum not attained: 1.4e-5 from the SDP's stop",

@@ -1,4 +1,4 @@
-"""A least-squares fit whose infimum is reached only as a parameter it cannot see grows without bound (newton.closure).
+"""A least-squares fit whose infimum is reached only as a parameter it cannot see grows without bound (model.closure).
 
 One rigid body about a fixed z axis: the data see only its axis inertia Izz and first moment mc_x, and want
 Izz = −0.01 (below any consistent value) with mc_x = 0.5. Consistency needs Izz ≥ mc_x²/m, so f falls toward its
@@ -131,7 +131,7 @@ def test_a_cvxpy_point_below_the_infimum_outside_the_set_does_not_beat_the_close
     assert problem.parameters.is_consistent(theta_cvx)  # to the library's relative tolerance
     theta, label, polished, certified, info = polish(theta_cvx, stats, problem.parameters, True, None, "CLARABEL",
                                                      closure=True)
-    assert label == "CLARABEL optimal (outside the set by rounding) → newton on the closed set (newton.closure)"
+    assert label == "CLARABEL optimal (outside the set by rounding) → newton on the closed set (model.closure)"
     assert (polished, certified) == (True, True)
     assert stats.objective(problem, theta) == pytest.approx(f_inf, rel=1e-9)
     m = float(info["projected_parameters"].split(" = ")[1].split(" ")[0])
@@ -147,7 +147,7 @@ def test_wls_on_an_unattained_infimum_is_fitted_on_the_closed_set():
     problem, names = _problem()
     wls = WLS(allow_unidentifiable=True).fit(problem)
     assert wls.solver == "newton"
-    assert wls.info["solver_chain"] == ("newton on the closed set (newton.closure): the infimum is approached only as "
+    assert wls.info["solver_chain"] == ("newton on the closed set (model.closure): the infimum is approached only as "
                                         "an unseen parameter grows, where CLARABEL stops by rounding, so CLARABEL was "
                                         "not run")
     assert list(wls.not_determined()) == ["j0.m"]

@@ -199,7 +199,7 @@ def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solve
         return s * solved.value, solved.status, solved.solver, solved.iterations, solved.solve_time
     info.update(solver_chain=f"{first} → newton optimal", fallback_used=True, fallback_reason=first,
                 relative_gap=ipm["relative_gap"])
-    info.update({k: v for k, v in ipm.items() if k.startswith("projected_")})  # newton.closure's completion
+    info.update({k: v for k, v in ipm.items() if k.startswith("projected_")})  # model.closure's completion
     return theta, "optimal", "newton", ipm["iterations"], time.perf_counter() - t0
 
 
@@ -216,7 +216,7 @@ def closed_fit(problem: IdentificationProblem, stats: Statistics, S: np.ndarray,
         return fit_quadratic(problem, stats, method=method, constrained=est.constrained, solver=est.engine,
                              solver_options=est.solver_options, allow_unidentifiable=est.allow_unidentifiable,
                              info=info)
-    info["solver_chain"] = "newton on the closed set (newton.closure)" + (
+    info["solver_chain"] = "newton on the closed set (model.closure)" + (
         "" if est.engine == "newton" else f": the infimum is approached only as an unseen parameter grows, where "
         f"{est.engine} stops by rounding, so {est.engine} was not run")
     common = {"constrained": True, "solver": "newton", "solver_options": {},

@@ -203,7 +203,7 @@ def polish(theta_cvx, stats, parameters, constrained, regularizer, solver, closu
                                           regularizer=regularizer, start=theta_cvx, closure=closure)
     except SolverError as exc:
         closed = closure and regularizer is None and constrained and projects(stats, parameters)
-        where = " on the closed set (newton.closure)" if closed else ""
+        where = " on the closed set (model.closure)" if closed else ""
         return theta_cvx, f"{solver} optimal, not certified: newton check{where} failed ({exc.status})", False, False, {}
     f_new = f(theta)
     above = (f_cvx - f_new) / max(abs(f_new), 1e-300) if np.isfinite(f_cvx) else np.inf
@@ -217,7 +217,7 @@ def polish(theta_cvx, stats, parameters, constrained, regularizer, solver, closu
         if above >= -TOL or outside:  # cvxpy's θ counts against the closed run only as a point of the set (exactly,
             # no tolerance: along the ray a relative one admits an axis inertia below 0, i.e. f below the infimum)
             why = "outside the set by rounding" if above < -TOL else f"{above:.1e} above"
-            return theta, f"{solver} optimal ({why}) → newton on the closed set (newton.closure)", True, True, \
+            return theta, f"{solver} optimal ({why}) → newton on the closed set (model.closure)", True, True, \
                 {**info, **projected}
         # else the closed run did not reach its infimum and cvxpy's θ is checked as below
     if above > TOL:

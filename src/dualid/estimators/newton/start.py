@@ -124,7 +124,7 @@ def toward(cons: FeasibleSet, theta_c: np.ndarray, target: np.ndarray, label: st
 
 def constant_metric_start(problem, cons: FeasibleSet, seed: np.ndarray) -> tuple[np.ndarray, str]:
     """A strictly feasible θ for a fit whose metric does not depend on θ (M_i = C_i ≻ 0, e.g. ``newton.weighted``),
-    where only the constraints ``cons`` (possibly the closed set of ``newton.closure``) decide: the seed's central
+    where only the constraints ``cons`` (possibly the closed set of ``model.closure``) decide: the seed's central
     point, else phase I over the constraints alone (no sample can leave the domain). SolverError (status
     infeasible) when they admit no strictly feasible θ."""
     theta_c = central_point(seed, cons)
