@@ -8,10 +8,9 @@ from pathlib import Path
 from typing import Optional
 
 import typer
-
-from dualid.cli.app import FLAG, app
 from rich.text import Text
 
+from dualid.cli.app import FLAG, app
 from dualid.cli.common import EXIT_FAILED, console, fail, print_warning
 
 EXPLAINED = 0.5  # warn when the fit explains less than this share of the effort's variance (R²)
@@ -130,17 +129,18 @@ def _fit_and_print(rb, method: str, strict: bool, make_problem) -> None:
 
         problem = make_problem(report)
         ident = problem.identifiability()
+        unseen = ", ".join(ident.unidentifiable) or "(combinations only)"
         if ident.rank < problem.p and strict:
             progress.stop()
             fail(f"--strict: the data determine {ident.rank} of {problem.p} parameter combinations, not θ; "
-                 f"not identifiable on these data: {', '.join(ident.unidentifiable) or '(combinations only)'}", EXIT_FAILED)
+                 f"not identifiable on these data: {unseen}", EXIT_FAILED)
         t0 = time.perf_counter()
         result = estimator.fit(problem)
         wall = time.perf_counter() - t0
     if ident.rank < problem.p:
         console.print(Text(f"note: the data determine {ident.rank} of {problem.p} parameter combinations (base "
                            f"parameters); θ̂ is one minimiser on the closed feasible set. Not identifiable on these data: "
-                           f"{', '.join(ident.unidentifiable) or '(combinations only)'}. dualid fit makes such "
+                           f"{unseen}. dualid fit makes such "
                            "parameters plausible against the URDF's inertials; --strict fails here instead."),
                       highlight=False)
     typer.echo(f"{method}: {result.status} ({result.solver}), objective {result.objective:.10g}, "

@@ -55,7 +55,7 @@ from dualid.linalg import NotPositiveDefinite
 from dualid.metric_guard import reference_guard
 from dualid.model.closure import ZERO_CURVATURE, on_closure
 from dualid.model.consistency import central_point, cvxpy_feasible_set, feasible_set, lifted_blocks
-from dualid.problem import IdentificationProblem, additive
+from dualid.problem import IdentificationProblem, additive, strided_rows
 
 LIFT = 1e-12  # solver="cvxpy": θ's consistency blocks end at least this far (relative) inside (``lifted_blocks``)
 ACCEPTABLE = 1e-6  # a solve that reaches max_iter within this relative gap ends "optimal_inaccurate", not an error
@@ -115,9 +115,8 @@ class NoiseModelDM:
         sample = _in_memory(sensor)  # pilot, closure, noise levels and check read sample subsets
         scaled = _scaled(sample)  # the equations on each coordinate's own force scale: closure and pilot
         cons, done = self._closure(sample, *scaled)
-        theta_pilot = self._pilot(sample, cons, *scaled)
+        theta_pilot, pilot = self._pilot(sample, cons, *scaled)
         start = self._inside(theta_pilot, cons)
-        pilot = "dm-paper" if np.any(np.all(sample.tau == 0, axis=0)) else "unit-free least squares"  # _pilot's
         try:
             theta, noise, run = self._rounds(sensor, sample, cons, start, theta_pilot)
             run["start"] = pilot
@@ -190,7 +189,7 @@ class NoiseModelDM:
             warnings.simplefilter("ignore", OptimumAtInfinityWarning)
             return np.asarray(fit_dual_metric_newton(problem, constrained=self.constrained, chunk=self.chunk).theta)
 
-    def _pilot(self, sensor, cons, Yw, tw) -> np.ndarray:
+    def _pilot(self, sensor, cons, Yw, tw) -> tuple[np.ndarray, str]:
         """Least squares in weights 1/mean τ_j² (each coordinate's equations on its own torque scale: covariant per
         coordinate, unlike OLS's), unconstrained; under the constraints, by the interior point, where M(θ) is not
         positive definite at every sample there. With a passive coordinate (τ_j = 0 on every sample: a floating base,
@@ -199,15 +198,16 @@ class NoiseModelDM:
         start led to one whose model cannot predict the pendulum (Crazyflie, 20 samples, 6 subsets: shape NCC −0.37 /
         −0.11 against 0.93 / 0.91 from the paper's optimum; WLS 0.91 / 0.83)."""
         if np.any(np.all(sensor.tau == 0, axis=0)):
-            return self._paper_optimum(sensor)
+            return self._paper_optimum(sensor), "dm-paper"
         theta = np.linalg.lstsq(Yw, tw, rcond=None)[0]
         try:
             np.linalg.cholesky(sensor.metric.evaluate(theta))
-            return theta
+            return theta, "unit-free least squares"
         except np.linalg.LinAlgError:
             pass
         weights = NoiseLevels(np.diag(torque_scale(sensor)), np.zeros((sensor.n, sensor.n)), 1.0, 0.0, 0)
-        return self._solve(sensor, cons, central_point(theta, cons) if self.constrained else theta, weights)[0]
+        return self._solve(sensor, cons, central_point(theta, cons) if self.constrained else theta, weights)[0], \
+            "unit-free least squares"
 
     def _check(self, sensor, theta, noise) -> NoiseCheck | None:
         W = np.diag(1.0 / np.mean(sensor.residual(theta) ** 2, axis=0))
@@ -337,7 +337,7 @@ def _in_memory(problem, samples: int = CHECK_SAMPLES):
     strided in-memory subsample of at most ``samples`` samples, in time order (one pass)."""
     if isinstance(problem, IdentificationProblem):
         return problem
-    return problem.subset(slice(0, None, max(1, -(-problem.N // samples))))
+    return problem.subset(strided_rows(problem.N, samples))
 
 
 __all__ = ["NoiseModelDM", "majorizer_blocks", "solve_noise_model_cvxpy"]
