@@ -119,7 +119,7 @@ class NoiseModelDM:
         start = self._inside(theta_pilot, cons)
         try:
             theta, noise, run = self._rounds(sensor, sample, cons, start, theta_pilot)
-            run["start"] = pilot
+            run.update(start=pilot, pilot=pilot)
         except SolverError:  # unseen parameters drifting outward from this start: from the paper's optimum instead
             paper = self._inside(self._paper_optimum(sensor), cons)
             theta, noise, run = self._rounds(sensor, sample, cons, paper, theta_pilot)
@@ -176,7 +176,7 @@ class NoiseModelDM:
         gaps = (np.nan,) * 3 if check is None else (check.excess, check.measured_gap, check.predicted_gap)
         record = NoiseRecord(noise.sigma_tau, noise.sigma_a, noise.torque_share, noise.acceleration_share,
                              "fixed" if self.sigma_tau is not None else "estimated", run["rounds"], np.nan, choice, *gaps)
-        guard = reference_guard(problem.in_sensor_chart(), theta, theta_pilot, f"pilot ({run.get('pilot', run['start'])})")
+        guard = reference_guard(problem.in_sensor_chart(), theta, theta_pilot, f"pilot ({run['pilot']})")
         solver = "newton" if self.solver == "newton" else f"cvxpy-mm/{self.cvxpy_solver}"
         return IdentificationResult(self.name, theta, problem.parameters, f, run["status"], solver,
                                     time.perf_counter() - t0, run["iterations"], self.constrained,
