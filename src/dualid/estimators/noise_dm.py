@@ -13,7 +13,7 @@ the same fit; the objective is invariant when Σ_τ, Σ_a are carried covariantl
    with a passive coordinate (τ_j ≡ 0), the paper's dual-metric optimum;
 2. the noise levels from its residuals (``noise_model.estimate_noise``: Σ_τ per joint, Σ_a = σ_a² diag(mean v²),
    equivariant under per-coordinate units). When the likelihood does not support acceleration noise, Σ_a = 0 and
-   the noise model is WLS's: ``dm`` returns the pilot;
+   ``dm`` is WLS in Σ_τ: one quadratic fit from its sufficient statistics, under the same constraints;
 3. ROUNDS times: θ by dualid's primal–dual interior point on f (gradient and Hessian of ``noise_model``)
    under the physical-consistency constraints, from the pilot moved strictly inside them, then from the last θ
    with the levels re-estimated at it;
@@ -27,28 +27,20 @@ the reference the interior point is checked against (``solve_noise_model_cvxpy``
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-
-import warnings
 
 from dualid.errors import ConfigError, MetricError, OptimumAtInfinityWarning, SolverError
 from dualid.estimators.base import captured_warnings, check_solver, solve_cvxpy
 from dualid.estimators.dual_metric import schur_psd
 from dualid.estimators.newton.fit import fit_dual_metric_newton
 from dualid.estimators.newton.interior_point import run_interior_point
-from dualid.estimators.newton.objective import CHUNK
-from dualid.estimators.noise_model import (
-    NoiseCheck,
-    NoiseLevels,
-    check_noise_model,
-    estimate_noise,
-    given_levels,
-    noise_model_derivatives,
-    noise_model_objective,
-    noise_model_scale,
-)
+from dualid.estimators.newton.objective import CHUNK, statistics
+from dualid.estimators.noise_model import (NoiseCheck, NoiseLevels, check_noise_model, estimate_noise, given_levels,
+                                           noise_model_derivatives, noise_model_objective, noise_model_scale)
+from dualid.estimators.quadratic_newton import quadratic_objective, run_quadratic
 from dualid.estimators.result import IdentificationResult, NoiseRecord
 from dualid.identifiability import check_identifiable
 from dualid.linalg import NotPositiveDefinite
@@ -217,11 +209,16 @@ class NoiseModelDM:
             return None
 
     def _solve(self, problem, cons, theta, noise: NoiseLevels):
-        """θ minimising f with the noise levels fixed, from θ, on ``cons`` (the closed set of ``_closure``); f is not
-        convex, so the interior point runs in its non-convex mode."""
+        """θ minimising f with the noise levels fixed, from θ, on ``cons`` (the closed set of ``_closure``): with Σ_a = 0,
+        WLS's quadratic in Σ_τ⁻¹ from its sufficient statistics (one pass); else f is not convex, and the interior
+        point runs in its non-convex mode."""
         S, A = noise.sigma_tau, noise.sigma_a
         if self.solver == "cvxpy":
             return solve_noise_model_cvxpy(problem, cons, theta, S, A, self.tol, self.max_iter, self.cvxpy_solver)
+        if not np.any(A):
+            stats = statistics(problem, np.linalg.inv(S), self.chunk)
+            objective = quadratic_objective(stats.H, stats.g, stats.c, problem.parameters)[0]
+            return run_quadratic(cons, theta, self.tol, self.max_iter, objective, max(stats.c, 1e-300))
 
         def objective(th, order):
             return noise_model_derivatives(problem, th, S, A, order, self.chunk)
