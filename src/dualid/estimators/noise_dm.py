@@ -17,7 +17,8 @@ the same fit; the objective is invariant when Σ_τ, Σ_a are carried covariantl
 3. ROUNDS times: θ by dualid's primal–dual interior point on f (gradient and Hessian of ``noise_model``)
    under the physical-consistency constraints, from the pilot moved strictly inside them, then from the last θ
    with the levels re-estimated at it;
-4. the held-out check (``noise_model.check_noise_model``): WLS when the residual is not the modelled noise;
+4. the held-out check (``noise_model.check_noise_model``): WLS when the residual is not the modelled noise; the
+   metric guard against the pilot: a degenerate fit (a ghost) gives way to the pilot (the paper's optimum) or WLS;
 5. the result records the noise levels (sensor chart), their residual shares and the rounds in ``result.noise``.
 
 solver="cvxpy" makes step 3's θ-solves by majorize–minimize instead, each step one conic problem (a batched SDP):
@@ -35,6 +36,7 @@ import numpy as np
 from dualid.errors import ConfigError, MetricError, OptimumAtInfinityWarning, SolverError
 from dualid.estimators.base import captured_warnings, check_solver, solve_cvxpy
 from dualid.estimators.dual_metric import schur_psd
+from dualid.estimators.least_squares import residual_covariance
 from dualid.estimators.newton.fit import fit_dual_metric_newton
 from dualid.estimators.newton.interior_point import run_interior_point
 from dualid.estimators.newton.objective import CHUNK, statistics
@@ -47,10 +49,11 @@ from dualid.linalg import NotPositiveDefinite
 from dualid.metric_guard import reference_guard
 from dualid.model.closure import ZERO_CURVATURE, on_closure
 from dualid.model.consistency import central_point, cvxpy_feasible_set, feasible_set, lifted_blocks
-from dualid.problem import IdentificationProblem, additive, strided_rows
+from dualid.problem import IdentificationProblem, strided_rows
 
 LIFT = 1e-12  # solver="cvxpy": θ's consistency blocks end at least this far (relative) inside (``lifted_blocks``)
 ACCEPTABLE = 1e-6  # a solve that reaches max_iter within this relative gap ends "optimal_inaccurate", not an error
+CHECK_SAMPLES = 20_000  # streamed data: the noise levels and the held-out check from a strided subsample of this size
 ROUNDS = 2  # noise levels at the pilot, θ; the levels at that θ, θ again (unless the first round finds Σ_a = 0)
 
 
@@ -59,11 +62,7 @@ def torque_scale(problem) -> np.ndarray:
     coordinate (τ_j = 0) the mean squared norm of its regressor rows, which transforms alike."""
     scale = np.mean(problem.tau**2, axis=0)
     rows = np.mean(np.sum(problem.Y**2, axis=2), axis=0)
-    scale = np.where(scale > 0, scale, rows)
-    return np.where(scale > 0, scale, 1.0)
-
-
-CHECK_SAMPLES = 20_000  # streamed data: the noise levels and the held-out check from a strided subsample of this size
+    return np.where(scale > 0, scale, np.where(rows > 0, rows, 1.0))
 
 
 @dataclass(frozen=True)
@@ -123,14 +122,21 @@ class NoiseModelDM:
             choice = f"no acceleration noise ({why}): WLS"
             return self._result(problem, done, theta, f, noise, run, theta_pilot, None, choice, t0)
         check = self._check(sample, theta, noise)
+        guard, why = reference_guard(sample, done(theta, {})[0], theta_pilot, "pilot"), None
         if check is not None and check.rejected:
-            S = np.diag(residual_squares(sensor, theta) / sensor.N)
+            why = (f"the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's beyond the noise "
+                   f"model's prediction, standard error {check.standard_error:.2g})")
+        elif guard.get("degenerate"):  # a ghost: a body made (nearly) massless or vastly heavier than the pilot's
+            why = (f"its fit is degenerate against its pilot (generalised eigenvalues of M(θ̂) against M(pilot) "
+                   f"{guard.get('metric_ratio_min', np.nan):.2g}…{guard.get('metric_ratio_max', np.nan):.3g})")
+        if why and pilot == "dm-paper":  # the pilot is the paper's constrained optimum: dm returns it
+            theta, f, choice = theta_pilot, sensor.dual_metric_objective(theta_pilot), f"dm-paper: {why}"
+        elif why:  # WLS in the residual variances at θ̂, from the same start
+            S = np.diag(np.diag(residual_covariance(sensor, theta)))
             wls = NoiseLevels(S, np.zeros_like(S), 1.0, 0.0, 0)
             theta, info = self._solve(sensor, cons, start, wls)
             run["status"] = _status(info)
-            f = noise_model_objective(sensor, theta, wls.sigma_tau, wls.sigma_a, self.chunk)
-            choice = (f"wls: the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's "
-                      f"beyond the noise model's prediction, standard error {check.standard_error:.2g})")
+            f, choice = noise_model_objective(sensor, theta, S, wls.sigma_a, self.chunk), f"wls: {why}"
         return self._result(problem, done, theta, f, noise, run, theta_pilot, check, choice, t0)
 
     def _inside(self, theta, cons):
@@ -218,7 +224,10 @@ class NoiseModelDM:
         if not np.any(A):
             stats = statistics(problem, np.linalg.inv(S), self.chunk)
             objective = quadratic_objective(stats.H, stats.g, stats.c, problem.parameters)[0]
-            return run_quadratic(cons, theta, self.tol, self.max_iter, objective, max(stats.c, 1e-300))
+            try:
+                return run_quadratic(cons, theta, self.tol, self.max_iter, objective, max(stats.c, 1e-300))
+            except SolverError:  # the convex-mode steps stalled (arms near a block's boundary): the general path
+                pass
 
         def objective(th, order):
             return noise_model_derivatives(problem, th, S, A, order, self.chunk)
@@ -236,12 +245,6 @@ class NoiseModelDM:
 def _status(info: dict) -> str:
     """A θ-solve's result status: "optimal_inaccurate" where the interior point stopped within ACCEPTABLE."""
     return "optimal_inaccurate" if info.get("status") == "optimal_inaccurate" else "optimal"
-
-
-@additive
-def residual_squares(problem, theta: np.ndarray) -> np.ndarray:
-    """(n,) Σ_i r_ij² per coordinate (one pass, run where the data live): N times the WLS fallback's torque variances."""
-    return sum(np.sum(block.residual(theta) ** 2, axis=0) for block in problem.blocks())
 
 
 # --- the conic reference (solver="cvxpy"): majorize–minimize -------------------------------------------------------
