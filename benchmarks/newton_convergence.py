@@ -109,12 +109,12 @@ def run_quadratic(seeds=3) -> list[str]:
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from dualid import OLS, WLS, RegularizedWLS
-    from dualid.bench.runner import _pinocchio_model
+    from dualid.bench.runner import pinocchio_model
     from dualid.model import RigidBodyModel
     from tests.factories import arm
 
     rows = ["| arm | seed | fit | status | solver | chain |", "| --- | --- | --- | --- | --- | --- |"]
-    for label, pin_model in (("3-DoF thin rods", arm(3)), ("arm7", _pinocchio_model("arm7"))):
+    for label, pin_model in (("3-DoF thin rods", arm(3)), ("arm7", pinocchio_model("arm7"))):
         model = RigidBodyModel(pin_model)
         for seed in range(seeds):
             problem = arm_problem(model, seed)

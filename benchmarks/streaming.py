@@ -2,7 +2,8 @@
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/streaming.py --n 1000000 --methods ols --out benchmarks/streaming.md
 
-Writes N samples of the benchmark Crazyflie (q, v, a and τ = Y θ + 5 % noise, the columns of a dualid data set
+Writes N samples of a benchmark system (``--system``: the Crazyflie or the 7-joint arm of ``dualid bench``; q, v, a and
+τ = Y θ + 5 % noise, the columns of a dualid data set
 run; up to 20,000 distinct random states, repeated with fresh noise beyond) to a temporary Parquet file in row groups, then fits each method in its own process from a
 ``ChunkedProblem`` (the regressor and metric rebuilt chunk by chunk on every pass) and records wall time, passes
 over the file and peak resident memory, next to the memory the materialised problem's Y and metric Jacobians
@@ -24,15 +25,15 @@ from pathlib import Path
 import numpy as np
 
 
-def write_parquet(path: Path, N: int, chunk: int = 100_000) -> dict:
+def write_parquet(path: Path, N: int, system: str, chunk: int = 100_000) -> dict:
     import pinocchio as pin
     import pyarrow as pa
     import pyarrow.parquet as pq
 
+    from dualid.bench.runner import pinocchio_model
     from dualid.model.rigid_body import RigidBodyModel
-    from dualid.systems.crazyflie_model import build_model
 
-    rb = RigidBodyModel(build_model())
+    rb = RigidBodyModel(pinocchio_model(system))
     theta = rb.nominal
     rng = np.random.default_rng(0)
     pin.seed(0)
@@ -56,13 +57,13 @@ def write_parquet(path: Path, N: int, chunk: int = 100_000) -> dict:
     return {"n": rb.nv, "p": rb.parameters.p, "bodies": len(rb.bodies), "file_GB": path.stat().st_size / 1e9}
 
 
-def run_one(path: Path, method: str, chunk: int) -> dict:
+def run_one(path: Path, method: str, chunk: int, system: str) -> dict:
+    from dualid.bench.runner import pinocchio_model
     from dualid.estimators.methods import make_estimator
     from dualid.model.rigid_body import RigidBodyModel
     from dualid.streaming import ChunkedProblem, ParquetSource
-    from dualid.systems.crazyflie_model import build_model
 
-    rb = RigidBodyModel(build_model())
+    rb = RigidBodyModel(pinocchio_model(system))
     problem = ChunkedProblem(rb, ParquetSource(path, rb.coordinates, rb.nq, chunk=chunk))
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
     t0 = time.perf_counter()
@@ -77,12 +78,13 @@ def run_one(path: Path, method: str, chunk: int) -> dict:
 
 def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "--child":
-        print(json.dumps(run_one(Path(sys.argv[2]), sys.argv[3], int(sys.argv[4]))), flush=True)
+        print(json.dumps(run_one(Path(sys.argv[2]), sys.argv[3], int(sys.argv[4]), sys.argv[5])), flush=True)
         return
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=1_000_000)
     ap.add_argument("--methods", default="ols")
     ap.add_argument("--chunk", type=int, default=65536)
+    ap.add_argument("--system", choices=("crazyflie", "arm7"), default="crazyflie")
     ap.add_argument("--out", type=Path, default=Path("benchmarks/streaming.md"))
     ap.add_argument("--force", action="store_true")
     args = ap.parse_args()
@@ -91,12 +93,12 @@ def main() -> None:
     load0 = [round(x, 2) for x in os.getloadavg()]
     runs = []
     with tempfile.TemporaryDirectory(prefix="dualid-stream-") as tmp:
-        path = Path(tmp) / "crazyflie.parquet"
+        path = Path(tmp) / f"{args.system}.parquet"
         t0 = time.perf_counter()
-        shape = write_parquet(path, args.n)
+        shape = write_parquet(path, args.n, args.system)
         write_s = time.perf_counter() - t0
         for method in args.methods.split(","):
-            out = subprocess.run([sys.executable, __file__, "--child", str(path), method, str(args.chunk)],
+            out = subprocess.run([sys.executable, __file__, "--child", str(path), method, str(args.chunk), args.system],
                                  capture_output=True, text=True)
             try:
                 row = json.loads(out.stdout.strip().splitlines()[-1])
@@ -106,7 +108,7 @@ def main() -> None:
             print(row, flush=True)
     materialised = args.n * shape["n"] * (shape["p"] + 6 * shape["bodies"]) * 8 / 1e9
     lines = [
-        "# A fit streamed from Parquet (benchmark Crazyflie)", "",
+        f"# A fit streamed from Parquet (benchmark {'Crazyflie' if args.system == 'crazyflie' else '7-joint arm'})", "",
         f"Command: `OPENBLAS_NUM_THREADS=1 python {' '.join(sys.argv)}`", "",
         f"N = {args.n:,} samples in a {shape['file_GB']:.2f} GB Parquet file (written in {write_s:.0f} s); chunks of "
         f"{args.chunk:,} samples. The materialised problem would hold Y and the metric's body Jacobians: "

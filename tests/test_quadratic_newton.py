@@ -36,9 +36,9 @@ def arm3():
 
 @pytest.fixture(scope="module")
 def arm7():
-    from dualid.bench.runner import _pinocchio_model
+    from dualid.bench.runner import pinocchio_model
 
-    model = RigidBodyModel(_pinocchio_model("arm7"))
+    model = RigidBodyModel(pinocchio_model("arm7"))
     return model, _arm_problem(model, 0)
 
 

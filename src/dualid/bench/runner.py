@@ -107,7 +107,7 @@ class BenchConfig:
 
 
 # --- problems -----------------------------------------------------------------------------------
-def _pinocchio_model(name: str):
+def pinocchio_model(name: str):
     """The Pinocchio model of a benchmark problem (true inertias in the bodies)."""
     import pinocchio as pin
 
@@ -140,7 +140,7 @@ def base_samples(name: str, cache: Path, count: int = BASE_SAMPLES) -> Path:
 
     from dualid.model.rigid_body import RigidBodyModel
 
-    model = _pinocchio_model(name)
+    model = pinocchio_model(name)
     rb = RigidBodyModel(model)
     rng = np.random.default_rng(0)
     pin.seed(0)
