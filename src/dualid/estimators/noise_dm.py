@@ -39,7 +39,7 @@ from dualid.estimators.dual_metric import schur_psd
 from dualid.estimators.least_squares import residual_covariance
 from dualid.estimators.newton.fit import fit_dual_metric_newton
 from dualid.estimators.newton.interior_point import run_interior_point
-from dualid.estimators.newton.objective import CHUNK, statistics
+from dualid.estimators.newton.objective import CHUNK, objective_value, statistics
 from dualid.estimators.noise_model import (NoiseCheck, NoiseLevels, check_noise_model, estimate_noise, given_levels,
                                            noise_model_derivatives, noise_model_objective, noise_model_scale)
 from dualid.estimators.quadratic_newton import quadratic_objective, run_quadratic
@@ -49,10 +49,11 @@ from dualid.linalg import NotPositiveDefinite
 from dualid.metric_guard import reference_guard
 from dualid.model.closure import ZERO_CURVATURE, on_closure
 from dualid.model.consistency import central_point, cvxpy_feasible_set, feasible_set, lifted_blocks
-from dualid.problem import IdentificationProblem, strided_rows
+from dualid.problem import IdentificationProblem, sample_blocks, strided_rows
 
 LIFT = 1e-12  # solver="cvxpy": θ's consistency blocks end at least this far (relative) inside (``lifted_blocks``)
 ACCEPTABLE = 1e-6  # a solve that reaches max_iter within this relative gap ends "optimal_inaccurate", not an error
+CHUNK_QR = 8192  # samples per block of the pilot's QR
 CHECK_SAMPLES = 20_000  # streamed data: the noise levels and the held-out check from a strided subsample of this size
 ROUNDS = 2  # noise levels at the pilot, θ; the levels at that θ, θ again (unless the first round finds Σ_a = 0)
 
@@ -61,7 +62,7 @@ def torque_scale(problem) -> np.ndarray:
     """(n,) each coordinate's squared force scale, mean τ_j² (covariant under a unit change of q_j); on a passive
     coordinate (τ_j = 0) the mean squared norm of its regressor rows, which transforms alike."""
     scale = np.mean(problem.tau**2, axis=0)
-    rows = np.mean(np.sum(problem.Y**2, axis=2), axis=0)
+    rows = np.einsum("ijk,ijk->j", problem.Y, problem.Y) / problem.N
     return np.where(scale > 0, scale, np.where(rows > 0, rows, 1.0))
 
 
@@ -103,7 +104,9 @@ class NoiseModelDM:
         if not self.allow_unidentifiable:
             check_identifiable(problem)
         sensor = problem.in_sensor_chart()
-        sample = _in_memory(sensor)  # pilot, closure, noise levels and check read sample subsets
+        # pilot, closure, noise levels and check: the problem in memory, or a strided subsample of streamed data
+        in_memory = isinstance(sensor, IdentificationProblem)
+        sample = sensor if in_memory else sensor.subset(strided_rows(sensor.N, CHECK_SAMPLES))
         scaled = _scaled(sample)  # the equations on each coordinate's own force scale: closure and pilot
         cons, done = self._closure(sample, *scaled)
         theta_pilot, pilot = self._pilot(sample, cons, *scaled)
@@ -161,12 +164,11 @@ class NoiseModelDM:
                 break
         return theta, noise, run
 
-    def _closure(self, sensor, Yw, tw):
+    def _closure(self, sensor, R, r, c):
         """The feasible set to solve on, closed over the parameters f cannot see (``model.closure``: a link mass that
-        enters only its consistency block would otherwise grow without bound), and the completion of θ after; Yw, tw:
+        enters only its consistency block would otherwise grow without bound), and the completion of θ after; R, r, c:
         the equations on their force scales (``_scaled``)."""
-        H, c = Yw.T @ Yw, float(tw @ tw)
-        return on_closure(feasible_set(sensor.parameters, self.constrained), H, c, sensor.parameters.names,
+        return on_closure(feasible_set(sensor.parameters, self.constrained), R.T @ R, c, sensor.parameters.names,
                           enabled=self.constrained)
 
     def _result(self, problem, done, theta, f, noise, run, theta_pilot, check, choice, t0):
@@ -187,7 +189,7 @@ class NoiseModelDM:
             warnings.simplefilter("ignore", OptimumAtInfinityWarning)
             return np.asarray(fit_dual_metric_newton(problem, constrained=self.constrained, chunk=self.chunk).theta)
 
-    def _pilot(self, sensor, cons, Yw, tw) -> tuple[np.ndarray, str]:
+    def _pilot(self, sensor, cons, R, r, c) -> tuple[np.ndarray, str]:
         """Least squares in weights 1/mean τ_j² (each coordinate's equations on its own torque scale: covariant per
         coordinate, unlike OLS's), unconstrained; under the constraints, by the interior point, where M(θ) is not
         positive definite at every sample there. With a passive coordinate (τ_j = 0 on every sample: a floating base,
@@ -197,12 +199,9 @@ class NoiseModelDM:
         −0.11 against 0.93 / 0.91 from the paper's optimum; WLS 0.91 / 0.83)."""
         if np.any(np.all(sensor.tau == 0, axis=0)):
             return self._paper_optimum(sensor), "dm-paper"
-        theta = np.linalg.lstsq(Yw, tw, rcond=None)[0]
-        try:
-            np.linalg.cholesky(sensor.metric.evaluate(theta))
+        theta = np.linalg.lstsq(R, r, rcond=np.finfo(float).eps * max(sensor.N * sensor.n, sensor.p))[0]
+        if np.isfinite(objective_value(sensor, theta, self.chunk)):  # M_i(θ) positive definite at every sample
             return theta, "unit-free least squares"
-        except np.linalg.LinAlgError:
-            pass
         weights = NoiseLevels(np.diag(torque_scale(sensor)), np.zeros((sensor.n, sensor.n)), 1.0, 0.0, 0)
         return self._solve(sensor, cons, central_point(theta, cons) if self.constrained else theta, weights)[0], \
             "unit-free least squares"
@@ -325,19 +324,16 @@ def solve_noise_model_cvxpy(problem, cons, theta0, sigma_tau, sigma_a, tol: floa
                    "cvxpy_status": statuses}
 
 
-def _scaled(problem) -> tuple[np.ndarray, np.ndarray]:
-    """(Yw (N·n, p), τw (N·n,)): every coordinate's equations divided by its force scale √mean τ_j² (``torque_scale``),
-    stacked: the unit-free least squares of the pilot and the statistics of the closure."""
-    scale = np.sqrt(torque_scale(problem))
-    return (problem.Y / scale[None, :, None]).reshape(-1, problem.p), (problem.tau / scale).reshape(-1)
-
-
-def _in_memory(problem, samples: int = CHECK_SAMPLES):
-    """The problem itself when it is in memory; for data streamed from disk (``streaming.ChunkedProblem``), an evenly
-    strided in-memory subsample of at most ``samples`` samples, in time order (one pass)."""
-    if isinstance(problem, IdentificationProblem):
-        return problem
-    return problem.subset(strided_rows(problem.N, samples))
+def _scaled(problem) -> tuple[np.ndarray, np.ndarray, float]:
+    """(R, r, c) with ‖Yw θ − τw‖² = ‖R θ − r‖² + c − ‖r‖², Yw, τw every coordinate's equations divided by its force scale
+    √mean τ_j² (``torque_scale``), stacked: the unit-free least squares of the pilot and the statistics of the closure,
+    by a QR over blocks of samples of [Yw τw] (the singular values of Yw, without a copy of Y)."""
+    s, p = np.sqrt(torque_scale(problem)), problem.p
+    R = np.zeros((0, p + 1))
+    for block, rows, _ in sample_blocks(problem, CHUNK_QR):
+        A = np.concatenate([block.Y[rows], block.tau[rows][:, :, None]], axis=2) / s[None, :, None]
+        R = np.linalg.qr(np.vstack([R, A.reshape(-1, p + 1)]), mode="r")
+    return R[:, :p], R[:, p], float(np.sum(np.einsum("ij,ij->j", problem.tau, problem.tau) / s**2))
 
 
 __all__ = ["NoiseModelDM", "majorizer_blocks", "solve_noise_model_cvxpy"]
