@@ -133,7 +133,7 @@ class NoiseModelDM:
             why = (f"its fit is degenerate against its pilot (generalised eigenvalues of M(θ̂) against M(pilot) "
                    f"{guard.get('metric_ratio_min', np.nan):.2g}…{guard.get('metric_ratio_max', np.nan):.3g})")
         if why and pilot == "dm-paper":  # the pilot is the paper's constrained optimum: dm returns it
-            theta, f, choice = theta_pilot, sensor.dual_metric_objective(theta_pilot), f"dm-paper: {why}"
+            theta, f, choice = theta_pilot, objective_value(sensor, theta_pilot, self.chunk), f"dm-paper: {why}"
         elif why:  # WLS in the residual variances at θ̂, from the same start
             S = np.diag(np.diag(residual_covariance(sensor, theta)))
             wls = NoiseLevels(S, np.zeros_like(S), 1.0, 0.0, 0)
