@@ -198,9 +198,14 @@ def test_a_fit_degenerate_against_its_pilot_is_not_returned():
     res = make_estimator("dm", theta0=system.theta_nominal, allow_unidentifiable=True).fit(train)
     assert not guard_info(train, res.theta, system.theta_nominal)["degenerate"]
     if res.noise.choice != "noise model":
+        from dualid.evaluation.objective_terms import derivatives
+
         assert res.noise.choice.startswith("dm-paper: its fit is degenerate against its pilot")
         paper = make_estimator("dm-paper", allow_unidentifiable=True).fit(train)
         assert rel(train.Y @ res.theta, train.Y @ paper.theta) < 1e-6
+        # its intervals use the objective it returned, the paper's: there θ̂ is stationary (the noise model's is not)
+        H, G, f = derivatives(train, res, NoiseModelDM(), np.arange(train.N) % 4)
+        assert rel(f, train.dual_metric_objective(res.theta)) < 1e-10
 
 
 def test_a_degenerate_fit_without_a_passive_coordinate_falls_back_to_wls(monkeypatch):

@@ -53,7 +53,8 @@ def derivatives(problem: IdentificationProblem, result: IdentificationResult, es
     theta = np.asarray(result.theta, dtype=float)
     K = int(labels.max()) + 1
     G = np.zeros((K, problem.p))
-    if isinstance(est, DualMetric):
+    fallback = result.noise.choice.split(":")[0] if isinstance(est, NoiseModelDM) and result.noise is not None else ""
+    if isinstance(est, DualMetric) or fallback == "dm-paper":  # dm that returned its pilot, the paper's optimum
         try:
             d = dual_metric_derivatives(problem, theta, order=2, chunk=chunk)
         except NotPositiveDefinite:
@@ -65,7 +66,7 @@ def derivatives(problem: IdentificationProblem, result: IdentificationResult, es
             g = 2.0 * np.einsum("nap,na->np", problem.Y[rows], w) - problem.metric.quad(w, rows)
             np.add.at(G, labels[rows], g)
         return d.hess, G, d.f
-    if isinstance(est, NoiseModelDM) and result.noise is not None and not result.noise.choice.startswith("wls:"):
+    if isinstance(est, NoiseModelDM) and result.noise is not None and fallback != "wls":
         return _noise_model_pass(problem.in_sensor_chart(), result, theta, labels, G, chunk)
     chart, W, L = _weights(problem, result, est)
     H, f = _quadratic_pass(chart, W, L, theta, labels, G, chunk)
