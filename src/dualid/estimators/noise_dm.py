@@ -123,9 +123,9 @@ class NoiseModelDM:
         if not noise.acceleration_share > 0:
             why = "given" if self.sigma_tau is not None else f"2 log-likelihood ratio {noise.likelihood_ratio:.3g}"
             choice = f"no acceleration noise ({why}): WLS"
-            return self._result(problem, done, theta, f, noise, run, theta_pilot, None, choice, t0)
+            return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, None, choice, t0)
         check = self._check(sample, theta, noise)
-        guard, why = reference_guard(sample, done(theta, {})[0], theta_pilot, "pilot"), None
+        guard, why = reference_guard(sensor, done(theta, {})[0], theta_pilot, f"pilot ({pilot})"), None
         if check is not None and check.rejected:
             why = (f"the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's beyond the noise "
                    f"model's prediction, standard error {check.standard_error:.2g})")
@@ -140,7 +140,8 @@ class NoiseModelDM:
             theta, info = self._solve(sensor, cons, start, wls)
             run["status"] = _status(info)
             f, choice = noise_model_objective(sensor, theta, S, wls.sigma_a, self.chunk), f"wls: {why}"
-        return self._result(problem, done, theta, f, noise, run, theta_pilot, check, choice, t0)
+        return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0,
+                            None if why else guard)
 
     def _inside(self, theta, cons):
         """θ, or (constrained, where θ is not strictly inside ``cons``) its central point: a start of the fit."""
@@ -171,12 +172,15 @@ class NoiseModelDM:
         return on_closure(feasible_set(sensor.parameters, self.constrained), R.T @ R, c, sensor.parameters.names,
                           enabled=self.constrained)
 
-    def _result(self, problem, done, theta, f, noise, run, theta_pilot, check, choice, t0):
+    def _result(self, problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0, guard=None):
+        """The result of θ (completed by ``done``); ``guard``: the metric guard of this θ against the pilot, when the
+        fit has it already."""
         theta, completed = done(theta, {})
         gaps = (np.nan,) * 3 if check is None else (check.excess, check.measured_gap, check.predicted_gap)
         record = NoiseRecord(noise.sigma_tau, noise.sigma_a, noise.torque_share, noise.acceleration_share,
                              "fixed" if self.sigma_tau is not None else "estimated", run["rounds"], np.nan, choice, *gaps)
-        guard = reference_guard(problem.in_sensor_chart(), theta, theta_pilot, f"pilot ({run['pilot']})")
+        if guard is None:
+            guard = reference_guard(sensor, theta, theta_pilot, f"pilot ({run['pilot']})")
         solver = "newton" if self.solver == "newton" else f"cvxpy-mm/{self.cvxpy_solver}"
         return IdentificationResult(self.name, theta, problem.parameters, f, run["status"], solver,
                                     time.perf_counter() - t0, run["iterations"], self.constrained,
