@@ -118,8 +118,7 @@ class NoiseModelDM:
             paper = self._inside(self._paper_optimum(sensor), cons)
             theta, noise, run = self._rounds(sensor, sample, cons, paper, theta_pilot)
             run.update(start=f"dm-paper (the fit from the {pilot} pilot failed)", pilot=pilot)
-        f = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk)
-        choice = "noise model"
+        f, choice = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk), "noise model"
         if not noise.acceleration_share > 0:
             why = "given" if self.sigma_tau is not None else f"2 log-likelihood ratio {noise.likelihood_ratio:.3g}"
             choice = f"no acceleration noise ({why}): WLS"

@@ -51,9 +51,9 @@ def fit_quadratic(
     info = {**(info or {}), "rank": gram_rank(stats.H)}
     if regularizer is None and not allow_unidentifiable:
         check_identifiable(problem, rank=info["rank"], what=f"{method} weighted regressor")
-    s = _chart(problem, stats, constrained, regularizer)
     if not constrained and regularizer is None:
         t0 = time.perf_counter()
+        s = _chart(problem, stats, constrained, regularizer)
         phi = np.linalg.lstsq(s[:, None] * stats.H * s[None, :], s * stats.g, rcond=None)[0]  # minimum-norm minimiser
         theta = s * phi  # (in scaled variables)
         return IdentificationResult(
@@ -69,6 +69,7 @@ def fit_quadratic(
         info.update({k: v for k, v in ipm.items() if k.startswith("projected_")})  # model.closure's completion
         status, used, iterations, solve_time = "optimal", "newton", ipm["iterations"], time.perf_counter() - t0
     else:
+        s = _chart(problem, stats, constrained, regularizer)
         cvx, phi = _cvxpy_problem(problem, stats, s, constrained, regularizer)
         theta_hat, status, used, iterations, solve_time = _solve_with_fallback(
             cvx, phi, s, stats, problem, method, constrained, solver, solver_options, regularizer, info, closure
