@@ -73,8 +73,7 @@ class NoiseModelDM:
     sigma_tau, sigma_a: fix the noise levels ((n, n), in the sensor chart: force² and acceleration² units) instead
     of estimating them; tol, max_iter: the interior point's (solver="newton"), or for solver="cvxpy" (majorize–minimize,
     ``solve_noise_model_cvxpy``, each step a conic problem for ``cvxpy_solver``: the reference, slow for large N) the
-    relative decrease of f that ends it and the number of conic solves.
-    """
+    relative decrease of f that ends it and the number of conic solves."""
 
     constrained: bool = True
     allow_unidentifiable: bool = False

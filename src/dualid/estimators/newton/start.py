@@ -104,20 +104,20 @@ def _frozen_metric_sums(problem, theta_c: np.ndarray, chunk: int) -> tuple[np.nd
     return H, g, 0
 
 
-def toward(cons: FeasibleSet, theta_c: np.ndarray, target: np.ndarray, label: str, value) -> tuple[np.ndarray, str]:
+def toward(cons: FeasibleSet, theta_c, target, label: str, value, f_c: float | None = None) -> tuple[np.ndarray, str]:
     """(θ, label): θ_c + β (target − θ_c), β ≤ 0.9 of the way to the boundary, halved while value (f, +inf outside
-    its domain) is infinite there; or the target with its blocks' eigenvalues lifted (it keeps the target's
-    well-determined directions, where the segment can stop far from it), whichever has the smaller f."""
+    its domain; f_c its value at θ_c if known) is infinite there; or the target with its blocks' eigenvalues lifted (it
+    keeps the target's well-determined directions, where the segment can stop far from it), whichever has smaller f."""
     d = target - theta_c
     beta = min(1.0, 0.9 * cons.max_step(theta_c, d))
-    line = theta_c
+    line, f_line = theta_c, f_c
     while beta > 1e-3:
-        if np.isfinite(value(theta_c + beta * d)):
-            line = theta_c + beta * d
+        if np.isfinite(f_beta := value(theta_c + beta * d)):
+            line, f_line = theta_c + beta * d, f_beta
             break
         beta *= 0.5
     lifted = central_point(target, cons)
-    f_line = value(line)
+    f_line = value(line) if f_line is None else f_line
     f_lifted = value(lifted) if cons.margin(lifted) > 0 else np.inf
     return (lifted, f"{label}→lifted") if f_lifted < f_line else (line, label)
 
@@ -147,11 +147,12 @@ def starting_point(problem, cons: FeasibleSet, chunk: int) -> tuple[np.ndarray, 
     for seed_name, seed in (("energy", _energy_ls), ("ols", _ols)):
         theta_seed = seed(problem, chunk)
         theta_c = central_point(theta_seed, cons)
-        if cons.margin(theta_c) <= 0 or not np.isfinite(objective_value(problem, theta_c, chunk)):
+        f_c = objective_value(problem, theta_c, chunk) if cons.margin(theta_c) > 0 else np.inf
+        if not np.isfinite(f_c):
             continue
         theta_f = frozen_metric_ls(problem, theta_c, chunk) if seed_name == "energy" else theta_seed
         target, label = (theta_f, f"{seed_name}→frozen-metric→central") if theta_f is not None else (theta_seed, f"{seed_name}→central")
-        return toward(cons, theta_c, target, label, lambda th: objective_value(problem, th, chunk))
+        return toward(cons, theta_c, target, label, lambda th: objective_value(problem, th, chunk), f_c)
     theta_c = central_point(_ols(problem, chunk), cons)
     # phase I: a small conic problem over the constraints and the samples where M_i(θ_c) is not ≻ 0
     samples = np.zeros(0, dtype=int)
