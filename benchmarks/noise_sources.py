@@ -175,7 +175,7 @@ def _second_starts(rs: list[dict]) -> dict:
     """How many fits were checked from second starts, how many of those found a lower objective (by > 1e-6 of it)."""
     x = [r["second_start"] for r in rs if r.get("second_start") is not None]
     return {"second_start_checked": len(x), "second_start_lower": sum(v < -1e-6 for v in x),
-            "second_start_min": min(x) if x else None} if x or any("second_start" in r for r in rs) else {}
+            "second_start_min": min(x) if x else None} if any("second_start" in r for r in rs) else {}
 
 
 def summarise(rows: list[dict], methods) -> dict:

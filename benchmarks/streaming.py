@@ -80,11 +80,13 @@ def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "--child":
         print(json.dumps(run_one(Path(sys.argv[2]), sys.argv[3], int(sys.argv[4]), sys.argv[5])), flush=True)
         return
+    from dualid.bench.runner import PROBLEMS
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=1_000_000)
     ap.add_argument("--methods", default="ols")
     ap.add_argument("--chunk", type=int, default=65536)
-    ap.add_argument("--system", choices=("crazyflie", "arm7"), default="crazyflie")
+    ap.add_argument("--system", choices=PROBLEMS, default="crazyflie")
     ap.add_argument("--out", type=Path, default=Path("benchmarks/streaming.md"))
     ap.add_argument("--force", action="store_true")
     args = ap.parse_args()
