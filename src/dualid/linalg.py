@@ -176,3 +176,12 @@ class SecantCorrection:
             self.A *= min(1.0, abs(float(s @ y_sharp)) / abs(sAs))
         r = y_sharp - self.A @ s
         self.A += (np.outer(r, v) + np.outer(v, r)) / vs - float(r @ s) * np.outer(v, v) / vs**2
+
+
+def triangular_factor(blocks, width: int) -> np.ndarray:
+    """R with RᵀR = Σ AᵀA over the row blocks A (each (m, width)): TSQR, R = qr([R; A]) block by block, so the
+    stacked matrix is never formed (memory O(block · width))."""
+    R = np.zeros((0, width))
+    for A in blocks:
+        R = np.linalg.qr(np.vstack([R, A]), mode="r")
+    return R

@@ -16,6 +16,7 @@ import numpy as np
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError
 from dualid.identifiability import Identifiability, identifiability
+from dualid.linalg import triangular_factor
 from dualid.model.base import Kind, Model
 from dualid.model.metric import AffineMetric
 from dualid.model.parameters import ParameterSpace
@@ -264,11 +265,8 @@ def identifiability_of(problem) -> Identifiability:
 @stacked
 def _scaled_factor(problem, scale: np.ndarray) -> np.ndarray:
     """R with RᵀR = AᵀA for the column-scaled stacked regressor A = [Y_i / scale] (TSQR over blocks of samples)."""
-    p = problem.p
-    R = np.zeros((0, p))
-    for block, rows, _ in sample_blocks(problem, CHECK_CHUNK):
-        R = np.linalg.qr(np.vstack([R, block.Y[rows].reshape(-1, p) / scale]), mode="r")
-    return R
+    blocks = (block.Y[rows].reshape(-1, problem.p) / scale for block, rows, _ in sample_blocks(problem, CHECK_CHUNK))
+    return triangular_factor(blocks, problem.p)
 
 
 def strided_rows(N: int, max_samples: int) -> slice:

@@ -45,7 +45,7 @@ from dualid.estimators.noise_model import (NoiseCheck, NoiseLevels, check_noise_
 from dualid.estimators.quadratic_newton import quadratic_objective, run_quadratic
 from dualid.estimators.result import IdentificationResult, NoiseRecord
 from dualid.identifiability import check_identifiable
-from dualid.linalg import NotPositiveDefinite
+from dualid.linalg import NotPositiveDefinite, triangular_factor
 from dualid.metric_guard import reference_guard
 from dualid.model.closure import ZERO_CURVATURE, on_closure
 from dualid.model.consistency import central_point, cvxpy_feasible_set, feasible_set, lifted_blocks
@@ -331,10 +331,9 @@ def _scaled(problem) -> tuple[np.ndarray, np.ndarray, float]:
     √mean τ_j² (``torque_scale``), stacked: the unit-free least squares of the pilot and the statistics of the closure,
     by a QR over blocks of samples of [Yw τw] (the singular values of Yw, without a copy of Y)."""
     s, p = np.sqrt(torque_scale(problem)), problem.p
-    R = np.zeros((0, p + 1))
-    for block, rows, _ in sample_blocks(problem, CHUNK_QR):
-        A = np.concatenate([block.Y[rows], block.tau[rows][:, :, None]], axis=2) / s[None, :, None]
-        R = np.linalg.qr(np.vstack([R, A.reshape(-1, p + 1)]), mode="r")
+    augmented = (np.concatenate([block.Y[rows], block.tau[rows][:, :, None]], axis=2) / s[:, None]  # [Y_i τ_i] / s
+                 for block, rows, _ in sample_blocks(problem, CHUNK_QR))
+    R = triangular_factor((A.reshape(-1, p + 1) for A in augmented), p + 1)
     return R[:, :p], R[:, p], float(np.sum(np.einsum("ij,ij->j", problem.tau, problem.tau) / s**2))
 
 
