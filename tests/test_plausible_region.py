@@ -4,7 +4,8 @@ Specifications: (1) on a noisy 4-DoF arm the masses the prior determines move to
 with the exact-prediction choice, and the divergence is never larger (the exact slice lies inside the
 region); (2) the ellipsoid constraint holds at the solution, checked with Σ_β⁻¹ computed here; (3) level
 → 0 keeps θ̂'s training predictions, level 0 is the exact-prediction choice; (4) exact error messages for bad levels;
-(5) the choice does not depend on the unit of a parameter.
+(5) the choice does not depend on the unit of a parameter; (6) it is the optimum of the same problem stated for
+cvxpy and solved by Clarabel (the SDP reference).
 """
 
 from __future__ import annotations
@@ -73,6 +74,41 @@ def test_masses_move_toward_the_prior_and_the_region_holds(noisy_arm):
     assert np.max(gap_exact) > np.log(10) > np.max(gap_region)  # 10× off the prior, then within a factor of 10
     # what it costs on the training data: a small fraction of the residual
     assert region.training_rmse_hat < region.training_rmse < 1.01 * region.training_rmse_hat
+
+
+@pytest.mark.parametrize("consistent", [True, False])
+def test_the_region_choice_is_the_sdp_optimum(noisy_arm, consistent):
+    import cvxpy as cp
+
+    from dualid.evaluation.plausible_newton import prior_divergence, prior_terms
+    from dualid.model.consistency import cvxpy_constraints
+
+    problem, theta_hat, prior, unc, _ = noisy_arm
+    if not consistent:  # the same β̂ (so the same region and optimum) from a θ̂ with a negative mass the data miss
+        null = np.linalg.svd(unc.base.C)[2][unc.base.rank:]
+        step = null.T @ np.linalg.lstsq(null.T, -np.eye(problem.parameters.p)[0], rcond=None)[0]
+        theta_hat = theta_hat + 10 * theta_hat[0] / max(abs(step[0]), 1e-300) * step
+        assert theta_hat[0] < 0 and np.allclose(unc.base.C @ theta_hat, unc.base.C @ noisy_arm[1])
+    region = plausible_in_region(problem, theta_hat, prior, unc, 0.95)
+    assert ("region as a constraint" if consistent else "θ̂ is not strictly feasible") in region.solver_chain
+    rigid, quad_idx, quad_w, _ = prior_terms(problem, prior)
+    theta = cp.Variable(problem.parameters.p)
+    R = 0.5 * cp.sum(cp.multiply(quad_w, cp.square(theta[quad_idx] - prior[quad_idx])))
+    for idx, V, _, logdet0, C0inv in rigid:
+        k, m, _ = V.shape
+        C = cp.reshape(V.reshape(k, m * m).T @ theta[idx], (m, m), order="C")
+        R = R - cp.log_det(0.5 * (C + C.T)) + logdet0 + cp.trace(C0inv @ C) - m
+    d = unc.base.C @ theta - unc.base.C @ theta_hat
+    S = np.linalg.inv(unc.covariance)
+    cons = [cp.quad_form(d, 0.5 * (S + S.T)) <= region.radius2, *cvxpy_constraints(theta, problem.parameters)]
+    reference = cp.Problem(cp.Minimize(R), cons)
+    reference.solve(solver="CLARABEL")
+    assert reference.status == "optimal"
+    assert region.divergence == pytest.approx(prior_divergence(problem, region.theta, prior))
+    rtol = 1e-6 if consistent else 1e-5  # the penalised sequence stops with the statistic within U_TOL of c²
+    assert region.divergence <= reference.value * (1 + rtol)  # the same optimum, not a worse point
+    assert reference.value <= region.divergence * (1 + 1e-6)
+    assert np.allclose(region.theta, theta.value, rtol=1e-3, atol=1e-6 * np.abs(prior).max())
 
 
 def _pendubot_problem(seed: int):

@@ -1,17 +1,20 @@
 """The confidence-region choice of plausible parameters by dualid's own interior point (no conic compiler).
 
 ``plausible_region`` states the problem: θ closest to the prior θ₀ whose base parameters β = Cθ lie in the fit's
-confidence ellipsoid (β − β̂)ᵀΣ_β⁻¹(β − β̂) ≤ c², physically consistent, within the bounds. Here it is solved as
-a sequence of smooth penalised problems
+confidence ellipsoid (β − β̂)ᵀΣ_β⁻¹(β − β̂) ≤ c², physically consistent, within the bounds. In the chart
 
-    θ(μ) = argmin_θ  R(θ) + μ‖u(θ)‖²   s.t. C_b(θ) ⪰ 0, bounds,      u(θ) = Λ^-½ Uᵀ D (Cθ − β̂) / c,
+    u(θ) = Λ^-½ Uᵀ D (Cθ − β̂) / c,    the region ‖u(θ)‖ ≤ 1,
 
 U Λ Uᵀ = D Σ_β D the covariance in the column-scaled chart (D = diag of the independent columns' norms), its
 eigenvalues floored at SIGMA_RTOL × the largest, so that ‖u‖² c² is the statistic and u is O(1) whatever the units
-and the noise level. μ is found by regula falsi in log μ until ‖u‖ ∈ [1 − U_TOL, 1]: the penalised optimum is
-then the constrained one (KKT with multiplier μ/c²). Each solve is ``newton.interior_point.run_interior_point``
-(primal–dual steps on the consistency LMIs and bound rows, affine-invariant, warm-started from the previous μ's
-solution); the first starts at the prior, which is strictly consistent, so no phase one is needed.
+and the noise level. The region is one more LMI, [[I, u], [uᵀ, 1]] ⪰ 0, beside the consistency LMIs and bound rows,
+and the problem is one run of ``newton.interior_point.run_interior_point`` (primal–dual, affine-invariant) from a
+point on the segment from θ̂ to the prior: strictly consistent when θ̂ is consistent (the prior is strictly), and
+inside the region. The region's multiplier is read off its dual block.
+
+When θ̂ is not consistent (an unconstrained fit), no such start exists, and the problem is solved as a sequence of
+penalised ones, θ(μ) = argmin_θ R(θ) + μ‖u(θ)‖² under the other constraints, from the prior: μ by regula falsi in
+log μ until ‖u‖ ∈ [1 − U_TOL, 1] (KKT with multiplier μ/c²), each solve warm-started from the previous μ's.
 
 The prior term R is scale-aware in every block:
 - rigid bodies: the log-det divergence of the pseudo-inertia to the prior's (invariant under units and body
@@ -35,8 +38,9 @@ import pinocchio as pin
 
 from dualid.errors import SolverError
 from dualid.estimators.newton.objective import Derivatives, NotPositiveDefinite
+from dualid.estimators.newton.interior_point import run_interior_point
 from dualid.estimators.quadratic_newton import run_quadratic
-from dualid.model.consistency import FeasibleSet, feasible_set, pullback_metric
+from dualid.model.consistency import LMI, FeasibleSet, feasible_set, pullback_metric
 from dualid.problem import IdentificationProblem
 
 SIGMA_RTOL = 1e-12  # Σ_β's eigenvalues floored at this × the largest (column-scaled chart)
@@ -212,10 +216,21 @@ def _region_map(beta_hat: np.ndarray, C: np.ndarray, covariance: np.ndarray, rad
     return W, b
 
 
+def _region_lmi(W: np.ndarray, b: np.ndarray) -> LMI:
+    """‖Wθ − b‖ ≤ 1 as the LMI [[I, u], [uᵀ, 1]] ⪰ 0 (its Schur complement is 1 − ‖u‖²), u = Wθ − b."""
+    r, p = W.shape
+    V = np.zeros((p, r + 1, r + 1))
+    V[:, :r, r] = V[:, r, :r] = W.T
+    C0 = np.eye(r + 1)
+    C0[:r, r] = C0[r, :r] = -b
+    return LMI("confidence region", np.arange(p), V, C0)
+
+
 def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: np.ndarray, C: np.ndarray,
-                 covariance: np.ndarray, radius2: float, scale: np.ndarray, s_ind: np.ndarray) -> dict:
+                 covariance: np.ndarray, radius2: float, scale: np.ndarray, s_ind: np.ndarray,
+                 theta_hat: np.ndarray) -> dict:
     """The module's problem. Returns {theta, mu, statistic, G, chain, solves, note}; raises SolverError when the
-    interior point fails at the first μ."""
+    penalised sequence's first interior point fails."""
     P = problem.parameters
     rigid, quad_idx, quad_w, G = prior_terms(problem, theta0)
     W, b = _region_map(beta_hat, C, covariance, radius2, s_ind)
@@ -225,18 +240,18 @@ def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: n
     cons = feasible_set(P)
     theta = _inside(np.asarray(theta0, dtype=float), cons)
 
-    def solve(mu: float, start: np.ndarray) -> np.ndarray:
-        def objective(th: np.ndarray, order: int) -> Derivatives:
-            f, g, H = prior_value(rigid, quad_idx, quad_w, th, theta0, order)
-            u = W @ th - b
-            f += mu * float(u @ u)
-            if not order:
-                return Derivatives(f)
-            H = H + 2.0 * mu * WtW
-            return Derivatives(f, g + 2.0 * mu * (W.T @ u), 0.5 * (H + H.T))
+    def objective(th: np.ndarray, order: int, mu: float) -> Derivatives:
+        f, g, H = prior_value(rigid, quad_idx, quad_w, th, theta0, order)
+        u = W @ th - b
+        f += mu * float(u @ u)
+        if not order:
+            return Derivatives(f)
+        H = H + 2.0 * mu * WtW
+        return Derivatives(f, g + 2.0 * mu * (W.T @ u), 0.5 * (H + H.T))
 
+    def solve(mu: float, start: np.ndarray) -> np.ndarray:
         try:
-            return run_quadratic(cons, start, TOL, 200, objective, 1.0)[0]
+            return run_quadratic(cons, start, TOL, 200, lambda t, order: objective(t, order, mu), 1.0)[0]
         except NotPositiveDefinite:  # a start outside the prior's domain (a body not strictly consistent)
             raise SolverError("plausible parameters: the start is not strictly consistent",
                               status="no_start") from None
@@ -248,6 +263,32 @@ def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: n
     if u_norm(theta) <= 1.0:  # the prior itself is in the region
         return {"theta": theta, "mu": 0.0, "statistic": u_norm(theta) ** 2 * radius2, "G": G,
                 "chain": "the prior is in the region", "solves": 0, "note": ""}
+    region = _region_lmi(W, b)
+    both = dataclasses.replace(cons, lmis=(*cons.lmis, region))
+    start = np.asarray(theta_hat, dtype=float) + 0.5 / u_norm(theta) * (theta - theta_hat)  # in the region, and
+    if both.margin(start) > 0:  # strictly consistent when θ̂ is consistent: one interior point with the region
+        try:
+            th, Z, _, info = run_interior_point(None, both, start, None, None, TOL, 200, 0, False,
+                                                objective=lambda t, order: objective(t, order, 0.0), f_scale=1.0)
+            mu = float(Z[-1][-1, -1])  # Z = μ v vᵀ with v = (−u, 1) at ‖u‖ = 1: the multiplier of μ‖u‖²
+            return {"theta": th, "mu": mu, "statistic": u_norm(th) ** 2 * radius2, "G": G, "note": "",
+                    "chain": f"interior point with the region as a constraint, {info['iterations']} iterations",
+                    "solves": 1}
+        except (SolverError, ArithmeticError, np.linalg.LinAlgError) as exc:
+            chain.append(f"interior point with the region as a constraint failed ({type(exc).__name__})")
+    else:
+        chain.append("θ̂ is not strictly feasible")
+    th, mu_best, solves, note = _penalised(solve, u_norm, theta, radius2, chain)
+    un = u_norm(th)
+    chain.append(f"interior point, {solves} solves, μ {mu_best:.3g}, statistic {un ** 2 * radius2:.3g}")
+    return {"theta": th, "mu": float(mu_best), "statistic": un ** 2 * radius2, "G": G, "chain": "; ".join(chain),
+            "solves": solves, "note": note}
+
+
+def _penalised(solve, u_norm, theta: np.ndarray, radius2: float,
+               chain: list[str]) -> tuple[np.ndarray, float, int, str]:
+    """(θ, μ, solves, note) of the penalised sequence from the prior ``theta`` (module docstring); ``solve(μ, start)``
+    is one interior point of R + μ‖u‖², ``u_norm(θ)`` = ‖u(θ)‖; a failure is appended to ``chain``."""
     # g(t) = log ‖u‖ at μ = e^t falls with t: bracket its root by ×10 steps, then regula falsi (Illinois)
     bracket: dict[str, tuple[float, float]] = {}  # "lo": (t, g > 0), "hi": (t, g ≤ 0)
     t, solves, best, last, side = 0.0, 0, None, theta, ""
@@ -286,7 +327,4 @@ def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: n
         best = (last, float(np.exp(t)), u_norm(last))
         note = (f"no strictly consistent θ inside the region was found (the data pin a body onto the consistency "
                 f"boundary): the written θ lies at {best[2] ** 2 * radius2:.3g} against the radius {radius2:.3g}")
-    th, mu_best, un = best
-    chain.append(f"interior point, {solves} solves, μ {mu_best:.3g}, statistic {un ** 2 * radius2:.3g}")
-    return {"theta": th, "mu": float(mu_best), "statistic": un ** 2 * radius2, "G": G, "chain": "; ".join(chain),
-            "solves": solves, "note": note}
+    return best[0], best[1], solves, note

@@ -131,7 +131,7 @@ def plausible_in_region(problem: IdentificationProblem, theta_hat, theta0, uncer
     s_ind = scale[list(base.independent)]
     Sigma = np.asarray(uncertainty.covariance, dtype=float)
     beta_hat = base.values(theta_hat)
-    out = solve_region(problem, theta0, beta_hat, base.C, Sigma, radius2, scale, s_ind)
+    out = solve_region(problem, theta0, beta_hat, base.C, Sigma, radius2, scale, s_ind, theta_hat)
     chain = [out["chain"]]
     try:
         theta_p, pulled = clear_boundary(out["theta"], theta_hat, P)  # the segment stays in the region
