@@ -25,7 +25,8 @@ from dualid.cli import app
 from dualid.evaluation.validation import RunValidation, Validation
 from dualid.report.document import Image, Report, Section, Table, Text, mean_cell
 from dualid.report.render import to_html, to_markdown
-from dualid.report.signals import axis_limits, signal_plot
+from dualid.report.signals import axis_limits
+from dualid.report.svgplot import ROW, TOP, signal_svg
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "dfki"
@@ -55,7 +56,7 @@ class Checker(HTMLParser):
             v = a.get(key)
             if v is not None and not (v.startswith("data:image/png;base64,") or v.startswith("#")):
                 self.external.append(f"{tag} {key}={v[:60]}")
-        if tag == "img":
+        if tag in ("img", "svg"):  # a PNG embedded, or an inline SVG figure
             self.images += 1
         if "id" in a:
             self.ids.append(a["id"])
@@ -113,8 +114,10 @@ def test_the_dfki_fit_writes_a_self_contained_html_report(dfki_fit):
     # every held-out run plotted (effort and acceleration), each figure embedded
     for run in ("trajectory_04", "trajectory_05"):
         for stem in ("effort", "acceleration"):
-            assert f"{stem}_{run}.png" in c.ids
-            assert (dfki_fit / f"{stem}_{run}.png").is_file()  # the Markdown's copy
+            assert f"{stem}_{run}.svg" in c.ids
+            svg = (dfki_fit / f"{stem}_{run}.svg").read_text()  # the Markdown's copy: the same markup, standalone
+            assert svg.startswith("<svg ") and svg in html and f"![{stem}_{run}.svg]({stem}_{run}.svg)" in \
+                (dfki_fit / "report.md").read_text()
     assert c.images == 6  # 2 runs × 2 signals + scores.png + friction.png
     # what the fit says physically: friction curves, each link against the URDF, the data's commit
     assert "friction.png" in c.ids and "Joint friction" in text and "Links against the URDF" in text
@@ -179,7 +182,7 @@ def test_validate_writes_the_html_report_with_one_run(dfki_fit, tmp_path):
     c = check_html(html)
     text = " ".join(" ".join(c.text).split())
     assert "τ RMSE [N m], 1 run" in text and " ± " not in text.split("Signals")[0]
-    assert c.images == 2 and "effort_trajectory_05.png" in c.ids
+    assert c.images == 2 and "effort_trajectory_05.svg" in c.ids
     record = yaml.safe_load((out / "validation.json").read_text())
     assert record["run"]["command"].startswith("dualid validate")
 
@@ -196,23 +199,27 @@ def _validation(label: str, tau_pred: np.ndarray, a_pred: np.ndarray | None = No
     return Validation(label, ("J1", "J2"), (run,))
 
 
+def _curves(svg: str, key: str) -> dict[str, np.ndarray]:
+    """title → y pixels of each polyline in the clipped group ``key`` (s<run><signal><joint> signals, r… residuals)."""
+    group = re.search(rf'<g clip-path="url\(#{key}\)">(.*?)</g>', svg).group(1)
+    return {title: np.array([float(p.split(",")[1]) for p in points.split()])
+            for points, title in re.findall(r'points="([^"]*)"><title>([^<]*)</title>', group)}
+
+
 def test_each_joint_has_its_own_legend_with_its_rmse():
     # regression: the old plot put one legend under the last panel, so the RMSE it showed per method was
     # the last joint's, read as if overall
     t = np.linspace(0.0, 1.0, 50)
     tau = np.stack([np.sin(2 * np.pi * t), 0.5 * np.cos(2 * np.pi * t)], axis=1)
     vals = {"ols": _validation("ols", tau + [0.1, 0.02]), "dm": _validation("dm", tau + [0.3, 0.04])}
-    sf = signal_plot(vals, 0, "tau")
-    axes = sf.figure.axes
-    assert len(axes) == 4  # per joint: the signals and their residuals
-    for j, ax in enumerate(axes[1::2]):  # the residual panel carries the joint's legend
-        np.testing.assert_allclose(ax.lines[0].get_ydata(), [0.1, 0.02][j])  # ols's residual
-        legend = ax.get_legend()
-        assert legend is not None, f"joint {j} has no legend"
-        texts = [t.get_text() for t in legend.get_texts()]
-        expected = {"ols": [0.1, 0.02][j], "dm": [0.3, 0.04][j]}
-        for label, rmse in expected.items():
-            assert f"{label}: RMSE {rmse:.3g} N m" in texts, texts
+    sf = signal_svg(vals, 0, "tau")
+    legends = re.split(r'<text x="\d+" y="\d+">J2</text>', sf.svg)
+    assert len(legends) == 2  # the legend of J2 follows J1's
+    for j, legend in enumerate(legends):
+        entries = re.findall(r'<text class="tick" x="\d+" y="\d+">([^<]*RMSE[^<]*)</text>', legend)
+        assert entries == [f"ols: RMSE {[0.1, 0.02][j]:.3g} N m", f"dm: RMSE {[0.3, 0.04][j]:.3g} N m"], entries
+        residuals = _curves(sf.svg, f"r0tau{j}")  # ols's residual is the constant offset: a flat line
+        assert np.ptp(residuals[entries[0]]) < 1e-9 and np.ptp(_curves(sf.svg, f"s0tau{j}")["measured"]) > 10
     assert not sf.clipped
 
 
@@ -222,11 +229,9 @@ def test_axes_follow_the_measured_signal_and_the_caption_says_what_is_clipped():
     wild = 10 * tau.copy()
     wild[10, 0] = 1e4  # a forward-dynamics blow-up on joint J1
     vals = {"ols": _validation("ols", tau, a_pred=wild)}
-    sf = signal_plot(vals, 0, "a")
-    lo, hi = sf.figure.axes[0].get_ylim()
-    measured = 10 * tau[:, 0]
-    span = np.ptp(measured)
-    assert measured.min() - 1.1 * span <= lo <= measured.min() and measured.max() <= hi <= measured.max() + 1.1 * span
+    sf = signal_svg(vals, 0, "a")
+    measured = _curves(sf.svg, "s0a0")["differentiated (measured q)"]
+    assert TOP + 0.04 * (ROW - TOP) < measured.min() and measured.max() < ROW - 0.04 * (ROW - TOP)  # the frame
     assert sf.clipped == ("ols (J1)",)
     assert "clipped" in sf.caption and "ols (J1)" in sf.caption
     # predictions near the measurement widen the axes instead of being clipped
@@ -276,24 +281,19 @@ def test_score_tables_of_many_joints_are_split():
     assert tables[1].rows == (("ols", "7.000", "8.000"),)
 
 
-def test_the_interactive_svg_names_each_curve_with_its_joint_rmse_and_keeps_the_measurement_in_frame():
-    from dualid.report.svgplot import BOTTOM, TOP, H, signal_svg
-
+def test_the_svg_names_each_curve_with_its_joint_rmse_and_keeps_the_measurement_in_frame():
     t = np.linspace(0.0, 1.0, 50)
     tau = np.stack([np.sin(2 * np.pi * t), 0.5 * np.cos(2 * np.pi * t)], axis=1)
     wild = tau.copy()
     wild[5, 1] = 1e4
     vals = {"ols": _validation("ols", tau + [0.1, 0.02]), "dm&co": _validation("dm&co", wild)}
-    svg = signal_svg(vals, 0, "tau")
+    svg = signal_svg(vals, 0, "tau").svg
     check_html(f"<!DOCTYPE html><html><body>{svg}</body></html>")
     assert "<title>ols: RMSE 0.1 N m</title>" in svg and "<title>ols: RMSE 0.02 N m</title>" in svg
     assert "<title>dm&amp;co: RMSE 0 N m</title>" in svg  # labels escaped
-    panels = re.findall(r'<g transform="translate\(0 (\d+)\)">(.*?)</g></g>', svg)
-    assert len(panels) == 2
-    for _, body in panels:
-        measured = re.search(r'<polyline stroke="#000000" points="([^"]+)"', body).group(1)
-        y = np.array([float(p.split(",")[1]) for p in measured.split()])
-        assert TOP <= y.min() and y.max() <= H - BOTTOM  # the axes follow the measured signal
+    for j in range(2):
+        y = _curves(svg, f"s0tau{j}")["measured"]
+        assert TOP + ROW * j <= y.min() and y.max() <= ROW * (j + 1)  # the axes follow the measured signal
 
 
 def test_the_git_commit_is_dualids_own_or_none(tmp_path):

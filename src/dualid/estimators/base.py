@@ -147,7 +147,7 @@ def solve_cvxpy(problem, variable, solver: str, solver_options: dict | None, wha
         try:
             with solver_stdout() as printed:
                 problem.solve(solver=solver, **options)
-        except cp.error.SolverError as exc:
+        except (cp.error.SolverError, cp.error.DCPError) as exc:  # DCPError: rounding broke convexity (huge data)
             raise SolverError(f"{what}: {solver} failed: {exc}", status="solver_error") from exc
     for line in dict.fromkeys(printed):  # recorded by the caller's captured_warnings (solver_warnings)
         warnings.warn(f"{solver}: {line}", SolverOutputWarning, stacklevel=2)

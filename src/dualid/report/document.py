@@ -56,8 +56,8 @@ class Table:
 
 @dataclass(frozen=True, eq=False)
 class Image:
-    """A figure rendered to PNG; ``name`` is the file the Markdown links (written beside it); ``svg``: an
-    optional interactive version of the same plot (inline SVG markup, escaped) shown by the HTML."""
+    """A figure: ``name`` is the file the Markdown links (written beside it), holding ``png`` (a PNG) or, when that
+    is empty, ``svg`` (self-contained SVG markup, escaped), which the HTML then shows inline."""
 
     kind: ClassVar[str] = "image"
     name: str

@@ -34,7 +34,7 @@ from dualid.report.metadata import metadata_items
 from dualid.report.model_figures import body_section, friction_section
 from dualid.report.model_files import ModelFiles, model_files_section, plausible_section
 from dualid.report.render import table_markdown
-from dualid.report.signals import score_bars, signal_plot
+from dualid.report.signals import score_bars
 from dualid.report.svgplot import signal_svg
 from dualid.robot.fit import FitOutcome
 
@@ -261,9 +261,8 @@ def signal_images(validations: dict[str, Validation]) -> list[Image]:
     first = next(iter(validations.values()))
     for i, r in enumerate(first.runs):
         for signal, stem in (("tau", "effort"), ("a", "acceleration")):
-            sf = signal_plot(validations, i, signal)
-            images.append(Image(f"{stem}_{slug(r.run)}.png", png(sf.figure), sf.caption,
-                                svg=signal_svg(validations, i, signal)))
+            sf = signal_svg(validations, i, signal)
+            images.append(Image(f"{stem}_{slug(r.run)}.svg", b"", sf.caption, svg=sf.svg))
     return images
 
 

@@ -9,7 +9,7 @@ from matplotlib.figure import Figure
 from dualid.model.consistency import body_properties
 from dualid.report.document import Image, Section, Table, Text
 from dualid.report.figures import new_figure
-from dualid.report.signals import decimate, style
+from dualid.report.signals import style
 from dualid.robot.fit import FitOutcome
 
 BODY_NOTE = ("A link's mass, centre of mass and inertia are set by the data only in the combinations listed under "

@@ -1,6 +1,6 @@
-"""The two renderings of a ``document.Report``: Markdown (figures linked as PNG files written beside
+"""The two renderings of a ``document.Report``: Markdown (figures linked as PNG or SVG files written beside
 it) and one self-contained HTML file (jinja2 template ``templates/report.html.j2``, figures embedded as
-base64 PNG, inline CSS, no script and no external resource)."""
+base64 PNG or inline SVG, inline CSS, no script and no external resource)."""
 
 from __future__ import annotations
 
@@ -57,10 +57,10 @@ def to_html(report: Report) -> str:
 
 
 def write_report(report: Report, out: Path, written: dict[str, Path]) -> None:
-    """report.md with its PNGs beside it, and report.html (the same report, figures embedded), in ``out``
+    """report.md with its figures beside it, and report.html (the same report, figures embedded), in ``out``
     (a folder the output-directory policy of ``report.outdir`` handed out); ``written`` gains their paths."""
     for image in report.images:
-        (out / image.name).write_bytes(image.png)
+        (out / image.name).write_bytes(image.png or image.svg.encode())
         written[image.name] = out / image.name
     (out / "report.md").write_text(to_markdown(report))
     (out / "report.html").write_text(to_html(report))

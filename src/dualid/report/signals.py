@@ -1,17 +1,13 @@
-"""Figures of a validation: measured vs predicted signals per run and joint beside their residuals, and
-per-joint score bars.
+"""What the figures of a validation share: the signals' names and units, the curves' colours and styles, the axes
+of a signal panel and of its residuals; and the per-joint score bars.
 
-Axes follow the measured signal: each panel's y-range is the measured range, widened to show
-predictions that stay near it (at most one measured span on either side) and clipped beyond,
-so a wild prediction (e.g. 1e4 rad/s² forward dynamics of a nearly singular M̂) does not flatten the
-measurement into a line; ``clipped`` names the curves that left the axes, for the caption.
-Every joint has its own legend with the RMSE of that joint on that run. Curves are decimated to at most
-MAX_POINTS points (the PNGs are ~900 px wide) and the figures are small, so drawing stays cheap.
+Axes follow the measured signal: each panel's y-range is the measured range, widened to show predictions that stay
+near it (at most one measured span on either side) and clipped beyond, so a wild prediction (e.g. 1e4 rad/s²
+forward dynamics of a nearly singular M̂) does not flatten the measurement into a line. The signal figures
+themselves are ``report.svgplot``'s.
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -73,81 +69,7 @@ def axis_limits(measured: np.ndarray, predicted: list[np.ndarray]) -> tuple[floa
     return lo - pad, hi + pad
 
 
-def _pred(val: Validation, run: int, signal: str):
-    r = val.runs[run]
-    return r.tau_pred if signal == "tau" else r.a_pred
-
-
-@dataclass(frozen=True, eq=False)
-class SignalFigure:
-    figure: Figure
-    run: str
-    signal: str  # "tau" or "a"
-    clipped: tuple[str, ...]  # "label (joint)" of the predictions that left the axes
-
-    @property
-    def caption(self) -> str:
-        stem, _, _, what = SIGNALS[self.signal]
-        text = f"Held-out run {self.run}, {what}; the legend of each joint gives its RMSE on this run."
-        if self.clipped:
-            text += (" The axes follow the measured signal; predictions clipped (they leave the axes): "
-                     + ", ".join(self.clipped) + ".")
-        return text
-
-
-def signal_plot(validations: dict[str, Validation], run: int, signal: str = "tau") -> SignalFigure:
-    """Measured vs predicted effort ("tau") or acceleration ("a") on held-out run ``run``: one row per joint,
-    left the signals, right the residuals (predicted − measured) in the same colours, with the joint's legend
-    (label and that joint's RMSE on this run)."""
-    first = next(iter(validations.values()))
-    coords = first.coordinates
-    meas_run = first.runs[run]
-    stem, _, measured_label, what = SIGNALS[signal]
-    fig, axes = new_figure(len(coords), 2, figsize=(11, 1.9 * len(coords) + 0.5), sharex=True,
-                           gridspec_kw={"width_ratios": (1, 1)})
-    measured = meas_run.tau if signal == "tau" else meas_run.a
-    t, meas = decimate(np.asarray(meas_run.t), measured)
-    clipped: list[str] = []
-    for j, (ax, res) in enumerate(axes):
-        unit = unit_of(signal, coords[j])
-        ax.plot(t, meas[:, j], color="black", lw=1.0, label=measured_label)
-        preds, lines, residuals = [], [], []
-        for k, (label, val) in enumerate(validations.items()):
-            pred = _pred(val, run, signal)
-            if pred is None:
-                continue
-            r = val.runs[run]
-            score = (r.tau_rmse if signal == "tau" else r.a_rmse)[j]
-            _, p = decimate(np.asarray(r.t), pred[:, j])
-            ax.plot(t, p, lw=0.8, alpha=0.9, **style(label, k))
-            line, = res.plot(t, p - meas[:, j], lw=0.8, alpha=0.9, **style(label, k))
-            residuals.append(p - meas[:, j])
-            lines.append((line, f"{label}: RMSE {score:.3g} {unit}"))
-            preds.append((label, pred[:, j]))
-        lo, hi = axis_limits(measured[:, j], [p for _, p in preds])
-        ax.set_ylim(lo, hi)
-        res.set_ylim(*_residual_limits(residuals, hi - lo))
-        clipped += [f"{label} ({coords[j]})" for label, p in preds
-                    if np.nanmin(p) < lo or np.nanmax(p) > hi or not np.isfinite(p).all()]
-        ax.set_ylabel(f"{coords[j]} [{unit}]", fontsize=8)
-        res.axhline(0.0, color="black", lw=0.6)
-        for a in (ax, res):
-            a.grid(alpha=0.3)
-            a.tick_params(labelsize=7)
-            a.locator_params(nbins=4)  # fewer tick labels: text is most of a figure's drawing time
-        res.legend([ln for ln, _ in lines], [text for _, text in lines], fontsize=7, loc="upper left",
-                   bbox_to_anchor=(1.01, 1.0), frameon=False, title=coords[j], title_fontsize=7)
-    axes[0, 0].set_title(f"{SIGNALS[signal][0]}: measured (black) and predicted", fontsize=8)
-    axes[0, 1].set_title("residual: predicted − measured", fontsize=8)
-    for a in axes[-1]:
-        a.set_xlabel("time [s]", fontsize=8)
-    fig.suptitle(f"held-out run {meas_run.run}: {what}", fontsize=9)
-    fig.subplots_adjust(left=0.07, right=0.8, top=0.9 if len(coords) > 1 else 0.82, bottom=0.12, wspace=0.25,
-                        hspace=0.25)
-    return SignalFigure(fig, meas_run.run, signal, tuple(clipped))
-
-
-def _residual_limits(residuals: list[np.ndarray], span: float) -> tuple[float, float]:
+def residual_limits(residuals: list[np.ndarray], span: float) -> tuple[float, float]:
     """Symmetric about 0, wide enough for 99.5 % of every residual sample, at most half the signal panel's span
     (a residual beyond it belongs to a prediction the signal panel clips too)."""
     r = np.abs(np.concatenate(residuals)) if residuals else np.empty(0)

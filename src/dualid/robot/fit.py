@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-import cvxpy as cp
 import numpy as np
 import pinocchio as pin
 
@@ -351,9 +350,9 @@ def _fit_robot(config: FitConfig, progress: Progress | None = None) -> FitOutcom
             est = estimator(method, theta0, config.prior.gamma, config.prior.per_equation,
                             dict(dict(config.solver).get(method, ())))
             result = est.fit(problem)
-        except (DualidError, ValueError, np.linalg.LinAlgError, cp.error.DCPError, cp.error.SolverError) as exc:
-            # recorded in the report (cvxpy's DCPError: e.g. data so large the problem loses convexity): one
-            # method's failure must not lose the others; anything else is a bug and propagates
+        except (DualidError, ValueError, np.linalg.LinAlgError) as exc:
+            # recorded in the report: one method's failure must not lose the others; anything else is a bug and
+            # propagates
             fits[method] = MethodFit(method, None, error=f"{type(exc).__name__}: {exc}")
             continue
         if method == "ols":
