@@ -165,7 +165,7 @@ def test_a_false_infeasibility_claim_is_refuted_by_the_interior_point(monkeypatc
         raise SolverError("ols fit: the problem is infeasible (CLARABEL status 'infeasible')", status="infeasible")
 
     monkeypatch.setattr(ls, "solve_cvxpy", claims_infeasible)
-    result = OLS().fit(problem)
+    result = OLS(solver="cvxpy").fit(problem)
     assert result.info["solver_chain"] == "CLARABEL claimed infeasible → newton optimal"
     assert result.solver == "newton" and result.status == "optimal" and result.info["fallback_used"] is True
     assert np.allclose(result.theta, expected.theta, rtol=1e-6, atol=1e-9)
@@ -173,7 +173,7 @@ def test_a_false_infeasibility_claim_is_refuted_by_the_interior_point(monkeypatc
         problem.Y, problem.tau, problem.metric, problem.v, problem.parameters.with_bounds(upper=np.full(9, -1.0)), "drag"
     )
     with pytest.raises(SolverError, match=r"^ols fit: the problem is infeasible \(CLARABEL status 'infeasible'\)$"):
-        OLS().fit(impossible)  # the interior point finds no start either: the claim stands
+        OLS(solver="cvxpy").fit(impossible)  # the interior point finds no start either: the claim stands
 
 
 def test_metric_that_cannot_be_positive_definite_is_a_metric_error():

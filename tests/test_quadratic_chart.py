@@ -16,7 +16,7 @@ import pytest
 from dualid.bench.corpus import cases
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.newton.objective import energy_statistics, statistics
-from dualid.estimators.quadratic_fit import signal_scale
+from dualid.estimators.quadratic_fit import fit_quadratic, signal_scale
 from dualid.estimators.quadratic_newton import fit_quadratic_newton
 from dualid.model.consistency import prior_blocks, pullback_metric
 
@@ -31,8 +31,9 @@ def units():
 
 def test_pullback_fit_with_the_ols_prior_in_units_1e6_is_solved_by_clarabel(units):
     problem = units["1e6"]
-    prior = make_estimator("ols", allow_unidentifiable=True).fit(problem).theta
-    result = make_estimator("pullback", theta0=prior, allow_unidentifiable=True).fit(problem)
+    prior = fit_quadratic(problem, statistics(problem), method="ols", constrained=True, solver="CLARABEL",  # not on
+                          solver_options=None, allow_unidentifiable=True).theta  # the closed set: a mass at the bound
+    result = make_estimator("pullback", theta0=prior, allow_unidentifiable=True, options={"solver": "cvxpy"}).fit(problem)
     assert result.status == "optimal" and result.solver == "CLARABEL", result.info["solver_chain"]
     assert result.info["solver_chain"].startswith("CLARABEL optimal (certified by newton: ")
     assert result.info["fallback_used"] is False
@@ -44,18 +45,22 @@ def test_energy_fit_in_units_1e_minus_6_does_not_fail_and_matches_units_1e6(unit
     in both units. It ends optimal_inaccurate, truthfully: this fit's infimum is not attained. With the first link's
     mass bounded, j0.m ≤ M, the optimum sits on the bound and f* falls as M grows (dualid's interior point on the
     bounded problem: 264.612 at M = 10, 264.561 at M = 100); the chain says so before that interior point takes over."""
-    results = {f: make_estimator("energy", allow_unidentifiable=True).fit(p) for f, p in units.items()}
+    results = {f: make_estimator("energy", allow_unidentifiable=True, options={"solver": "cvxpy"}).fit(p) for f, p in units.items()}
     for f, r in results.items():
         assert "CLARABEL failed" not in r.info["solver_chain"], (f, r.info["solver_chain"])
         assert r.info["solver_chain"] == "CLARABEL returned optimal_inaccurate → newton optimal", f
         assert r.status == "optimal" and r.solver == "newton"
     assert results["1e-6"].objective == pytest.approx(results["1e6"].objective, rel=1e-8)
+    default = {f: make_estimator("energy", allow_unidentifiable=True).fit(p) for f, p in units.items()}  # the Newton
+    assert all(r.info["solver_chain"] == "newton optimal" for r in default.values())  # fit on the closed set
+    assert default["1e-6"].objective == pytest.approx(default["1e6"].objective, rel=1e-8)
+    assert default["1e-6"].objective <= results["1e-6"].objective * (1 + 1e-9)
     problem = units["1e-6"]
     stats = energy_statistics(problem)
     bounded = {}
     for M in (10.0, 100.0):
         theta, _ = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters.with_bounds(upper={"j0.m": M}))
-        assert theta[problem.parameters.names.index("j0.m")] == pytest.approx(M, rel=1e-5)  # on the bound
+        assert theta[problem.parameters.names.index("j0.m")] == pytest.approx(M, rel=1e-4)  # at the bound
         bounded[M] = stats.objective(problem, theta)
     assert bounded[100.0] < bounded[10.0] * (1 - 1e-4)
     assert results["1e-6"].objective < bounded[100.0]
@@ -110,6 +115,7 @@ def test_crazyflie_pullback_fit_in_units_1e3_is_solved_by_clarabel():
     from dualid.bench.corpus import cad_prior
 
     problem, theta_true = CASES["crazyflie, units 1e3 on q1, 5 %"].build()[:2]
-    result = make_estimator("pullback", theta0=cad_prior(theta_true, 0), allow_unidentifiable=True).fit(problem)
+    result = make_estimator("pullback", theta0=cad_prior(theta_true, 0), allow_unidentifiable=True,
+                            options={"solver": "cvxpy"}).fit(problem)
     assert result.info["solver_chain"].startswith("CLARABEL optimal (certified by newton: "), result.info["solver_chain"]
     assert result.status == "optimal" and result.solver == "CLARABEL"

@@ -1,5 +1,6 @@
-"""Constrained and regularized least squares by dualid's own interior-point method, and its use as the recorded
-fallback when Clarabel fails or stops at optimal_inaccurate (thin-rod arms: pseudo-inertias near singular)."""
+"""Constrained and regularized least squares by dualid's own interior-point method (the default), Clarabel as its
+recorded fallback, and the interior point as the fallback of the conic reference (solver="cvxpy") when Clarabel fails
+or stops at optimal_inaccurate (thin-rod arms: pseudo-inertias near singular)."""
 
 from __future__ import annotations
 
@@ -8,9 +9,10 @@ import warnings
 import numpy as np
 import pytest
 
-from dualid import OLS, WLS, RegularizedWLS
+from dualid import OLS, WLS, EnergyLS, RegularizedWLS
 from dualid.data import Trajectory
 from dualid.estimators.newton.objective import statistics
+from dualid.estimators.quadratic_fit import fit_quadratic
 from dualid.estimators.quadratic_newton import fit_quadratic_newton
 from dualid.model import RigidBodyModel
 from dualid.model.consistency import regularizer_value
@@ -44,33 +46,35 @@ def arm7():
 
 @pytest.mark.parametrize("which", ["arm3", "arm7"])
 def test_constrained_ols_on_thin_rod_arms_is_optimal(which, request):
-    """Clarabel alone may stop at optimal_inaccurate on these arms (it does on arm7); the fit is then
-    solved by the interior-point method, says so, and agrees with SCS (a different algorithm); no raw
-    warning escapes."""
+    """Pseudo-inertias near singular: the fit is optimal, consistent, agrees with SCS (a different algorithm) and no
+    raw warning escapes."""
     _, problem = request.getfixturevalue(which)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        result = OLS(allow_unidentifiable=True).fit(problem)
-    assert result.status == "optimal" and result.is_consistent
-    if result.solver == "newton":
-        assert result.info["fallback_used"] is True
-        assert result.info["solver_chain"] == "CLARABEL returned optimal_inaccurate → newton optimal"
-        assert "Solution may be inaccurate" in result.info["solver_warnings"]
-    else:
-        assert result.info["solver_chain"].startswith("CLARABEL optimal (certified by newton: ")
-        assert result.info["fallback_used"] is False
-    scs = OLS(solver="cvxpy", cvxpy_solver="SCS", solver_options={"eps": 1e-10, "max_iters": 100_000}, allow_unidentifiable=True).fit(problem)
+        result = OLS(allow_unidentifiable=True, solver="newton").fit(problem)
+    assert result.status == "optimal" and result.is_consistent and result.solver == "newton"
+    scs = fit_quadratic(problem, statistics(problem), method="ols", constrained=True, solver="SCS",
+                        solver_options={"eps": 1e-10, "max_iters": 100_000}, allow_unidentifiable=True)
     assert result.objective <= scs.objective * (1 + 1e-7)
     assert result.objective == pytest.approx(scs.objective, rel=1e-5)
 
 
 def test_a_failed_clarabel_fit_falls_back_to_newton_and_says_so(arm3):
     _, problem = arm3
-    result = OLS(allow_unidentifiable=True, solver_options={"max_iter": 3}).fit(problem)
+    result = EnergyLS(allow_unidentifiable=True, solver="cvxpy", solver_options={"max_iter": 3}).fit(problem)
     assert (result.status, result.solver, result.info["fallback_used"]) == ("optimal", "newton", True)
     assert result.info["solver_chain"].startswith("CLARABEL failed (user_limit)")
     assert result.info["solver_chain"].endswith("→ newton optimal")
-    reference = OLS(allow_unidentifiable=True).fit(problem)
+    reference = EnergyLS(allow_unidentifiable=True).fit(problem)
+    assert result.objective == pytest.approx(reference.objective, rel=1e-6)
+
+
+def test_a_failed_newton_fit_falls_back_to_clarabel_and_says_so(arm3):
+    _, problem = arm3
+    result = EnergyLS(allow_unidentifiable=True, solver_options={"max_iter": 3}).fit(problem)
+    assert (result.status, result.info["fallback_used"]) == ("optimal", True)
+    assert result.info["solver_chain"].startswith("newton failed (max_iterations) → CLARABEL ")
+    reference = EnergyLS(allow_unidentifiable=True).fit(problem)
     assert result.objective == pytest.approx(reference.objective, rel=1e-6)
 
 
@@ -89,7 +93,7 @@ def test_regularized_fit_agrees_with_cvxpy_where_clarabel_is_optimal(arm3, kind)
     theta, info = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, regularizer=(kind, theta0, gamma))
     value = stats.objective(problem, theta) + gamma * regularizer_value(kind, problem.parameters, theta, theta0)
     ref = RegularizedWLS(theta0=theta0, gamma=gamma, per_equation=False, regularizer=kind, covariance=np.eye(problem.n),
-                         allow_unidentifiable=True).fit(problem)
+                         allow_unidentifiable=True, solver="cvxpy").fit(problem)
     assert ref.status == "optimal" and ref.solver == "CLARABEL"
     assert value == pytest.approx(ref.objective, rel=1e-7)
     assert info["iterations"] <= 30

@@ -146,17 +146,19 @@ def test_wls_on_an_unattained_infimum_is_fitted_on_the_closed_set():
 
     problem, names = _problem()
     wls = WLS(allow_unidentifiable=True).fit(problem)
-    assert wls.solver == "newton"
-    assert wls.info["solver_chain"] == ("newton on the closed set (model.closure): the infimum is approached only as "
-                                        "an unseen parameter grows, where CLARABEL stops by rounding, so CLARABEL was "
-                                        "not run")
+    assert wls.solver == "newton" and wls.info["solver_chain"] == "newton on the closed set (model.closure)"
+    reference = WLS(allow_unidentifiable=True, solver="cvxpy").fit(problem)  # the same, and the chain says why
+    assert reference.info["solver_chain"] == (
+        "newton on the closed set (model.closure): the infimum is approached only as an unseen parameter grows, where "
+        "CLARABEL stops by rounding, so CLARABEL was not run")
+    assert np.array_equal(reference.theta, wls.theta)
     assert list(wls.not_determined()) == ["j0.m"]
     assert abs(wls.theta[names.index("j0.Izz")]) < 1e-7 and wls.theta[names.index("j0.mc_x")] == pytest.approx(B)
 
 
 def test_wls_keeps_its_cvxpy_solver_where_the_infimum_is_attained():
     """The same data with the mass bounded (j0.m ≤ 10 kg): nothing is projected, the minimum is attained at the
-    bound, and WLS is Clarabel's (certified by dualid's interior point) as before."""
+    bound, and WLS with solver="cvxpy" is Clarabel's (certified by dualid's interior point), the default's too."""
     from dataclasses import replace
 
     from dualid import WLS
@@ -167,7 +169,9 @@ def test_wls_keeps_its_cvxpy_solver_where_the_infimum_is_attained():
     hi[names.index("j0.m")] = 10.0
     lo = np.asarray(P.lower if P.lower is not None else [-np.inf] * problem.p, dtype=float)
     bounded = replace(problem, parameters=P.with_bounds(lo, hi))
-    wls = WLS(allow_unidentifiable=True).fit(bounded)
+    wls = WLS(allow_unidentifiable=True, solver="cvxpy").fit(bounded)
     assert wls.info["solver_chain"].startswith("CLARABEL optimal")
+    default = WLS(allow_unidentifiable=True).fit(bounded)
+    assert default.info["solver_chain"] == "newton optimal" and default.objective <= wls.objective * (1 + 1e-9)
     assert "projected_parameters" not in wls.info
     assert wls.theta[names.index("j0.m")] == pytest.approx(10.0, rel=1e-6)

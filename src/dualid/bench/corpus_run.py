@@ -1,7 +1,7 @@
 """Run every method of the method table, with each solver where there is a choice, on one corpus problem.
 
 Runs per problem (``fits``):
-- ols, wls, energy: the library default (Clarabel, dualid's interior point as recorded fallback);
+- ols, wls, energy: the library default (dualid's interior point, Clarabel as recorded fallback);
 - logdet, pullback: with a CAD-like prior, and with a prior on the consistency boundary (the constrained
   OLS fit), the latter also with the prior floor off (``prior_floor=0``: the behaviour before the lift);
 - dm: dualid's interior point (its only solver);
@@ -9,9 +9,9 @@ Runs per problem (``fits``):
 
 The reference of each run (``ref_objective``, ``rel_gap`` = (f − f_ref)/|f_ref|, ``pred_diff`` = ‖Y(θ − θ_ref)‖/‖Yθ_ref‖):
 dm-paper: the SDP (Clarabel) when it is optimal; dm: its own objective (its noise levels are estimated from the data);
-quadratic and regularized fits: dualid's interior-point method run directly on the same sufficient statistics
-(``quadratic_newton``; where it fails, SCS to 1e-9 when it says optimal, else SCS's end point polished by the interior
-point), or the fit itself if lower.
+quadratic and regularized fits: the same estimator with solver="cvxpy" (Clarabel, certified or polished by the interior
+point) when it ends optimal; else SCS to 1e-9 when it says optimal, else SCS's end point polished by the interior point
+(``quadratic_newton`` on the same sufficient statistics); or the fit itself if lower.
 Failures are rows, never dropped; raw warnings reaching the caller are counted.
 """
 
@@ -22,6 +22,8 @@ import time
 import warnings
 
 import numpy as np
+
+from dualid.errors import SolverError
 
 SDP_MAX_N = 1000
 SCS_TIGHT = {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 20_000}
@@ -55,7 +57,7 @@ def _quadratic_reference(est, problem, start=None):
         stats = statistics(problem)
     elif isinstance(est, EnergyLS):
         stats = energy_statistics(problem)
-    elif isinstance(est, (WLS, RegularizedWLS)):  # WLS (closed_set): its Σ̂ and fit on the closed set, as WLS.fit
+    elif isinstance(est, (WLS, RegularizedWLS)):  # Σ̂ from OLS on the closed set (covariance_weight); WLS too
         stats = statistics(problem, covariance_weight(problem, None, est)[0])
         if isinstance(est, RegularizedWLS):
             th0 = lift_prior(problem.parameters, np.asarray(est.theta0), float(est.prior_floor))[0]
@@ -63,7 +65,7 @@ def _quadratic_reference(est, problem, start=None):
     else:
         return None, None
     theta, _ = fit_quadratic_newton(stats.H, stats.g, stats.c, problem.parameters, regularizer=reg, start=start,
-                                    closure=est.closed_set)
+                                    closure=isinstance(est, (WLS, EnergyLS)))
     f = stats.objective(problem, theta)
     if reg is not None:
         f += reg[2] * regularizer_value(reg[0], problem.parameters, theta, reg[1])
@@ -94,15 +96,17 @@ def fits(problem, theta_true, sdp: bool = True, prior_seed: int = 0, sdp_max_n: 
     def quad(method, variant, est):
         r, row = _record(est, problem)
         row.update(method=method, variant=variant, solver_choice="default")
-        try:
-            f_ref, th_ref = _quadratic_reference(est, problem)
-            row["reference"] = "newton"
+        same = {}  # the fit's own weights: the reference's pilot OLS would give slightly different ones (another problem)
+        if r is not None and "covariance_matrix" in r.info and hasattr(est, "covariance"):
+            same["covariance"] = np.asarray(r.info["covariance_matrix"])
+        try:  # the conic reference (Clarabel, certified or polished by the interior point)
+            ref = dataclasses.replace(est, solver="cvxpy", **same).fit(problem)
+            if ref.status != "optimal":
+                raise SolverError(f"{ref.info.get('solver_chain', '')}: {ref.status}")
+            f_ref, th_ref, row["reference"] = float(ref.objective), np.asarray(ref.theta), "cvxpy"
         except Exception as exc:  # then SCS to a tight tolerance, if it is optimal
             f_ref, th_ref = None, None
             row["ref_error"] = f"{type(exc).__name__}: {exc}"[:200]
-            same = {}  # the fit's own weights: SCS's pilot OLS would give slightly different ones (another problem)
-            if r is not None and "covariance_matrix" in r.info and hasattr(est, "covariance"):
-                same["covariance"] = np.asarray(r.info["covariance_matrix"])
             scs, _ = _record(dataclasses.replace(est, solver="cvxpy", cvxpy_solver="SCS", solver_options=SCS_TIGHT, **same), problem)
             if scs is not None and scs.status == "optimal" and scs.solver == "SCS":
                 f_ref, th_ref, row["reference"] = float(scs.objective), np.asarray(scs.theta), "SCS"

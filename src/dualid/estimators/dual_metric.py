@@ -14,7 +14,6 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-import scipy.sparse as sp
 
 from dualid.errors import MetricError, SolverError, SolverOptionError
 from dualid.estimators.base import (
@@ -47,6 +46,7 @@ def schur_psd(B0: np.ndarray, B: np.ndarray, Y: np.ndarray, tau: np.ndarray, s_t
     A_i = B0_i + Σ_k θ_k B_ik (B0 (N, n, n), B (N, p, n, n)), r_i = Y_i θ − τ_i, θ = s_θ ⊙ φ, s_i = s_slack σ_i; stored
     sparse (row-major blocks). The SDP of ``dm-paper`` (A = M) and of each step of ``dm``'s conic reference."""
     import cvxpy as cp
+    import scipy.sparse as sp
 
     N, n, p = Y.shape
     m = n + 1

@@ -37,9 +37,9 @@ class _Common:
     values: arrays and option mappings are stored as tuples, so equality and hashing work."""
 
     constrained: bool = True  # physical-consistency constraints (pseudo-inertia ⪰ 0, drag ⪰ 0, bounds)
-    # "cvxpy": the conic problem by cvxpy_solver, certified or polished by dualid's interior point (quadratic_newton.
-    # polish), which also takes over when it fails; "newton": dualid's interior point alone
-    solver: str = "cvxpy"
+    # "newton": dualid's interior point (Clarabel when it fails, recorded in info); "cvxpy": the conic reference by
+    # cvxpy_solver, certified or polished by the interior point (quadratic_newton.polish), which takes over on failure
+    solver: str = "newton"
     solver_options: Mapping[str, Any] | None = None  # cvxpy_solver's options; for "newton": tol, max_iter
     allow_unidentifiable: bool = False  # accept one minimiser when the data do not determine θ
     cvxpy_solver: str = field(default="CLARABEL", kw_only=True)  # or "SCS"
@@ -47,8 +47,6 @@ class _Common:
     # estimator's own pilot or prior when it has one (WLS: its OLS fit; RegularizedWLS: θ₀)
     guard_reference: tuple | None = field(default=None, kw_only=True)
     guard_bound: float = field(default=DEFAULT_BOUND, kw_only=True)
-    # a class constant: fitted (with its Σ̂'s OLS) by quadratic_fit.closed_fit (WLS only; docs/estimators.md)
-    closed_set = False
 
     def __post_init__(self) -> None:
         name = type(self).__name__
@@ -90,8 +88,10 @@ class _Common:
 
 @dataclass(frozen=True)
 class OLS(_Common):
-    """Ordinary least squares: Σ ‖Y_i θ − τ_i‖²."""
+    """Ordinary least squares Σ ‖Y_i θ − τ_i‖². Default: the conic path, whose end point on unseen directions makes a
+    better-conditioned prior (logdet, pullback) and plausible-step input than the interior point's (docs/estimators.md)."""
 
+    solver: str = "cvxpy"
     name = "ols"
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
@@ -121,17 +121,11 @@ def _residual_products(problem, theta: np.ndarray) -> np.ndarray:
 
 
 def covariance_weight(problem: IdentificationProblem, covariance, reference: _Common) -> tuple[np.ndarray, dict]:
-    """W = Σ̂⁻¹ from a given covariance, or from the residuals of OLS under the same constraints (for an estimator
-    with ``closed_set``, that OLS fit as ``closed_fit``: on the closed feasible set where its infimum is not attained,
-    as the WLS fit that follows)."""
+    """W = Σ̂⁻¹ from a given covariance, or from the residuals of OLS under the same constraints, fitted as
+    ``closed_fit`` (on the closed feasible set where its infimum is not attained, as the WLS fit that follows)."""
     theta_ols = None
     if covariance is None:
-        if reference.closed_set:
-            theta_ols = closed_fit(problem, statistics(problem), np.eye(problem.n), "ols", reference).theta
-        else:
-            ols = OLS(reference.constrained, reference.solver, reference.solver_options,
-                      reference.allow_unidentifiable, cvxpy_solver=reference.cvxpy_solver)
-            theta_ols = ols.fit(problem).theta
+        theta_ols = closed_fit(problem, statistics(problem), np.eye(problem.n), "ols", reference).theta
         covariance = residual_covariance(problem, theta_ols)
         source = "ols residuals"
     else:
@@ -151,7 +145,6 @@ class WLS(_Common):
 
     covariance: np.ndarray | None = None  # (n, n) symmetric positive definite; None: from OLS residuals
     name = "wls"
-    closed_set = True  # its fit and its Σ̂'s OLS fit by quadratic_fit.closed_fit
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -167,12 +160,12 @@ class WLS(_Common):
 
 @dataclass(frozen=True)
 class EnergyLS(_Common):
-    """Energy (power) residual: Σ (v_iᵀ r_i)²; rank one per sample."""
+    """Energy (power) residual Σ (v_iᵀ r_i)², rank one per sample; on the closed set (``model.closure``), as WLS."""
 
     name = "energy"
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
-        return self._guarded(self._fit(problem, energy_statistics(problem)), problem)
+        return self._guarded(self._fit(problem, energy_statistics(problem), closure=self.constrained), problem)
 
 
 @dataclass(frozen=True)
@@ -238,19 +231,12 @@ class RegularizedWLS(_Common):
 
 
 REFERENCE_TOL = 1e-6  # relative: the guard compares eigenvalue ratios against [1/100, 100], far coarser than this …
-REFERENCE_MAX_ITER = 30  # … and a jam (rank-deficient arm7 at N = 100: stuck at a gap of 8.7e-7 after 100
-# iterations, 1e-6 not reached in 40) costs at most this many cheap iterations before cvxpy takes over
+REFERENCE_MAX_ITER = 30  # … and a jam (rank-deficient arm7 at N = 100) costs at most this many cheap iterations
 
 
 def wls_reference(problem: IdentificationProblem, constrained: bool) -> tuple[np.ndarray, str]:
-    """(θ_wls, how it was solved): OLS → Σ̂ of its residuals → WLS with W = Σ̂⁻¹, both by dualid's interior-point
-    method to REFERENCE_TOL; if that fails, the cvxpy WLS estimator (recorded in the second element). Raises
-    SolverError when both fail.
-
-    The WLS reference of the dual-metric fit's metric guard (``DualMetric.fit``): two p-sized quadratic problems on
-    the sufficient statistics, solved in milliseconds (through cvxpy they cost more than the Newton fit itself). The
-    guard compares generalised eigenvalues against [1/100, 100], so the same convex problem to 1e-6 relative will do.
-    """
+    """(θ_wls, how): OLS → Σ̂ of its residuals → WLS, W = Σ̂⁻¹, by the interior point to REFERENCE_TOL (the guard of
+    ``DualMetric.fit``), else by the WLS estimator (recorded in the second element); SolverError when both fail."""
     try:
         ols = statistics(problem)
         theta_ols, _ = fit_quadratic_newton(ols.H, ols.g, ols.c, problem.parameters, constrained=constrained,
@@ -262,7 +248,7 @@ def wls_reference(problem: IdentificationProblem, constrained: bool) -> tuple[np
         return theta, f"newton (tol {REFERENCE_TOL:g})"
     except (SolverError, np.linalg.LinAlgError) as exc:
         theta = WLS(constrained=constrained, allow_unidentifiable=True).fit(problem).theta
-        return theta, f"cvxpy (dualid's interior point failed: {str(exc)[:120]})"
+        return theta, f"the WLS estimator (the interior point to {REFERENCE_TOL:g} failed: {str(exc)[:120]})"
 
 
 REFERENCES = ("wls", "prior")  # the margin's θ_ref (``with_margin``)

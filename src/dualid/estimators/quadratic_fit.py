@@ -1,8 +1,8 @@
 """The quadratic fit engine of every least-squares estimator: one weighted problem, solved.
 
-``fit_quadratic``: min θᵀHθ − 2gᵀθ + c (+ γ R(θ)) from the sufficient statistics, by a cvxpy solver certified (or
-polished) by dualid's interior point, which also takes over when the solver fails (``quadratic_newton.polish``), or
-by that interior point alone (solver "newton").
+``fit_quadratic``: min θᵀHθ − 2gᵀθ + c (+ γ R(θ)) from the sufficient statistics, by dualid's interior point
+(solver "newton", the default; the conic reference takes over when it fails), or by a cvxpy solver certified (or
+polished) by that interior point, which also takes over when the solver fails (``quadratic_newton.polish``).
 ``fit_weighted``: argmin Σ r_iᵀ C_i⁻¹ r_i for a per-sample or constant covariance C_i, by dualid's Newton method or by
 whitening and ``fit_quadratic``. ``closed_fit``: a constant-weight fit that goes to the closed feasible set where
 its infimum is not attained (``model.closure``), as ``dm``'s pilot does.
@@ -47,7 +47,7 @@ def fit_quadratic(
     closure: bool = False,  # Newton polish / fallback on the closed feasible set (model.closure; dm)
 ) -> IdentificationResult:
     """min θᵀHθ − 2gᵀθ + c (+ γ R(θ)) under the problem's constraints. solver: "newton" (dualid's interior point
-    alone, cold start) or a cvxpy solver ("CLARABEL", "SCS": in scaled variables θ = s ⊙ φ, then certified)."""
+    from its cold start; Clarabel when it fails) or a cvxpy solver ("CLARABEL", "SCS": in scaled variables θ = s ⊙ φ, then certified)."""
     info = {**(info or {}), "rank": gram_rank(stats.H)}
     if regularizer is None and not allow_unidentifiable:
         check_identifiable(problem, rank=info["rank"], what=f"{method} weighted regressor")
@@ -60,20 +60,26 @@ def fit_quadratic(
             method, theta, problem.parameters, stats.objective(problem, theta), "optimal", "lstsq",
             time.perf_counter() - t0, None, False, info,
         )
-    if solver == "newton":  # dualid's interior point alone, from its cold start; options: tol, max_iter
+    failed = ""
+    if solver == "newton":  # dualid's interior point, from its cold start (options: tol, max_iter) …
         t0 = time.perf_counter()
-        theta_hat, ipm = quadratic_newton.fit_quadratic_newton(
-            stats.H, stats.g, stats.c, problem.parameters, constrained=constrained, regularizer=regularizer,
-            closure=closure, **dict(solver_options or {}))
-        info.update(solver_chain="newton optimal", fallback_used=False, relative_gap=ipm["relative_gap"])
-        info.update({k: v for k, v in ipm.items() if k.startswith("projected_")})  # model.closure's completion
-        status, used, iterations, solve_time = "optimal", "newton", ipm["iterations"], time.perf_counter() - t0
-    else:
+        try:
+            theta_hat, ipm = quadratic_newton.fit_quadratic_newton(
+                stats.H, stats.g, stats.c, problem.parameters, constrained=constrained, regularizer=regularizer,
+                closure=closure, **dict(solver_options or {}))
+            info.update(solver_chain="newton optimal", fallback_used=False, relative_gap=ipm["relative_gap"],
+                        **{k: v for k, v in ipm.items() if k.startswith("projected_")})  # model.closure's completion
+            status, used, iterations, solve_time = "optimal", "newton", ipm["iterations"], time.perf_counter() - t0
+        except SolverError as exc:  # … and when it fails, the conic reference, recorded in the result
+            failed, solver, solver_options = f"newton failed ({exc.status})", "CLARABEL", None
+    if solver != "newton":
         s = _chart(problem, stats, constrained, regularizer)
         cvx, phi = _cvxpy_problem(problem, stats, s, constrained, regularizer)
         theta_hat, status, used, iterations, solve_time = _solve_with_fallback(
             cvx, phi, s, stats, problem, method, constrained, solver, solver_options, regularizer, info, closure
         )
+        if failed:
+            info.update(solver_chain=f"{failed} → {info['solver_chain']}", fallback_used=True, fallback_reason=failed)
     value = stats.objective(problem, theta_hat)
     if regularizer is not None:
         kind, theta0, gamma = regularizer

@@ -17,22 +17,13 @@ pseudo-inertia LMIs, a line search that keeps every C_b ≻ 0); only f, ∇f, �
 Newton steps are affine-invariant, so the badly scaled cones that make Clarabel stop ("CLARABEL failed",
 ``optimal_inaccurate``) on arms with thin links or priors on the cone boundary cost nothing here.
 
-``polish``: the independent check of every cvxpy solution of a quadratic or regularized fit. Clarabel can stop with
-status ``optimal`` well above the optimum (1e-5 … 4e-2 on log-det / pullback fits whose prior is on the consistency
-boundary): its stopping test is relative to the size of the conic reformulation, not to f. So every cvxpy solution
-is polished by ``fit_quadratic_newton`` started from it (moved just inside the cones), whose stopping test is the
-duality gap plus the Newton decrement relative to f (tol 1e-9). Then
-- the polish is lower by more than ``TOL`` (relative): the polished θ is returned, the chain says by how much the
-  cvxpy solution was above;
-- otherwise the cvxpy solution is kept, certified by the polish (the measured gap is recorded);
-- the polish fails: the cvxpy status is kept only as ``optimal_inaccurate`` (uncertified), the chain says why.
-
-A least-squares fit (no prior) whose f is already below ``ROUNDING`` · f(0) (exact data) is certified without the
-polish: f ≥ 0, and a polish there is rounding-dominated. With ``closure`` (dm's fits) and a parameter the closure
-projects out (``model.closure``: the infimum is approached only as it grows) the polish on the closed set is the
-answer ("→ newton on the closed set"): cvxpy's θ is a stopping point along that ray placed by rounding. Except
-when the closed run ends more than ``TOL`` above a cvxpy θ that is in the set exactly (that run missed its
-infimum): then as above; a cvxpy θ outside the set by rounding does not count ("outside the set by rounding").
+``polish``: the check of every cvxpy solution (``solver="cvxpy"``, the reference): Clarabel can stop ``optimal``
+well above the optimum (its test is relative to the conic reformulation, not to f), so its θ is polished by
+``fit_quadratic_newton`` started from it (tol 1e-9 on the gap plus the Newton decrement, relative to f). Lower by more
+than ``TOL``: the polished θ, and the chain says by how much cvxpy was above; else cvxpy's θ, certified; the polish
+fails: cvxpy's status only as ``optimal_inaccurate``. Exact data (f below ``ROUNDING`` · f(0)) are certified without
+it. With ``closure`` and a parameter it projects out, the closed run is the answer unless it ends more than ``TOL``
+above a cvxpy θ that is in the set exactly (docs/estimators.md, "Solvers, options and fallbacks").
 """
 
 from __future__ import annotations
@@ -42,10 +33,9 @@ import numpy as np
 from dualid.errors import SolverError
 from dualid.estimators.newton.interior_point import run_interior_point
 from dualid.estimators.newton.objective import Derivatives, value_or_inf
-from dualid.linalg import NotPositiveDefinite
-from dualid.linalg import solve_psd
+from dualid.linalg import NotPositiveDefinite, gram_eigh, jacobi_scale, solve_psd
 from dualid.model.closure import close, on_closure
-from dualid.model.consistency import central_point, feasible_set, prior_blocks, pullback_metric
+from dualid.model.consistency import LMI, FeasibleSet, central_point, feasible_set, prior_blocks, pullback_metric
 
 TOL = 1e-7  # a cvxpy objective this far (relative) above the certified optimum is not optimal
 ROUNDING = 1e-12  # a least-squares f(θ) ≤ this × f(0) (exact data) is optimal to that accuracy: f ≥ 0 (no iterations)
@@ -124,7 +114,7 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
             return np.inf
         return value_or_inf(objective, theta)
 
-    f_scale = max(float(c), 1e-300)
+    f_scale = max(float(c - g @ theta_ls), ROUNDING * float(c), 1e-300)  # ~f*: c ≫ f* at a high SNR or exact data
     failure = None
     if start is not None:
         warm = central_point(np.asarray(start, dtype=float), cons, eps=1e-7)
@@ -145,7 +135,26 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
         raise SolverError("quadratic Newton: found no strictly feasible start", status="no_start")
     theta, info = run_quadratic(cons, candidates[k], tol, max_iter, objective, f_scale)
     info["start"] = "cold" + (f" ({failure})" if failure else "")
-    return done(theta, info)
+    return done(theta if regularizer is not None else toward_start(theta, candidates[k], H, cons, value), info)
+
+
+def toward_start(theta, start, H, cons, value):
+    """Of the minimisers θ + M z (M: the data's null space, f unchanged) a central one toward ``start`` (the LS point moved
+    inside; Jacobi-scaled chart): an interior point drifts along unseen directions, pulled by its barrier alone."""
+    d = jacobi_scale(H)
+    _, U, keep = gram_eigh(H / np.outer(d, d))
+    M, z0 = U[:, ~keep] / d[:, None], U[:, ~keep].T @ (d * (start - theta))
+    if not np.any(z0):
+        return theta
+    reduced = FeasibleSet(tuple(LMI(c.name, np.arange(M.shape[1]), np.stack([c.dC(m) for m in M.T]), c.C(theta))
+                                for c in cons.lmis), cons.G @ M, cons.G @ theta + cons.h, cons.names)
+    try:
+        z, _ = run_quadratic(reduced, np.zeros(M.shape[1]), 1e-3, 100, lambda z, order: Derivatives(
+            float((z - z0) @ (z - z0)), 2.0 * (z - z0), 2.0 * np.eye(len(z))), float(z0 @ z0))
+    except SolverError:
+        return theta
+    moved = theta + M @ z
+    return moved if value(moved) <= value(theta) + 1e-12 * max(abs(value(theta)), 1e-300) else theta
 
 
 # Retried with exact Newton steps (no Levenberg term; the eigen pseudo-inverse only where Cholesky fails) when the

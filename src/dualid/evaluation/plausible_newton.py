@@ -9,11 +9,12 @@ U Λ Uᵀ = D Σ_β D the covariance in the column-scaled chart (D = diag of the
 eigenvalues floored at SIGMA_RTOL × the largest, so that ‖u‖² c² is the statistic and u is O(1) whatever the units
 and the noise level. The region is one more LMI, [[I, u], [uᵀ, 1]] ⪰ 0, beside the consistency LMIs and bound rows,
 and the problem is one run of ``newton.interior_point.run_interior_point`` (primal–dual, affine-invariant) from a
-point on the segment from θ̂ to the prior: strictly consistent when θ̂ is consistent (the prior is strictly), and
-inside the region. The region's multiplier is read off its dual block.
+point inside the region: the prior with θ̂'s base parameters mostly taken over (its other parameters kept), or else a
+point on the segment from the prior to θ̂ (strictly consistent when θ̂ is consistent, the prior being strictly).
+The region's multiplier is read off its dual block.
 
-When θ̂ is not consistent (an unconstrained fit), no such start exists, and the problem is solved as a sequence of
-penalised ones, θ(μ) = argmin_θ R(θ) + μ‖u(θ)‖² under the other constraints, from the prior: μ by regula falsi in
+When neither start is strictly consistent (an unconstrained θ̂) or that run fails, the problem is solved as a
+sequence of penalised ones, θ(μ) = argmin_θ R(θ) + μ‖u(θ)‖² under the other constraints, from the prior: μ by regula falsi in
 log μ until ‖u‖ ∈ [1 − U_TOL, 1] (KKT with multiplier μ/c²), each solve warm-started from the previous μ's.
 
 The prior term R is scale-aware in every block:
@@ -265,19 +266,27 @@ def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: n
                 "chain": "the prior is in the region", "solves": 0, "note": ""}
     region = _region_lmi(W, b)
     both = dataclasses.replace(cons, lmis=(*cons.lmis, region))
-    start = np.asarray(theta_hat, dtype=float) + 0.5 / u_norm(theta) * (theta - theta_hat)  # in the region, and
-    if both.margin(start) > 0:  # strictly consistent when θ̂ is consistent: one interior point with the region
+    t = 1.0 - 0.5 / u_norm(theta)  # u(θ₀ + t(θ̂ − θ₀)) = (1 − t) u(θ₀): inside the region
+    Cs = C / scale[None, :]  # the base parameters in the column-scaled chart
+    towards = (np.linalg.pinv(Cs) @ (Cs @ (scale * (theta_hat - theta)))) / scale  # θ̂'s base parameters, θ₀'s others
+    start = theta + t * towards  # inside the region; else on the way from it to the point with θ̂'s other
+    if both.margin(start) <= 0:  # parameters, strictly consistent when θ̂ is consistent (the prior being strictly)
+        far = theta + t * (np.asarray(theta_hat, dtype=float) - theta)
+        start = far + 0.9 * min(1.0, both.max_step(far, start - far)) * (start - far) if both.margin(far) > 0 else None
+    if start is not None:  # one interior point with the region (its tolerance relative to R at the start)
         try:
-            th, Z, _, info = run_interior_point(None, both, start, None, None, TOL, 200, 0, False,
-                                                objective=lambda t, order: objective(t, order, 0.0), f_scale=1.0)
+            th, Z, _, info = run_interior_point(None, both, start, None, None, TOL * 1e-3, 200, 0, False,
+                                                objective=lambda t_, order: objective(t_, order, 0.0), f_scale=1.0)
             mu = float(Z[-1][-1, -1])  # Z = μ v vᵀ with v = (−u, 1) at ‖u‖ = 1: the multiplier of μ‖u‖²
-            return {"theta": th, "mu": mu, "statistic": u_norm(th) ** 2 * radius2, "G": G, "note": "",
-                    "chain": f"interior point with the region as a constraint, {info['iterations']} iterations",
-                    "solves": 1}
+            if u_norm(th) <= 1.0 + 1e-7:  # (a tiny region: u = Wθ − b cancels ~1/c-sized terms in the LMI)
+                return {"theta": th, "mu": mu, "statistic": u_norm(th) ** 2 * radius2, "G": G, "note": "",
+                        "chain": f"interior point with the region as a constraint, {info['iterations']} iterations",
+                        "solves": 1}
+            chain.append(f"interior point with the region as a constraint ended outside it (‖u‖ = {u_norm(th):.9g})")
         except (SolverError, ArithmeticError, np.linalg.LinAlgError) as exc:
             chain.append(f"interior point with the region as a constraint failed ({type(exc).__name__})")
     else:
-        chain.append("θ̂ is not strictly feasible")
+        chain.append("no strictly feasible start in the region")
     th, mu_best, solves, note = _penalised(solve, u_norm, theta, radius2, chain)
     un = u_norm(th)
     chain.append(f"interior point, {solves} solves, μ {mu_best:.3g}, statistic {un ** 2 * radius2:.3g}")

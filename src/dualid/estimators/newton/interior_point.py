@@ -138,8 +138,7 @@ def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, c
         for c, Zb, Ci in zip(cons.lmis, Z, Cinv):
             r_dual[c.idx] -= np.einsum("kab,ba->k", c.V, Zb)
             barrier_grad[c.idx] += np.einsum("kab,ba->k", c.V, Ci)
-            # K_kl = tr(V_k Z V_l C⁻¹) as one product: O(k m³ + k² m²), where a 4-operand einsum is O(k² m⁴)
-            K[np.ix_(c.idx, c.idx)] += (c.V @ Zb).reshape(len(c.V), -1) @ (c.V @ Ci).mT.reshape(len(c.V), -1).T
+            K[np.ix_(c.idx, c.idx)] += np.einsum("kab,lba->kl", c.V @ Zb, c.V @ Ci)  # tr(V_k Z V_l C⁻¹), O(k² m²)
         if len(s):
             r_dual -= cons.G.T @ z
             barrier_grad += cons.G.T @ (1.0 / s)
