@@ -439,7 +439,8 @@ LOG_CASES = [
     ("short", _with(lambda df: df.iloc[:10]), "bad: 10 samples are too few to derive default preprocessing (need 100)"),
     ("tau-1e300", _with(lambda df: df.assign(tau_meas1=df["tau_meas1"] * 1e300)),
      "column 'tau_meas1' reaches 2.91e+300 in SI units; more than 1e+12 is not a robot measurement"),
-    ("ragged-csv", _text_file("time,pos_meas1\n0,1,2,3\n", "ragged.csv"), "ragged.csv lacks the default DFKI columns"),
+    ("ragged-csv", _text_file("time,pos_meas1\n0,1,2,3\n", "ragged.csv"),
+     "ragged.csv: cannot read it as CSV (ArrowInvalid: CSV parse error: Expected 2 columns, got 4: 0,1,2,3)"),
 ]
 for _id, _make, _msg in LOG_CASES:
     _log_case(_id, _make, _msg)

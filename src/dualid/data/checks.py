@@ -1,7 +1,7 @@
 """Checks of logs that catch what would otherwise become silently wrong results.
 
-Errors (DataError) where the data cannot be right: duplicated column names in a CSV header (pandas
-would rename them and the wrong column would be fitted), time stamps that repeat or go back, every
+Errors (DataError) where the data cannot be right: duplicated column names in a CSV header (a reader
+could rename or drop one, and the wrong column would be fitted), time stamps that repeat or go back, every
 effort and wrench zero (a fit would return a robot without mass as the exact answer).
 Warnings (DualidWarning, through Python's ``warnings``; a fit records them in its report) where the
 data are probably but not certainly wrong: a median time step too long for a robot log (time in

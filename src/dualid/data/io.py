@@ -252,7 +252,7 @@ def load_log(
 ) -> Trajectory:
     """One log file as a Trajectory in SI units.
 
-    path: .csv (pandas), .parquet (pyarrow via pandas) or .npz (numpy). NPZ arrays may be 1-D channels
+    path: .csv or .parquet (pyarrow) or .npz (numpy). NPZ arrays may be 1-D channels
     or 2-D (T, n) arrays, Parquet columns may hold one list per row: column k of an array "q" is the
     channel "q[k]" (0-based) in the column map.
     columns: a ColumnMap or its dict form. joints: the model's joint names; the trajectory's

@@ -1,4 +1,5 @@
-"""Reading a log file into named float channels: CSV (pandas), Parquet (pyarrow via pandas) and NPZ.
+"""Reading a log file into named float channels: CSV and Parquet (pyarrow; its CSV parser gives each decimal its
+nearest double, as Python's float() does) and NPZ.
 
 (T, n) arrays (NPZ arrays, Parquet columns holding one list per row) become channels "name[k]".
 Unreadable files are DataErrors naming the file; duplicated CSV header names are refused.
@@ -21,13 +22,6 @@ FORMATS = (".csv", ".parquet", ".npz")
 
 
 _READ: ContextVar[dict | None] = ContextVar("dualid_tables_read", default=None)
-
-
-def _exact_floats(pd) -> dict:
-    """read_csv options that give each decimal its nearest double, as Python's float() does. pandas 3 does that by
-    default (and deprecates the option); pandas 2's default parser is one unit in the last place off on some
-    values (2.2.2: 5744 of the 9994 torques of examples/dfki/data/trajectory_05.csv)."""
-    return {"float_precision": "round_trip"} if int(pd.__version__.split(".")[0]) < 3 else {}
 
 
 @contextmanager
@@ -80,27 +74,30 @@ def _read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
         if len(set(lengths.values())) > 1:
             raise DataError(f"{path}: npz channels have different lengths {lengths}")
         return data, list(data)
-    import pandas as pd
-
     if ext == ".csv":
+        import pyarrow.csv as pcsv
+
         try:
             csv_header(path)
         except UnicodeDecodeError as exc:
-            raise DataError(f"{path}: cannot read it as CSV text ({exc})") from None  # duplicated names: pandas would rename them silently
+            raise DataError(f"{path}: cannot read it as CSV text ({exc})") from None  # duplicated names: refused there
         try:
-            df = pd.read_csv(path, **_exact_floats(pd))
-        except pd.errors.EmptyDataError:
-            raise DataError(f"{path}: log is empty (no rows)") from None
-        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+            table = pcsv.read_csv(path)
+        except ValueError as exc:  # pyarrow's ArrowInvalid, e.g. a row with more fields than the header
+            if "Empty CSV file" in str(exc):
+                raise DataError(f"{path}: log is empty (no rows)") from None
             raise DataError(f"{path}: cannot read it as CSV ({type(exc).__name__}: {exc})") from None
     else:
+        import pyarrow.parquet as pq
+
         try:
-            df = pd.read_parquet(path)
+            table = pq.read_table(path)
         except (ValueError, OSError) as exc:  # pyarrow's ArrowInvalid is a ValueError
             if isinstance(exc, (PermissionError, IsADirectoryError)):
                 raise
             raise DataError(f"{path}: cannot read it as Parquet ({type(exc).__name__}: {exc})") from None
-    data = {str(c): df[c].to_numpy() for c in df.columns}
+        table = table.select([c for c in table.column_names if not c.startswith("__index_level_")])  # pandas' index
+    data = {str(c): _column(table, c) for c in table.column_names}
     for c, x in list(data.items()):  # Parquet list columns (one array per row) -> (T, n)
         if x.dtype == object and len(x) and isinstance(x[0], (list, tuple, np.ndarray)):
             try:
@@ -109,6 +106,16 @@ def _read_table(path: Path) -> tuple[dict[str, np.ndarray], list[str]]:
                 raise DataError(f"{path}: list column {c!r} has rows of different lengths or non-numbers") from None
     data = _split_arrays(path, data)
     return data, list(data)
+
+
+def _column(table, name: str) -> np.ndarray:
+    """A pyarrow column as a numpy array: numbers without gaps through DLPack (pyarrow's own conversion imports
+    pandas, 0.3 s), anything else (missing cells, text, lists) by that conversion."""
+    column = table.column(name).combine_chunks()
+    try:
+        return np.from_dlpack(column)
+    except (TypeError, ValueError, BufferError):  # pyarrow's ArrowTypeError is a TypeError
+        return column.to_numpy(zero_copy_only=False)
 
 
 def _split_arrays(path: Path, data: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
