@@ -7,6 +7,7 @@ Unreadable files are DataErrors naming the file; duplicated CSV header names are
 
 from __future__ import annotations
 
+import warnings
 import zipfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -113,7 +114,9 @@ def _column(table, name: str) -> np.ndarray:
     pandas, 0.3 s), anything else (missing cells, text, lists) by that conversion."""
     column = table.column(name).combine_chunks()
     try:
-        return np.from_dlpack(column)
+        with warnings.catch_warnings():  # numpy asks for a versioned capsule, which pyarrow ≤ 26 does not make yet
+            warnings.simplefilter("ignore", DeprecationWarning)
+            return np.from_dlpack(column)
     except (TypeError, ValueError, BufferError):  # pyarrow's ArrowTypeError is a TypeError
         return column.to_numpy(zero_copy_only=False)
 
