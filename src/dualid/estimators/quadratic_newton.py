@@ -153,8 +153,8 @@ def toward_start(theta, start, H, cons, value):
             float((z - z0) @ (z - z0)), 2.0 * (z - z0), 2.0 * np.eye(len(z))), float(z0 @ z0))
     except SolverError:
         return theta
-    moved = theta + M @ z
-    return moved if value(moved) <= value(theta) + 1e-12 * max(abs(value(theta)), 1e-300) else theta
+    moved, f = theta + M @ z, value(theta)
+    return moved if value(moved) <= f + 1e-12 * max(abs(f), 1e-300) else theta
 
 
 # Retried with exact Newton steps (no Levenberg term; the eigen pseudo-inverse only where Cholesky fails) when the

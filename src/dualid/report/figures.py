@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 # FreeType's hinting adds about 15 % to it at the report's 80 dpi; the difference is not visible at that size.
 # Titles at a fixed height (read when the axes are made): an automatic one measures every axis's ticks at each draw.
 DRAWING = {"text.hinting": "none", "axes.titley": 1.0}
-PNG = {"compress_level": 1}  # zlib's fastest level: 4× faster to encode than PIL's default, files ~20 % larger
+PNG = {"compress_level": 1}  # zlib's fastest level: a quarter less encoding time than PIL's 6, files ~10 % larger
 
 
 def new_figure(nrows: int = 1, ncols: int = 1, *, figsize: tuple[float, float], **subplots):
@@ -35,7 +35,7 @@ def png(fig: Figure, dpi: int = 80) -> bytes:
 def save_figure(fig: Figure, path: str | Path, dpi: int = 120, **kw) -> Path:
     path = Path(path)
     with rc_context(DRAWING):
-        fig.savefig(path, dpi=dpi, **({"pil_kwargs": PNG} if Path(path).suffix == ".png" else {}), **kw)
+        fig.savefig(path, dpi=dpi, **({"pil_kwargs": PNG} if path.suffix == ".png" else {}), **kw)
     return path
 
 
