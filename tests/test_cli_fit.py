@@ -42,7 +42,7 @@ def test_fit_and_validate_end_to_end(tmp_path):
     assert result.exit_code == 0, _out(result)
     record = yaml.safe_load((out / "parameters.yaml").read_text())
     assert list(record["methods"]) == ["ols", "wls"]  # --method overrides the config's default methods
-    assert (out / "ols.urdf").is_file() and (out / "scores.png").is_file()
+    assert (out / "ols.urdf").is_file() and (out / "scores.svg").is_file()
     assert "held-out τ RMSE [N m], 1 run" in result.output and "± 0.000" not in result.output
     # stderr is not a terminal here: one plain time-stamped line per stage, no spinner frames
     assert re.search(r"^\[ *[0-9.]+ s\] fitting wls \(", result.output, re.M) and "⠋" not in result.output

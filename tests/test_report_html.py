@@ -118,9 +118,9 @@ def test_the_dfki_fit_writes_a_self_contained_html_report(dfki_fit):
             svg = (dfki_fit / f"{stem}_{run}.svg").read_text()  # the Markdown's copy: the same markup, standalone
             assert svg.startswith("<svg ") and svg in html and f"![{stem}_{run}.svg]({stem}_{run}.svg)" in \
                 (dfki_fit / "report.md").read_text()
-    assert c.images == 6  # 2 runs × 2 signals + scores.png + friction.png
+    assert c.images == 6  # 2 runs × 2 signals + scores.svg + friction.svg
     # what the fit says physically: friction curves, each link against the URDF, the data's commit
-    assert "friction.png" in c.ids and "Joint friction" in text and "Links against the URDF" in text
+    assert "friction.svg" in c.ids and "Joint friction" in text and "Links against the URDF" in text
     for link in ("Joint1", "Joint2"):
         assert f"<caption>{link}</caption>" in html
     # the commit of the repository holding the data; in an export of the sources (no .git) it says there is none
@@ -367,5 +367,38 @@ def test_every_method_and_reference_has_its_own_colour():
     colours = [m.color.lower() for m in METHODS.values()] + [TRUTH.color.lower()]
     assert len(set(colours)) == len(colours)
     assert not {c.lower() for c in REFERENCE_COLORS} & set(colours)
-    assert color("lab model 2.0", 6) != color("lab model 2.1", 7) and style("lab model 2.0", 6)["ls"] == "--"
-    assert style("dm", 5) == {"color": METHODS["dm"].color, "ls": "-"}
+    assert color("lab model 2.0", 6) != color("lab model 2.1", 7) and style("lab model 2.0", 6)[1]  # dashed
+    assert style("dm", 5) == (METHODS["dm"].color, False)
+
+
+def test_score_bars_are_as_tall_as_their_means_with_whiskers_over_runs():
+    from dualid.report.svgplot import score_svg
+
+    t = np.linspace(0.0, 1.0, 50)
+    tau = np.stack([np.sin(2 * np.pi * t), 0.5 * np.cos(2 * np.pi * t)], axis=1)
+    one = {"ols": _validation("ols", tau + [0.1, 0.02]), "lab": _validation("lab", tau + [0.2, 0.04])}
+    svg = score_svg(one)
+    check_html(f"<!DOCTYPE html><html><body>{svg}</body></html>")
+    rects = re.findall(r'<rect ([^>]*) x="[^"]*" y="[^"]*" width="[^"]*" height="([^"]*)"><title>([^<]*)</title>', svg)
+    heights = {title: float(h) for _, h, title in rects}
+    assert heights["lab, J1: 0.2"] == pytest.approx(2 * heights["ols, J1: 0.1"], rel=0.02)
+    assert heights["lab, J2: 0.04"] == pytest.approx(2 * heights["ols, J2: 0.02"], rel=0.05)
+    looks = {title.split(",")[0]: look for look, _, title in rects}
+    assert "stroke-dasharray" in looks["lab"] and "stroke-dasharray" not in looks["ols"]  # a reference: pale, dashed
+    assert "<path" not in svg  # one run: no whiskers
+    two = {"ols": Validation("ols", ("J1", "J2"), one["ols"].runs + one["lab"].runs)}
+    assert "ols, J1: 0.15 ± 0.05" in score_svg(two) and "<path" in score_svg(two)
+
+
+def test_friction_curves_are_drawn_on_linear_axes():
+    from dualid.report.svgplot import curves_svg
+
+    v = np.linspace(-2.0, 2.0, 21)
+    svg = curves_svg("f", [("J1", v, {"a": 2 * v, "b": -v})], "velocity", "N m", {"a": ("#000000", False),
+                                                                                 "b": ("#111111", True)})
+    curves = {title: np.array([[float(c) for c in p.split(",")] for p in points.split()])
+              for points, title in re.findall(r'points="([^"]*)"><title>([^<]*)</title>', svg)}
+    (xa, ya), (xb, yb) = curves["a"].T, curves["b"].T
+    slope_a, slope_b = np.polyfit(xa, ya, 1)[0], np.polyfit(xb, yb, 1)[0]
+    assert slope_a == pytest.approx(-2 * slope_b, rel=1e-2) and slope_a < 0  # y grows upwards: pixels downwards
+    assert np.allclose(xa, xb) and np.ptp(xa) > 200

@@ -87,7 +87,7 @@ def test_uncertainty_is_reported_only_for_identifiable_parameters(outcome):
 
 def test_outputs_and_urdf_round_trip(outcome, written):
     for name in ("parameters.yaml", "parameters.json", "ols.urdf", "dm.urdf", "report.md", "identifiability.txt",
-                 "effort_trajectory_04.svg", "acceleration_trajectory_04.svg", "scores.png"):
+                 "effort_trajectory_04.svg", "acceleration_trajectory_04.svg", "scores.svg"):
         assert (written / name).is_file(), name
     record = yaml.safe_load((written / "parameters.yaml").read_text())
     assert record["data"]["train"] == [str(DFKI / "trajectory_00.csv")]

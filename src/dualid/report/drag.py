@@ -15,16 +15,15 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import yaml
 from matplotlib.figure import Figure
 
 from dualid.estimators.methods import color as method_color
 from dualid.evaluation.validation import Validation
 from dualid.report.base_parameters import base_section
 from dualid.report.document import Bullets, Image, Pre, Report, Section, Table, Text, runs_phrase
-from dualid.report.figures import cycle_color, new_figure
-from dualid.report.fit_report import fit_notes, png, preprocessing_table, run_section
-from dualid.report.io import jsonable, markdown_table, write_json
+from dualid.report.figures import cycle_color, new_figure, png
+from dualid.report.fit_report import fit_notes, preprocessing_table, run_section
+from dualid.report.io import jsonable, markdown_table, write_json, yaml_text
 from dualid.report.metadata import run_metadata
 from dualid.report.outdir import write_output
 from dualid.report.render import write_report
@@ -105,7 +104,7 @@ def write_drag_fit(outcome: DragFitOutcome, out: str | Path, force: bool = False
 def _write(outcome: DragFitOutcome, out: Path, meta: dict) -> dict[str, Path]:
     written: dict[str, Path] = {}
     record = {"run": meta, **parameters_record(outcome)}
-    (out / "parameters.yaml").write_text(yaml.safe_dump(jsonable(record), sort_keys=False, allow_unicode=True))
+    (out / "parameters.yaml").write_text(yaml_text(jsonable(record)))
     written["parameters.yaml"] = out / "parameters.yaml"
     written["parameters.json"] = write_json(out / "parameters.json", record)
     (out / "identifiability.txt").write_text(outcome.identifiability.describe() + "\n")

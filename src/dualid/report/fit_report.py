@@ -29,13 +29,11 @@ from dualid.report.document import (
     mean_cell,
     runs_phrase,
 )
-from dualid.report.figures import png
 from dualid.report.metadata import metadata_items
 from dualid.report.model_figures import body_section, friction_section
 from dualid.report.model_files import ModelFiles, model_files_section, plausible_section
 from dualid.report.render import table_markdown
-from dualid.report.signals import score_bars
-from dualid.report.svgplot import signal_svg
+from dualid.report.svgplot import score_svg, signal_svg
 from dualid.robot.fit import FitOutcome
 
 JOINTS_PER_TABLE = 7  # score tables of more joints are split into groups
@@ -271,8 +269,8 @@ def _figures(d: FitReportData) -> Section:
         return Section("Held-out signals")
     images = signal_images(d.held_out)
     if len(d.held_out) > 1:
-        images.append(Image("scores.png", png(score_bars(d.held_out)),
-                            "Held-out scores per joint (bars: mean over runs; whiskers: std when more than one run)."))
+        images.append(Image("scores.svg", b"", "Held-out scores per joint (bars: mean over runs; whiskers: std when "
+                            "more than one run; pale, dashed outline: references).", svg=score_svg(d.held_out)))
     return Section("Held-out signals", tuple(images))
 
 
@@ -333,7 +331,7 @@ def _parameters(d: FitReportData) -> Section:
 
 
 def _friction(d: FitReportData) -> Section:
-    return friction_section(d.outcome, png)
+    return friction_section(d.outcome)
 
 
 def _bodies(d: FitReportData) -> Section:

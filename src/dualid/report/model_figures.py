@@ -4,12 +4,11 @@ method and reference, and each link's mass, centre of mass and principal moments
 from __future__ import annotations
 
 import numpy as np
-from matplotlib.figure import Figure
 
 from dualid.model.consistency import body_properties
 from dualid.report.document import Image, Section, Table, Text
-from dualid.report.figures import new_figure
 from dualid.report.signals import style
+from dualid.report.svgplot import curves_svg
 from dualid.robot.fit import FitOutcome
 
 BODY_NOTE = ("A link's mass, centre of mass and inertia are set by the data only in the combinations listed under "
@@ -22,42 +21,31 @@ def _thetas(o: FitOutcome) -> dict[str, np.ndarray]:
     return {m: f.result.theta for m, f in o.fits.items() if f.ok} | {lab: th for lab, (th, _) in o.references.items()}
 
 
-def friction_plot(o: FitOutcome) -> Figure | None:
-    """τ_f(v) = b v + f_c tanh(v / v_c) per joint over the training runs' velocity range; None without friction."""
+def friction_plot(o: FitOutcome) -> str | None:
+    """SVG: τ_f(v) = b v + f_c tanh(v / v_c) per joint over the training runs' velocity range; None without friction."""
     model = o.model
     if not hasattr(model, "friction") or not (model.viscous or model.coulomb):
         return None
-    thetas = _thetas(o)
-    frictions = {lab: model.friction(th) for lab, th in thetas.items()}
-    joints = list(next(iter(frictions.values())))
-    fig, axes = new_figure(1, len(joints), figsize=(min(11.0, 3.2 * len(joints) + 2.2), 2.8))
-    for ax, joint in zip(axes[0], joints):
+    frictions = {lab: model.friction(th) for lab, th in _thetas(o).items()}
+    panels = []
+    for joint in next(iter(frictions.values())):
         j = model.coordinates.index(joint)
         vmax = max(float(np.nanmax(np.abs(r.v[:, j]))) for r in o.train) or 1.0
         v = np.linspace(-vmax, vmax, 201)
-        for k, (lab, fr) in enumerate(frictions.items()):
-            b, fc = fr[joint]
-            ax.plot(v, b * v + fc * np.tanh(v / model.coulomb_velocity), lw=1.0, label=lab, **style(lab, k))
-        ax.axhline(0.0, color="black", lw=0.5)
-        ax.axvline(0.0, color="black", lw=0.5)
-        ax.set_title(joint, fontsize=8)
-        ax.set_xlabel("velocity [rad/s]", fontsize=8)
-        ax.grid(alpha=0.3)
-        ax.tick_params(labelsize=7)
-    axes[0, 0].set_ylabel("friction torque [N m]", fontsize=8)
-    axes[0, -1].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False)
-    fig.subplots_adjust(left=0.08, right=0.8, bottom=0.18, top=0.88, wspace=0.3)
-    return fig
+        panels.append((joint, v, {lab: fr[joint][0] * v + fr[joint][1] * np.tanh(v / model.coulomb_velocity)
+                                  for lab, fr in frictions.items()}))
+    styles = {lab: style(lab, k) for k, lab in enumerate(frictions)}
+    return curves_svg("joint friction", panels, "velocity [rad/s]", "N m", styles)
 
 
-def friction_section(o: FitOutcome, png) -> Section:
-    fig = friction_plot(o)
-    if fig is None:
+def friction_section(o: FitOutcome) -> Section:
+    svg = friction_plot(o)
+    if svg is None:
         return Section("Joint friction")
     vc = o.model.coulomb_velocity
-    return Section("Joint friction", (Image("friction.png", png(fig),
+    return Section("Joint friction", (Image("friction.svg", b"",
                                             f"Identified joint friction τ_f = b·v + f_c·tanh(v / {vc:g} rad/s) over "
-                                            "the training runs' velocities (dashed: references)."),))
+                                            "the training runs' velocities (dashed: references).", svg=svg),))
 
 
 def _vector(x) -> str:

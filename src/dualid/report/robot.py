@@ -1,4 +1,4 @@
-"""Writing a real-robot fit or validation: parameters.yaml/json, <method>.urdf, report.md, report.html and PNGs.
+"""Writing a real-robot fit or validation: parameters.yaml/json, <method>.urdf, report.md, report.html and SVG figures.
 
 Files in the output folder of a fit:
 - parameters.yaml, parameters.json: the run metadata (dualid version, git commit, UTC time, command
@@ -7,8 +7,8 @@ Files in the output folder of a fit:
   held-out scores, and the data files, column map and preprocessing steps used;
 - <method>.urdf, <method>.xml: the URDF and MJCF with the identified parameters (the plausible ones when
   a prior exists; report/model_files.py);
-- identifiability.txt; report.md with effort_<run>.png / acceleration_<run>.png for every held-out
-  run and scores.png; report.html: the same report (``report.fit_report``, one value rendered twice by
+- identifiability.txt; report.md with effort_<run>.svg / acceleration_<run>.svg for every held-out
+  run, scores.svg and friction.svg; report.html: the same report (``report.fit_report``, one value rendered twice by
   ``report.render``) as one self-contained file with the figures embedded.
 """
 
@@ -17,13 +17,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-import yaml
 
 from dualid.estimators.methods import method as method_entry
 from dualid.evaluation.validation import Validation
 from dualid.report.base_parameters import UNCERTAINTY_NOTE, definitions, method_record
 from dualid.report.fit_report import fit_report, report_data, score_table, validation_report
-from dualid.report.io import jsonable, write_json
+from dualid.report.io import jsonable, write_json, yaml_text
 from dualid.report.metadata import run_metadata
 from dualid.report.model_files import plausible_record, write_model_files
 from dualid.report.outdir import write_output
@@ -142,7 +141,7 @@ def _write_fit(outcome: FitOutcome, out: Path, meta: dict, progress: Callable[[s
     urdfs = {m: e["urdf"] for m, e in files.items()}
     data = report_data(outcome, urdfs, meta, model_files)
     record = parameters_record(outcome, urdfs, meta, data.train, files)
-    (out / "parameters.yaml").write_text(yaml.safe_dump(record, sort_keys=False, allow_unicode=True))
+    (out / "parameters.yaml").write_text(yaml_text(record))
     write_json(out / "parameters.json", record)
     written["parameters.yaml"], written["parameters.json"] = out / "parameters.yaml", out / "parameters.json"
     (out / "identifiability.txt").write_text(outcome.identifiability_text() + "\n")

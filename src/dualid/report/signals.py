@@ -1,5 +1,5 @@
 """What the figures of a validation share: the signals' names and units, the curves' colours and styles, the axes
-of a signal panel and of its residuals; and the per-joint score bars.
+of a signal panel and of its residuals.
 
 Axes follow the measured signal: each panel's y-range is the measured range, widened to show predictions that stay
 near it (at most one measured span on either side) and clipped beyond, so a wild prediction (e.g. 1e4 rad/s²
@@ -10,11 +10,8 @@ themselves are ``report.svgplot``'s.
 from __future__ import annotations
 
 import numpy as np
-from matplotlib.figure import Figure
 
 from dualid.estimators.methods import color as method_color
-from dualid.evaluation.validation import Validation
-from dualid.report.figures import new_figure
 
 SIGNALS = {
     "tau": ("effort", "N m", "measured", "effort: inverse dynamics Y(q,v,a)θ̂"),
@@ -40,9 +37,9 @@ def color(label: str, k: int):
     return method_color(label) or REFERENCE_COLORS[k % len(REFERENCE_COLORS)]
 
 
-def style(label: str, k: int) -> dict:
-    """Line style of a curve: its colour, dashed for references."""
-    return {"color": color(label, k), "ls": "-" if method_color(label) else "--"}
+def style(label: str, k: int) -> tuple[str, bool]:
+    """(colour, dashed) of a curve: its colour, dashed for references."""
+    return color(label, k), not method_color(label)
 
 
 def decimate(t: np.ndarray, *ys: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -77,33 +74,3 @@ def residual_limits(residuals: list[np.ndarray], span: float) -> tuple[float, fl
     half = min(1.1 * float(np.percentile(r, 99.5)), 0.5 * span) if r.size else 0.5 * span
     half = half if half > 0 else 0.5 * span if span > 0 else 1.0
     return -half, half
-
-
-def score_bars(validations: dict[str, Validation]) -> Figure:
-    """Grouped bars per joint of held-out effort RMSE and NCC, and acceleration NCC (mean ± std over runs)."""
-    first = next(iter(validations.values()))
-    coords = first.coordinates
-    panels = (("tau_rmse", "effort RMSE [N m] (lower is better)"), ("tau_ncc", "effort NCC (higher is better)"),
-              ("a_ncc", "forward-dynamics acceleration NCC"))
-    fig, axes = new_figure(1, 3, figsize=(12, 3.6))
-    x = np.arange(len(coords))
-    w = 0.8 / len(validations)
-    for ax, (key, title) in zip(axes[0], panels):
-        for k, (label, val) in enumerate(validations.items()):
-            yerr = np.nan_to_num(val.std(key)) if len(val.runs) > 1 else None
-            ax.bar(x - 0.4 + w * (k + 0.5), np.nan_to_num(val.mean(key)), w, yerr=yerr, capsize=2,
-                   color=color(label, k), label=label, error_kw={"elinewidth": 0.8},
-                   hatch=None if method_color(label) else "//")
-        ax.set_xticks(x)
-        ax.set_xticklabels(coords)
-        ax.set_title(title, fontsize=9)
-        ax.grid(axis="y", alpha=0.3)
-        if key != "tau_rmse":
-            lo = min([0.0] + [float(np.nanmin(v.mean(key))) for v in validations.values()
-                              if np.isfinite(v.mean(key)).any()])
-            ax.set_ylim(min(lo - 0.05, 0.0) if lo < 0 else 0.0, 1.0)
-    handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 8), fontsize=8, frameon=False,
-               bbox_to_anchor=(0.5, 0.0))
-    fig.subplots_adjust(left=0.05, right=0.99, top=0.92, bottom=0.16, wspace=0.2)
-    return fig
