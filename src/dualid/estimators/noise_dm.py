@@ -39,7 +39,7 @@ from dualid.estimators.dual_metric import schur_psd
 from dualid.estimators.least_squares import residual_covariance
 from dualid.estimators.newton.fit import fit_dual_metric_newton
 from dualid.estimators.newton.interior_point import run_interior_point
-from dualid.estimators.newton.objective import CHUNK, objective_value, statistics
+from dualid.estimators.newton.objective import CHUNK, objective_value, statistics, stopping_scale
 from dualid.estimators.noise_model import (NoiseCheck, NoiseLevels, check_noise_model, estimate_noise, given_levels,
                                            noise_model_derivatives, noise_model_objective, noise_model_scale)
 from dualid.estimators.quadratic_newton import quadratic_objective, run_quadratic
@@ -106,9 +106,11 @@ class NoiseModelDM:
         # pilot, closure, noise levels and check: the problem in memory, or a strided subsample of streamed data
         in_memory = isinstance(sensor, IdentificationProblem)
         sample = sensor if in_memory else sensor.subset(strided_rows(sensor.N, CHECK_SAMPLES))
-        scaled = _scaled(sample)  # the equations on each coordinate's own force scale: closure and pilot
-        cons, done = self._closure(sample, *scaled)
-        theta_pilot, pilot = self._pilot(sample, cons, *scaled)
+        R, r, c = _scaled(sample)  # the equations on each coordinate's own force scale: closure and pilot
+        # closed over what f cannot see (model.closure: a mass in its block only grows without bound); done completes θ
+        cons, done = on_closure(feasible_set(sample.parameters, self.constrained), R.T @ R, c, sample.parameters.names,
+                                enabled=self.constrained)
+        theta_pilot, pilot = self._pilot(sample, cons, R, r, c)
         start = self._inside(theta_pilot, cons)
         try:
             theta, noise, run = self._rounds(sensor, sample, cons, start, theta_pilot)
@@ -146,9 +148,8 @@ class NoiseModelDM:
         return central_point(theta, cons) if self.constrained and not cons.margin(theta) > 0 else theta
 
     def _rounds(self, sensor, sample, cons, theta, theta_pilot):
-        """The noise-level / θ alternations from θ (module doc, step 3): (θ, levels, {iterations, rounds, status});
-        the levels from ``sample`` (the problem itself in memory, a subsample of streamed data). The status is
-        "optimal_inaccurate" when the last solve stopped at max_iter within ACCEPTABLE of its tolerance."""
+        """The levels / θ alternations from θ (module doc, step 3): (θ, levels, {iterations, rounds, status: ``_status``
+        of the last solve}); the levels from ``sample`` (the problem in memory, a subsample of streamed data)."""
         noise, run = None, {"iterations": 0, "rounds": 0, "status": "optimal"}
         fixed = self.sigma_tau is not None
         if fixed:
@@ -163,16 +164,8 @@ class NoiseModelDM:
                 break
         return theta, noise, run
 
-    def _closure(self, sensor, R, r, c):
-        """The feasible set to solve on, closed over the parameters f cannot see (``model.closure``: a link mass that
-        enters only its consistency block would otherwise grow without bound), and the completion of θ after; R, r, c:
-        the equations on their force scales (``_scaled``)."""
-        return on_closure(feasible_set(sensor.parameters, self.constrained), R.T @ R, c, sensor.parameters.names,
-                          enabled=self.constrained)
-
     def _result(self, problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0, guard=None):
-        """The result of θ (completed by ``done``); ``guard``: the metric guard of this θ against the pilot, when the
-        fit has it already."""
+        """The result of θ (completed by ``done``); ``guard``: θ's metric guard against the pilot, if already made."""
         theta, completed = done(theta, {})
         gaps = (np.nan,) * 3 if check is None else (check.excess, check.measured_gap, check.predicted_gap)
         record = NoiseRecord(noise.sigma_tau, noise.sigma_a, noise.torque_share, noise.acceleration_share,
@@ -216,17 +209,17 @@ class NoiseModelDM:
             return None
 
     def _solve(self, problem, cons, theta, noise: NoiseLevels):
-        """θ minimising f with the noise levels fixed, from θ, on ``cons`` (the closed set of ``_closure``): with Σ_a = 0,
-        WLS's quadratic in Σ_τ⁻¹ from its sufficient statistics (one pass); else f is not convex, and the interior
-        point runs in its non-convex mode."""
+        """θ minimising f with the levels fixed, from θ, on the closed set ``cons``: with Σ_a = 0 WLS's quadratic in Σ_τ⁻¹
+        from its sufficient statistics (one pass); else f is not convex: the interior point's non-convex mode."""
         S, A = noise.sigma_tau, noise.sigma_a
         if self.solver == "cvxpy":
             return solve_noise_model_cvxpy(problem, cons, theta, S, A, self.tol, self.max_iter, self.cvxpy_solver)
         if not np.any(A):
             stats = statistics(problem, np.linalg.inv(S), self.chunk)
-            objective = quadratic_objective(stats.H, stats.g, stats.c, problem.parameters)[0]
+            objective, theta_ls = quadratic_objective(stats.H, stats.g, stats.c, problem.parameters)
             try:
-                return run_quadratic(cons, theta, self.tol, self.max_iter, objective, max(stats.c, 1e-300))
+                return run_quadratic(cons, theta, self.tol, self.max_iter, objective,
+                                     stopping_scale(stats.c - stats.g @ theta_ls, stats.c))
             except SolverError:  # the convex-mode steps stalled (arms near a block's boundary): the general path
                 pass
 
@@ -243,8 +236,7 @@ class NoiseModelDM:
         return theta, info
 
 
-def _status(info: dict) -> str:
-    """A θ-solve's result status: "optimal_inaccurate" where the interior point stopped within ACCEPTABLE."""
+def _status(info: dict) -> str:  # "optimal_inaccurate": the interior point stopped at max_iter within ACCEPTABLE
     return "optimal_inaccurate" if info.get("status") == "optimal_inaccurate" else "optimal"
 
 

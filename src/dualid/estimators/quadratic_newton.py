@@ -32,13 +32,12 @@ import numpy as np
 
 from dualid.errors import SolverError
 from dualid.estimators.newton.interior_point import run_interior_point
-from dualid.estimators.newton.objective import Derivatives, value_or_inf
+from dualid.estimators.newton.objective import ROUNDING, Derivatives, stopping_scale, value_or_inf
 from dualid.linalg import NotPositiveDefinite, gram_eigh, jacobi_scale, solve_psd
 from dualid.model.closure import close, on_closure
 from dualid.model.consistency import LMI, FeasibleSet, central_point, feasible_set, prior_blocks, pullback_metric
 
 TOL = 1e-7  # a cvxpy objective this far (relative) above the certified optimum is not optimal
-ROUNDING = 1e-12  # a least-squares f(θ) ≤ this × f(0) (exact data) is optimal to that accuracy: f ≥ 0 (no iterations)
 
 
 def _blocks(regularizer, parameters):
@@ -114,7 +113,7 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
             return np.inf
         return value_or_inf(objective, theta)
 
-    f_scale = max(float(c - g @ theta_ls), ROUNDING * float(c), 1e-300)  # ~f*: c ≫ f* at a high SNR or exact data
+    f_scale = stopping_scale(c - g @ theta_ls, c)
     failure = None
     if start is not None:
         warm = central_point(np.asarray(start, dtype=float), cons, eps=1e-7)
