@@ -249,3 +249,9 @@ def test_a_stalled_quadratic_solve_falls_back_to_the_general_path(monkeypatch):
     general = NoiseModelDM().fit(problem)
     assert quick.noise.acceleration_share == 0 and general.noise.choice == quick.noise.choice
     assert rel(problem.Y @ general.theta, problem.Y @ quick.theta) < 1e-7
+
+
+def test_without_velocities_the_acceleration_noise_has_no_shape_and_dm_says_so():
+    problem, _ = eiv_problem(7, N=300, torque=0.05, regressor=0.0)
+    res = NoiseModelDM().fit(replace(problem, v=np.zeros_like(problem.v)))  # e.g. logs of Y and τ only
+    assert res.noise.choice == "no acceleration noise (the velocities are 0: Σ_a has no shape): WLS"

@@ -183,5 +183,7 @@ def triangular_factor(blocks, width: int) -> np.ndarray:
     stacked matrix is never formed (memory O(block · width))."""
     R = np.zeros((0, width))
     for A in blocks:
-        R = np.linalg.qr(np.vstack([R, A]), mode="r")
+        B = np.empty((len(R) + len(A), width), order="F")  # LAPACK's layout: numpy's qr copies C-ordered input
+        B[:len(R)], B[len(R):] = R, A
+        R = np.linalg.qr(B, mode="r")
     return R

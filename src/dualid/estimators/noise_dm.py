@@ -121,7 +121,8 @@ class NoiseModelDM:
             run.update(start=f"dm-paper (the fit from the {pilot} pilot failed)", pilot=pilot)
         f, choice = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk), "noise model"
         if not noise.acceleration_share > 0:
-            why = "given" if self.sigma_tau is not None else f"2 log-likelihood ratio {noise.likelihood_ratio:.3g}"
+            why = ("given" if self.sigma_tau is not None else f"2 log-likelihood ratio {noise.likelihood_ratio:.3g}"
+                   if np.isfinite(noise.likelihood_ratio) else "the velocities are 0: Σ_a has no shape")
             choice = f"no acceleration noise ({why}): WLS"
             return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, None, choice, t0)
         check = self._check(sample, theta, noise)

@@ -84,8 +84,9 @@ def noise_model_sums(problem, theta: np.ndarray, sigma_tau: np.ndarray, sigma_a:
         Y = block.Y[rows]
         c, n = Y.shape[0], Y.shape[1]
         r = (Y.reshape(c * n, p) @ theta).reshape(c, n) - block.tau[rows]
-        M = block.metric.evaluate(theta, rows)
-        L = cholesky_batch(noise_model_covariance(M, sigma_tau, sigma_a))
+        flat = not order and not np.any(sigma_a)  # f with C_i = Σ_τ at every sample: one factor, no M_i(θ)
+        M = np.zeros((1, n, n)) if flat else block.metric.evaluate(theta, rows)
+        L = np.broadcast_to(cholesky_batch(noise_model_covariance(M, sigma_tau, sigma_a)), (c, n, n))
         if not order:
             z = forward_substitute(L, r)
             f += float(np.sum(z * z))
