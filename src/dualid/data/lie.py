@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
-from scipy import signal
 
 from dualid.errors import DataError
 
@@ -124,6 +123,8 @@ def lowpass_taps(fs: float, cutoff: float, order: int = 4) -> np.ndarray:
     below 1e-5 of its peak and normalized to unit sum: the same filter as a symmetric FIR."""
     if not 0 < cutoff < fs / 2:
         raise DataError(f"low-pass cutoff must be in (0, {fs / 2:.4g}) Hz (Nyquist at fs={fs:.4g} Hz), got {cutoff}")
+    from scipy import signal  # here: scipy.signal costs ~0.7 s to import, and most fits filter nothing
+
     half = int(np.ceil(20 * fs / cutoff))
     x = np.zeros(2 * half + 1)
     x[half] = 1.0
@@ -139,6 +140,8 @@ def derivative_taps(fs: float, method: str, n: int, polyorder: int) -> list[np.n
     differences (second derivative = central difference of the central difference, as np.gradient twice)."""
     dt = 1.0 / fs
     if method == "savgol":
+        from scipy import signal
+
         return [signal.savgol_coeffs(n, polyorder, deriv=d, delta=dt, use="dot") for d in range(3)]
     return [np.array([0.0, 1.0, 0.0]), np.array([-0.5, 0.0, 0.5]) / dt, np.array([0.25, 0.0, -0.5, 0.0, 0.25]) / dt**2]
 

@@ -11,7 +11,6 @@ import warnings
 from dataclasses import replace
 
 import numpy as np
-from scipy import interpolate as interp, signal
 
 from dualid.data import lie
 from dualid.data.checks import check_gaps, check_upsampling
@@ -43,6 +42,8 @@ def lowpass(x: np.ndarray, fs: float, cutoff: float, order: int = 4) -> np.ndarr
     """Zero-phase Butterworth low-pass along axis 0 (filtfilt, second-order sections)."""
     if not _is_number(cutoff) or not 0 < cutoff < fs / 2:
         raise DataError(f"low-pass cutoff must be in (0, {fs / 2:.4g}) Hz (Nyquist at fs={fs:.4g} Hz), got {cutoff!r}")
+    from scipy import signal  # here: scipy.signal costs ~0.7 s to import, and many logs need no filter
+
     sos = signal.butter(order, cutoff, btype="low", fs=fs, output="sos")
     padlen = 3 * (2 * len(sos) + 1)  # scipy's default for sosfiltfilt
     if np.shape(x)[0] <= padlen:
@@ -62,6 +63,8 @@ def savgol_derivatives(x: np.ndarray, fs: float, window: float, polyorder: int =
     n = _savgol_samples(window, fs, polyorder)
     if n > x.shape[0]:
         raise DataError(f"Savitzky–Golay window of {n} samples is longer than the signal ({x.shape[0]} samples)")
+    from scipy import signal
+
     dt = 1.0 / fs
     x = np.asarray(x, dtype=float)
     xs = signal.savgol_filter(x, n, polyorder, deriv=0, axis=0, mode="interp")
@@ -99,7 +102,9 @@ def interpolate(t: np.ndarray, x: np.ndarray, t_new: np.ndarray, method: str = "
     """The columns of x (T, k), sampled at t, at the times t_new: "linear" or "cubic" (not-a-knot spline)."""
     if method == "linear":
         return np.stack([np.interp(t_new, t, x[:, j]) for j in range(x.shape[1])], axis=1)
-    return interp.CubicSpline(t, x, axis=0)(t_new)
+    from scipy.interpolate import CubicSpline
+
+    return CubicSpline(t, x, axis=0)(t_new)
 
 
 def resample(traj: Trajectory, rate: float, method: str = "linear") -> Trajectory:

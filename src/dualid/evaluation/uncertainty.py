@@ -45,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
-import scipy.stats
+import scipy.special
 
 from dualid.errors import ConfigError, DualidError, SolverError
 from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS
@@ -217,7 +217,7 @@ def sandwich(H: np.ndarray, G: np.ndarray, base: BaseParameters, scale: np.ndarr
 
 
 def _intervals(values, cov, df, level):
-    q = scipy.stats.t.ppf(0.5 + level / 2, max(df, 1))
+    q = scipy.special.stdtrit(max(df, 1), 0.5 + level / 2)  # Student t quantile, as scipy.stats.t.ppf
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     return values - q * se, values + q * se
 

@@ -13,7 +13,6 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from scipy import signal
 
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DataError, DualidWarning
@@ -37,6 +36,8 @@ def _round(x: float, digits: int = 2) -> float:
 
 def log_rate_and_band(traj: Trajectory) -> tuple[float, float]:
     """(fs [Hz] from the median time step, f_m [Hz] the motion band of q)."""
+    from scipy import signal  # here: scipy.signal costs ~0.7 s to import
+
     fs = 1.0 / float(np.median(np.diff(traj.t)))
     t_uniform = traj.t[0] + np.arange(int((traj.t[-1] - traj.t[0]) * fs) + 1) / fs
     band = 0.0
