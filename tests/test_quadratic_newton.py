@@ -121,3 +121,42 @@ def test_a_duality_gap_of_exactly_zero_is_not_a_division_by_zero(arm3):
                                         objective=objective, f_scale=1.0)
     assert info["duality_gap"] < 1e-300  # the dual stays at 0 (up to repair_psd's denormals)
     np.testing.assert_allclose(theta, a, rtol=0, atol=1e-9 * np.abs(a).max())
+
+
+def _dfki_problem():
+    """The DFKI example's training problem (examples/dfki/fit.yaml): its links' Iyy and Izz have no effect on the data."""
+    from pathlib import Path
+
+    from dualid.problem import build_problem as problem_of
+    from dualid.robot import fit as rf
+    from dualid.robot.config import FitConfig
+
+    config = FitConfig.from_yaml(Path(__file__).resolve().parents[1] / "examples" / "dfki" / "fit.yaml")
+    rigid, model = rf.build_model(config)
+    joints = tuple(rigid.coordinates)
+    columns = rf.column_map(config.columns, joints, config.train[0])
+    steps, _ = rf.choose_preprocessing(config.preprocessing, config.train[0], columns, joints)
+    return rf.with_bounds(problem_of(model, rf.load_runs(config.train, columns, joints, steps, rigid)), config.bounds)
+
+
+def test_the_interior_point_does_not_drift_along_what_the_data_do_not_see(monkeypatch):
+    """The barrier pushes an interior point outward along directions f cannot see that loosen a block (a link's
+    Iyy + Izz about a joint that turns about x): on the DFKI logs WLS ended at Iyy = Izz = 110 kg m² and dm (its WLS
+    fallback) at 5,204. Its end is moved along the data's null space toward its start (``newton.start.toward_start``):
+    the same predictions and objective, inertias of the links' size."""
+    from dualid.estimators import noise_dm
+    from dualid.estimators.methods import make_estimator
+    from dualid.estimators.newton import weighted
+
+    problem = _dfki_problem()
+    unseen = [k for k, name in enumerate(problem.parameters.names) if name.endswith((".Iyy", ".Izz"))]
+    fit = {m: make_estimator(m, allow_unidentifiable=True).fit(problem) for m in ("wls", "dm")}
+    for module in (weighted, noise_dm):
+        monkeypatch.setattr(module, "toward_start", lambda theta, *args: theta)
+    drift = {m: make_estimator(m, allow_unidentifiable=True).fit(problem) for m in ("wls", "dm")}
+    Y = problem.Y.reshape(-1, problem.p)
+    for m in fit:
+        assert np.max(np.abs(fit[m].theta[unseen])) < 1.0 < np.max(np.abs(drift[m].theta[unseen])), m
+        prediction, drifted = Y @ fit[m].theta, Y @ drift[m].theta
+        assert np.linalg.norm(prediction - drifted) <= 1e-7 * np.linalg.norm(drifted), m
+        assert fit[m].objective == pytest.approx(drift[m].objective, rel=1e-9), m

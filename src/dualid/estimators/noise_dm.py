@@ -39,10 +39,11 @@ from dualid.estimators.dual_metric import schur_psd
 from dualid.estimators.least_squares import residual_covariance
 from dualid.estimators.newton.fit import fit_dual_metric_newton
 from dualid.estimators.newton.interior_point import run_interior_point
-from dualid.estimators.newton.objective import CHUNK, objective_value, statistics, stopping_scale
+from dualid.estimators.newton.objective import CHUNK, objective_value, statistics, stopping_scale, value_or_inf
 from dualid.estimators.noise_model import (NoiseCheck, NoiseLevels, check_noise_model, estimate_noise, given_levels,
                                            noise_model_derivatives, noise_model_objective, noise_model_scale)
-from dualid.estimators.quadratic_newton import quadratic_objective, run_quadratic
+from dualid.estimators.newton.start import run_quadratic, toward_start
+from dualid.estimators.quadratic_newton import quadratic_objective
 from dualid.estimators.result import IdentificationResult, NoiseRecord
 from dualid.identifiability import check_identifiable
 from dualid.linalg import NotPositiveDefinite, triangular_factor
@@ -144,8 +145,7 @@ class NoiseModelDM:
         return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0,
                             None if why else guard)
 
-    def _inside(self, theta, cons):
-        """θ, or (constrained, where θ is not strictly inside ``cons``) its central point: a start of the fit."""
+    def _inside(self, theta, cons):  # θ, or (constrained, θ not strictly inside cons) its central point: a start
         return central_point(theta, cons) if self.constrained and not cons.margin(theta) > 0 else theta
 
     def _rounds(self, sensor, sample, cons, theta, theta_pilot):
@@ -219,8 +219,9 @@ class NoiseModelDM:
             stats = statistics(problem, np.linalg.inv(S), self.chunk)
             objective, theta_ls = quadratic_objective(stats.H, stats.g, stats.c, problem.parameters)
             try:
-                return run_quadratic(cons, theta, self.tol, self.max_iter, objective,
-                                     stopping_scale(stats.c - stats.g @ theta_ls, stats.c))
+                fit, info = run_quadratic(cons, theta, self.tol, self.max_iter, objective,
+                                          stopping_scale(stats.c - stats.g @ theta_ls, stats.c))
+                return toward_start(fit, theta, stats.H, cons, lambda th: value_or_inf(objective, th)), info
             except SolverError:  # the convex-mode steps stalled (arms near a block's boundary): the general path
                 pass
 

@@ -31,11 +31,11 @@ from __future__ import annotations
 import numpy as np
 
 from dualid.errors import SolverError
-from dualid.estimators.newton.interior_point import run_interior_point
+from dualid.estimators.newton.start import run_quadratic, toward_start
 from dualid.estimators.newton.objective import ROUNDING, Derivatives, stopping_scale, value_or_inf
-from dualid.linalg import NotPositiveDefinite, gram_eigh, jacobi_scale, solve_psd
+from dualid.linalg import NotPositiveDefinite, solve_psd
 from dualid.model.closure import close, on_closure
-from dualid.model.consistency import LMI, FeasibleSet, central_point, feasible_set, prior_blocks, pullback_metric
+from dualid.model.consistency import central_point, feasible_set, prior_blocks, pullback_metric
 
 TOL = 1e-7  # a cvxpy objective this far (relative) above the certified optimum is not optimal
 
@@ -135,56 +135,6 @@ def fit_quadratic_newton(H, g, c, parameters, *, constrained: bool = True, regul
     theta, info = run_quadratic(cons, candidates[k], tol, max_iter, objective, f_scale)
     info["start"] = "cold" + (f" ({failure})" if failure else "")
     return done(theta if regularizer is not None else toward_start(theta, candidates[k], H, cons, value), info)
-
-
-def toward_start(theta, start, H, cons, value):
-    """Of the minimisers θ + M z (M: the data's null space, f unchanged) a central one toward ``start`` (the LS point moved
-    inside; Jacobi-scaled chart): an interior point drifts along unseen directions, pulled by its barrier alone."""
-    d = jacobi_scale(H)
-    _, U, keep = gram_eigh(H / np.outer(d, d))
-    M, z0 = U[:, ~keep] / d[:, None], U[:, ~keep].T @ (d * (start - theta))
-    if not np.any(z0):
-        return theta
-    reduced = FeasibleSet(tuple(LMI(c.name, np.arange(M.shape[1]), np.stack([c.dC(m) for m in M.T]), c.C(theta))
-                                for c in cons.lmis), cons.G @ M, cons.G @ theta + cons.h, cons.names)
-    try:
-        z, _ = run_quadratic(reduced, np.zeros(M.shape[1]), 1e-3, 100, lambda z, order: Derivatives(
-            float((z - z0) @ (z - z0)), 2.0 * (z - z0), 2.0 * np.eye(len(z))), float(z0 @ z0))
-    except SolverError:
-        return theta
-    moved, f = theta + M @ z, value(theta)
-    return moved if value(moved) <= f + 1e-12 * max(abs(f), 1e-300) else theta
-
-
-# Retried with exact Newton steps (no Levenberg term; the eigen pseudo-inverse only where Cholesky fails) when the
-# Levenberg-damped run fails: with 1e-12 the fit crawls along directions whose Jacobi-scaled curvature is below it.
-# Not the first choice: exact steps are rounding-dominated and chart-dependent (docs/performance.md)
-RETRY_LEVENBERG = 0.0
-
-
-def run_quadratic(cons, theta, tol, max_iter, objective, f_scale, gap0=1.0):
-    """run_interior_point on the module's f, an arithmetic failure inside it a SolverError (a failed solve for the
-    caller's fallback or certificate); a failed run is retried once with RETRY_LEVENBERG (info["newton_levenberg"])."""
-    failure = None
-    for levenberg in (1e-12, RETRY_LEVENBERG):
-        try:
-            theta_out, _, _, info = run_interior_point(None, cons, theta, None, None, tol, max_iter, 0, False, gap0=gap0,
-                                                    objective=objective, f_scale=f_scale, levenberg=levenberg)
-            info["newton_levenberg"] = levenberg
-            if failure is not None:
-                info["newton_retry"] = f"Levenberg 1e-12 failed ({failure.status}); exact Newton steps"
-            break
-        except (ArithmeticError, np.linalg.LinAlgError) as exc:
-            failure = SolverError(f"quadratic Newton: numerical failure: {type(exc).__name__}: {exc}",
-                                  status="numerical_error")
-            failure.__cause__ = exc
-        except SolverError as exc:
-            failure = exc
-    else:
-        raise failure
-    theta = theta_out
-    info.pop("f_history", None)
-    return theta, info
 
 
 # --- the certificate of a cvxpy solution ---------------------------------------------------------------------------

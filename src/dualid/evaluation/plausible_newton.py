@@ -40,7 +40,7 @@ import pinocchio as pin
 from dualid.errors import SolverError
 from dualid.estimators.newton.objective import Derivatives, NotPositiveDefinite
 from dualid.estimators.newton.interior_point import run_interior_point
-from dualid.estimators.quadratic_newton import run_quadratic
+from dualid.estimators.newton.start import run_quadratic
 from dualid.model.consistency import LMI, FeasibleSet, feasible_set, pullback_metric
 from dualid.problem import IdentificationProblem
 

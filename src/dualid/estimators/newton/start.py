@@ -1,4 +1,5 @@
-"""A strictly feasible, chart-invariant starting point (and phase I when the cheap one fails)."""
+"""A strictly feasible, chart-invariant starting point (and phase I when the cheap one fails); the interior point on a
+given objective (``run_quadratic``) and the move of its end along the data's null space (``toward_start``)."""
 
 from __future__ import annotations
 
@@ -6,10 +7,10 @@ import numpy as np
 
 from dualid.errors import MetricError, SolverError
 from dualid.estimators.base import parameter_scale, solve_cvxpy
-from dualid.estimators.newton.objective import energy_statistics, statistics
-from dualid.estimators.newton.objective import objective_value
-from dualid.linalg import solve_psd
-from dualid.model.consistency import FeasibleSet, central_point
+from dualid.estimators.newton.interior_point import run_interior_point
+from dualid.estimators.newton.objective import Derivatives, energy_statistics, objective_value, statistics
+from dualid.linalg import gram_eigh, jacobi_scale, solve_psd
+from dualid.model.consistency import LMI, FeasibleSet, central_point
 from dualid.problem import IdentificationProblem, additive, sample_blocks
 
 
@@ -173,3 +174,52 @@ def starting_point(problem, cons: FeasibleSet, chunk: int) -> tuple[np.ndarray, 
             return theta_c, "phase-I"
         samples = np.union1d(samples, more)
     raise MetricError("dual-metric Newton: phase I did not find θ with every M_i(θ) positive definite")
+
+
+def toward_start(theta, start, H, cons, value):
+    """Of the minimisers θ + M z (M: the null space of H = ½∇²f, f unchanged) a central one toward ``start`` (the fit's
+    start; Jacobi-scaled chart): an interior point drifts along unseen directions, pushed by its barrier alone (DFKI
+    WLS: Joint1.Iyy = Izz = 110 kg m² → 0.0098, the same predictions). ``value``: θ → f."""
+    d = jacobi_scale(H)
+    _, U, keep = gram_eigh(H / np.outer(d, d))
+    M, z0 = U[:, ~keep] / d[:, None], U[:, ~keep].T @ (d * (start - theta))
+    if not np.any(z0):
+        return theta
+    reduced = FeasibleSet(tuple(LMI(c.name, np.arange(M.shape[1]), np.stack([c.dC(m) for m in M.T]), c.C(theta))
+                                for c in cons.lmis), cons.G @ M, cons.G @ theta + cons.h, cons.names)
+    try:
+        z, _ = run_quadratic(reduced, np.zeros(M.shape[1]), 1e-3, 100, lambda z, order: Derivatives(
+            float((z - z0) @ (z - z0)), 2.0 * (z - z0), 2.0 * np.eye(len(z))), float(z0 @ z0))
+    except SolverError:
+        return theta
+    moved, f = theta + M @ z, value(theta)
+    return moved if cons.margin(moved) > 0 and value(moved) <= f + 1e-12 * max(abs(f), 1e-300) else theta
+
+
+# The retry of a failed Levenberg-damped run (1e-12 crawls along directions of Jacobi-scaled curvature below it): exact
+# Newton steps, the eigen pseudo-inverse where Cholesky fails; rounding-dominated, chart-dependent (docs/performance.md)
+RETRY_LEVENBERG = 0.0
+
+
+def run_quadratic(cons, theta, tol, max_iter, objective, f_scale, gap0=1.0):
+    """run_interior_point on ``objective`` (θ, order) → Derivatives, an arithmetic failure a SolverError (for the caller's
+    fallback or certificate); a failed run is retried once with RETRY_LEVENBERG (info["newton_levenberg"])."""
+    failure = None
+    for levenberg in (1e-12, RETRY_LEVENBERG):
+        try:
+            theta_out, _, _, info = run_interior_point(None, cons, theta, None, None, tol, max_iter, 0, False, gap0=gap0,
+                                                    objective=objective, f_scale=f_scale, levenberg=levenberg)
+            info["newton_levenberg"] = levenberg
+            if failure is not None:
+                info["newton_retry"] = f"Levenberg 1e-12 failed ({failure.status}); exact Newton steps"
+            break
+        except (ArithmeticError, np.linalg.LinAlgError) as exc:
+            failure = SolverError(f"quadratic Newton: numerical failure: {type(exc).__name__}: {exc}",
+                                  status="numerical_error")
+            failure.__cause__ = exc
+        except SolverError as exc:
+            failure = exc
+    else:
+        raise failure
+    info.pop("f_history", None)
+    return theta_out, info

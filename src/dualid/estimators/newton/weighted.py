@@ -22,10 +22,9 @@ from dualid.errors import MetricError
 from dualid.estimators.newton.fit import check_bounds
 from dualid.estimators.newton.interior_point import direction_label, direction_names, run_interior_point
 from dualid.estimators.newton.objective import CHUNK, Derivatives
-from dualid.estimators.newton.start import constant_metric_start, toward
+from dualid.estimators.newton.start import constant_metric_start, toward, toward_start
 from dualid.estimators.result import IdentificationResult
-from dualid.linalg import forward_substitute, tri_inverse
-from dualid.linalg import solve_psd
+from dualid.linalg import forward_substitute, solve_psd, tri_inverse
 from dualid.model.closure import on_closure
 from dualid.model.consistency import central_point, feasible_set
 from dualid.problem import IdentificationProblem, additive, sample_blocks
@@ -235,6 +234,7 @@ def fit_weighted_newton(
         theta0, start = constant_metric_start(problem, cons, theta_f)
     theta, _, _, info = run_interior_point(problem, cons, theta0, None, None, tol, max_iter, chunk, verbose,
                                         objective=objective, f_scale=c)
+    theta = toward_start(theta, theta0, H, cons, f_of)
     info.pop("objective")
     info.update(start=start, statistics="one pass (H = Σ YᵀC⁻¹Y)", weight=white.kind)
     names = problem.parameters.names  # the iterates' direction by parameter name (no arrays in info), as newton.fit
