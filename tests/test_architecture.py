@@ -346,14 +346,14 @@ def test_import_and_help_load_no_heavy_library(code):
 
 def test_a_fit_and_its_report_load_no_plotting_library_filter_or_conic_solver():
     """``dualid fit`` draws its figures as SVG markup (``report.svgplot``) and imports cvxpy, scipy.signal (0.7 s CPU,
-    scipy.stats with it) and MuJoCo only where a fit uses them: its modules load none of them, nor matplotlib (0.36 s)
-    or pandas."""
+    scipy.stats with it), scipy.spatial (floating bases) and MuJoCo only where a fit uses them: its modules load none
+    of them, nor matplotlib (0.36 s) or pandas."""
     import subprocess
     import sys
 
     probe = ("from dualid.robot.config import FitConfig\nfrom dualid.robot.fit import fit_robot\n"
              "from dualid.report.robot import write_fit\nimport sys\n"
-             "print(sorted(set(sys.modules) & {'matplotlib', 'cvxpy', 'pandas', 'mujoco', 'scipy.signal', 'scipy.stats'}))")
+             "print(sorted(set(sys.modules) & {'matplotlib', 'cvxpy', 'pandas', 'mujoco', 'scipy.signal', 'scipy.stats', 'scipy.spatial'}))")
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout
     assert out.strip().splitlines()[-1] == "[]"
 

@@ -29,7 +29,6 @@ from dataclasses import dataclass
 from typing import Callable, Mapping
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from dualid.data.lie import gradient_on_group, unit_quaternions
 from dualid.errors import DataError, DualidWarning
@@ -156,6 +155,8 @@ class WrenchColumns:
 
 def read_base(base: BaseColumns, column: Callable[[str], np.ndarray], where: str) -> tuple[np.ndarray, np.ndarray | None, dict]:
     """(q_base (T, 7) [x y z qx qy qz qw], v_base (T, 6) LOCAL or None, notes) from the logged columns."""
+    from scipy.spatial.transform import Rotation  # here: scipy.spatial costs ~0.3 s to import
+
     if base.matrix:
         Tm = np.stack([column(c) for c in base.matrix], axis=1).reshape(-1, 4, 4)
         last = np.abs(Tm[:, 3] - np.array([0.0, 0.0, 0.0, 1.0])).max(axis=1)
