@@ -141,12 +141,16 @@ def second_start(est, problem, result) -> float | None:
     where a second start found a lower objective. None where dm kept no noise model (its objective is then WLS's,
     convex)."""
     from dualid.estimators import noise_dm
+    from dualid.model.closure import on_closure
+    from dualid.model.consistency import feasible_set
     from dualid.estimators.noise_model import noise_model_objective
 
     if result.noise is None or result.noise.choice != "noise model":
         return None
     sensor = problem.in_sensor_chart()
-    cons, _ = est._closure(sensor, *noise_dm._scaled(sensor))
+    R, _, c = noise_dm._scaled(sensor)  # the closed set dm's fit solves on (NoiseModelDM.fit)
+    cons, _ = on_closure(feasible_set(sensor.parameters, est.constrained), R.T @ R, c, sensor.parameters.names,
+                         enabled=est.constrained)
     S, A = result.noise.sigma_tau, result.noise.sigma_a
     f_dm = noise_model_objective(sensor, result.theta, S, A)
     others = []

@@ -84,3 +84,17 @@ def test_noise_sources_truth_scores_the_floor(tmp_path):
     with pytest.raises(SystemExit) as exc:
         bench.main(["--quick", "--method", "ols", "--out", str(out)])
     assert exc.value.code == 2 and out.read_text() == "{}"
+
+
+def test_the_second_start_check_solves_dms_objective_again():
+    """noise_sources.second_start re-solves dm's fit (its closed set, its levels) from two other starts."""
+    from dualid.estimators.noise_dm import NoiseModelDM
+    from tests.test_noise_dm import eiv_problem
+
+    bench = _script("noise_sources")
+    problem, _ = eiv_problem(7, N=1000, torque=0.05, regressor=0.1)
+    est = NoiseModelDM()
+    result = est.fit(problem)
+    assert result.noise.choice == "noise model"
+    gap = bench.second_start(est, problem, result)
+    assert gap is not None and gap > -1e-6  # no lower objective from another start
