@@ -128,13 +128,7 @@ class FeasibleSet:
 
     def max_step(self, theta: np.ndarray, d: np.ndarray) -> float:
         """Largest α with every constraint strictly feasible on [θ, θ + α d) (inf if unbounded)."""
-        alpha = np.inf
-        if self.lmis and len({c.C0.shape for c in self.lmis}) == 1:  # equal blocks: one batched call
-            alpha = max_step_psd_batched(np.stack([c.C(theta) for c in self.lmis]),
-                                          np.stack([c.dC(d) for c in self.lmis]))
-        else:
-            for c in self.lmis:
-                alpha = min(alpha, max_step_psd(c.C(theta), c.dC(d)))
+        alpha = max_step_blocks([c.C(theta) for c in self.lmis], [c.dC(d) for c in self.lmis])
         if len(self.h):
             s, ds = self.G @ theta + self.h, self.G @ d
             neg = ds < 0
@@ -157,6 +151,15 @@ def repair_psd(X: np.ndarray, floor: float = 1e-14) -> np.ndarray:
 def max_step_psd(X: np.ndarray, dX: np.ndarray) -> float:
     """Largest α with X + α dX ≻ 0 for X ≻ 0."""
     return max_step_psd_batched(X[None], dX[None])
+
+
+def max_step_blocks(X: list, dX: list) -> float:
+    """Largest α with X_b + α dX_b ≻ 0 for every block b (X_b ≻ 0): one batched call per block size."""
+    sizes: dict[int, list[int]] = {}
+    for b, x in enumerate(X):
+        sizes.setdefault(x.shape[0], []).append(b)
+    return min((max_step_psd_batched(np.stack([X[b] for b in bs]), np.stack([dX[b] for b in bs]))
+                for bs in sizes.values()), default=np.inf)
 
 
 def max_step_psd_batched(X: np.ndarray, dX: np.ndarray) -> float:

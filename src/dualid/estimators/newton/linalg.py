@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dualid.model.consistency import FeasibleSet, max_step_psd, max_step_psd_batched
+from dualid.model.consistency import FeasibleSet, max_step_blocks
 
 
 def dual_direction(cons: FeasibleSet, Z, z, Cinv, s, d, target):
@@ -19,12 +19,7 @@ def dual_direction(cons: FeasibleSet, Z, z, Cinv, s, d, target):
 
 
 def dual_max_step(Z, z, dZ, dz) -> float:
-    alpha = np.inf
-    if Z and len({Zb.shape for Zb in Z}) == 1:  # equal blocks: one batched call
-        alpha = max_step_psd_batched(np.stack(Z), np.stack(dZ))
-    else:
-        for Zb, dZb in zip(Z, dZ):
-            alpha = min(alpha, max_step_psd(Zb, dZb))
+    alpha = max_step_blocks(Z, dZ)
     neg = dz < 0
     if neg.any():
         alpha = min(alpha, float(np.min(-z[neg] / dz[neg])))
