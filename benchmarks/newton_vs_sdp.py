@@ -13,11 +13,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import subprocess
 import tempfile
 import time
 from pathlib import Path
 
-from dualid.bench.runner import BASE_SAMPLES, run_in_subprocess
+from dualid.bench.runner import BASE_SAMPLES, machine, run_in_subprocess
 
 
 def _load() -> float:
@@ -47,10 +48,15 @@ def main() -> None:
                 row.update(started_utc=t0, load_before=before, load_after=_load())
                 print(json.dumps(row), flush=True)
                 rows.append(row)
-    out_json.write_text(json.dumps({"command": "python benchmarks/newton_vs_sdp.py " + " ".join(
-        f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items() if k not in ("out", "force")), "rows": rows},
-        indent=1))
-    lines = ["| problem | N | Newton [s] (it.) | Clarabel [s] (it.) | Clarabel ÷ Newton | objective gap (N − C)/C | "
+    command = "OPENBLAS_NUM_THREADS=1 python benchmarks/newton_vs_sdp.py " + " ".join(
+        f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items() if k not in ("out", "force"))
+    out_json.write_text(json.dumps({"command": command, "machine": machine(), "rows": rows}, indent=1))
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    m = machine()
+    lines = ["# The paper's DM: dualid's Newton against the Clarabel SDP", "",
+             f"Command: `{command}` (dualid {commit or 'unknown'}, {m['cpu']}, {m['cores']} cores; one process per run, "
+             "one run at a time).", "",
+             "| problem | N | Newton [s] (it.) | Clarabel [s] (it.) | Clarabel ÷ Newton | objective gap (N − C)/C | "
              "peak RSS N / C [GB] | load before → after |", "| --- | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
     by = {(r["problem"], r["N"], r["solver"]): r for r in rows}
     for name in args.problems.split(","):
