@@ -125,7 +125,7 @@ def covariance_weight(problem: IdentificationProblem, covariance, reference: _Co
     ``closed_fit`` (on the closed feasible set where its infimum is not attained, as the WLS fit that follows)."""
     theta_ols = None
     if covariance is None:
-        theta_ols = closed_fit(problem, statistics(problem), np.eye(problem.n), "ols", reference).theta
+        theta_ols = closed_fit(problem, statistics(problem), np.eye(problem.n), "ols", reference, null_step=False).theta
         covariance = residual_covariance(problem, theta_ols)
         source = "ols residuals"
     else:

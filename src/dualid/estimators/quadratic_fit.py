@@ -211,7 +211,7 @@ def _solve_with_fallback(cvx, phi, s, stats, problem, method, constrained, solve
 
 
 def closed_fit(problem: IdentificationProblem, stats: Statistics, S: np.ndarray, method: str, est,
-               info: dict | None = None) -> IdentificationResult:
+               info: dict | None = None, null_step: bool = True) -> IdentificationResult:
     """The weighted fit argmin Σ r_iᵀ S⁻¹ r_i (stats: its statistics, W = S⁻¹; est: the estimator, for constrained,
     engine, solver_options, allow_unidentifiable) by ``fit_quadratic``, except where its infimum is not attained: a
     constrained fit in which the closure projects a parameter out (an unseen mass whose growth only loosens its block,
@@ -226,7 +226,7 @@ def closed_fit(problem: IdentificationProblem, stats: Statistics, S: np.ndarray,
     info["solver_chain"] = "newton on the closed set (model.closure)" + (
         "" if est.engine == "newton" else f": the infimum is approached only as an unseen parameter grows, where "
         f"{est.engine} stops by rounding, so {est.engine} was not run")
-    common = {"constrained": True, "solver": "newton", "solver_options": {},
+    common = {"constrained": True, "solver": "newton", "solver_options": {} if null_step else {"null_step": False},
               "allow_unidentifiable": est.allow_unidentifiable}
     return fit_weighted(problem, np.asarray(S, dtype=float)[None], method, common, info)
 

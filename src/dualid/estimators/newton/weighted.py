@@ -201,6 +201,7 @@ def fit_weighted_newton(
     what: str = "the weight's covariance",
     whiten=None,
     objective_pass: bool = True,
+    null_step: bool = True,  # False: no move along the null space (a pilot whose θ feeds only its residuals)
 ) -> IdentificationResult:
     """argmin Σ r_iᵀ C_i⁻¹ r_i under the constraints (module doc); when the cheap start fails, from the weighted
     LS's central point or a phase I on the same (closed) feasible set (``newton.start.constant_metric_start``).
@@ -234,7 +235,7 @@ def fit_weighted_newton(
         theta0, start = constant_metric_start(problem, cons, theta_f)
     theta, _, _, info = run_interior_point(problem, cons, theta0, None, None, tol, max_iter, chunk, verbose,
                                         objective=objective, f_scale=c)
-    theta = toward_start(theta, theta0, H, cons, f_of)
+    theta = toward_start(theta, theta0, H, cons, f_of) if null_step else theta
     info.pop("objective")
     info.update(start=start, statistics="one pass (H = Σ YᵀC⁻¹Y)", weight=white.kind)
     names = problem.parameters.names  # the iterates' direction by parameter name (no arrays in info), as newton.fit
