@@ -1,4 +1,4 @@
-"""The one JSON writer, the one YAML text and the one Markdown table helper of every report."""
+"""Every report's one JSON writer, one YAML emitter and one Markdown table builder."""
 
 from __future__ import annotations
 
