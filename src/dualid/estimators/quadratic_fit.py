@@ -226,13 +226,13 @@ def closed_fit(problem: IdentificationProblem, stats: Statistics, S: np.ndarray,
     info["solver_chain"] = "newton on the closed set (model.closure)" + (
         "" if est.engine == "newton" else f": the infimum is approached only as an unseen parameter grows, where "
         f"{est.engine} stops by rounding, so {est.engine} was not run")
-    common = {"constrained": True, "solver": "newton", "solver_options": {} if null_step else {"null_step": False},
+    common = {"constrained": True, "solver": "newton", "solver_options": {},
               "allow_unidentifiable": est.allow_unidentifiable}
-    return fit_weighted(problem, np.asarray(S, dtype=float)[None], method, common, info)
+    return fit_weighted(problem, np.asarray(S, dtype=float)[None], method, common, info, null_step=null_step)
 
 
 def fit_weighted(sensor: IdentificationProblem, C, method: str, common: dict, info: dict,
-                 what: str = "the weight's covariance") -> IdentificationResult:
+                 what: str = "the weight's covariance", null_step: bool = True) -> IdentificationResult:
     """argmin Σ r_iᵀ C_i⁻¹ r_i (C (N, n, n) or (1, n, n), ≻ 0, or a function rows → C_i of a block of
     samples, so no N-sized array is needed) under the constraints.
 
@@ -246,7 +246,7 @@ def fit_weighted(sensor: IdentificationProblem, C, method: str, common: dict, in
         try:  # from the weighted statistics (two passes over the data; phase I on the closed set if the cheap
             # start fails: no fit of the materialised metric without the closure, model.closure)
             result = fit_weighted_newton(sensor, weight, constrained=common["constrained"], method=method,
-                                         what=f"{method}: {what}", **common["solver_options"])
+                                         what=f"{method}: {what}", null_step=null_step, **common["solver_options"])
             return dataclasses.replace(result, info={**result.info, **info})
         except np.linalg.LinAlgError:
             pass  # the message below
