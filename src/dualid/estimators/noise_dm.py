@@ -16,7 +16,8 @@ the same fit; the objective is invariant when Σ_τ, Σ_a are carried covariantl
    ``dm`` is WLS in Σ_τ: one quadratic fit from its sufficient statistics, under the same constraints;
 3. ROUNDS times: θ by dualid's primal–dual interior point on f (gradient and Hessian of ``noise_model``)
    under the physical-consistency constraints, from the pilot moved strictly inside them, then from the last θ
-   with the levels re-estimated at it;
+   with the levels re-estimated at it; a solve whose θ only feeds the levels (the pilot's, the first round's) stops
+   at LEVELS_TOL;
 4. the held-out check (``noise_model.check_noise_model``): WLS when the residual is not the modelled noise; the
    metric guard against the pilot: a degenerate fit (a ghost) gives way to the pilot (the paper's optimum) or WLS;
 5. the result records the noise levels (sensor chart), their residual shares and the rounds in ``result.noise``.
@@ -57,6 +58,8 @@ ACCEPTABLE = 1e-6  # a solve that reaches max_iter within this relative gap ends
 CHUNK_QR = 8192  # samples per block of the pilot's QR
 CHECK_SAMPLES = 20_000  # streamed data: the noise levels and the held-out check from a strided subsample of this size
 ROUNDS = 2  # noise levels at the pilot, θ; the levels at that θ, θ again (unless the first round finds Σ_a = 0)
+LEVELS_TOL = 1e-4  # relative gap of the solves whose θ only feeds the noise levels (the pilot, the first round): the
+# levels' own sampling error is ~1/√samples (1.4 % from 5,000), far above what this accuracy moves them
 
 
 def torque_scale(problem) -> np.ndarray:
@@ -158,7 +161,8 @@ class NoiseModelDM:
         for k in range(1 if fixed else ROUNDS):
             if not fixed:
                 noise = estimate_noise(sample, theta_pilot if k == 0 else theta, start=noise if k else None)
-            theta, info = self._solve(sensor, cons, theta, noise)
+            last = fixed or k == ROUNDS - 1 or not noise.acceleration_share > 0
+            theta, info = self._solve(sensor, cons, theta, noise, None if last else LEVELS_TOL)
             run.update(iterations=run["iterations"] + info["iterations"], rounds=run["rounds"] + 1,
                        status=_status(info))
             if not noise.acceleration_share > 0:  # no acceleration noise: the noise model is WLS's
@@ -199,8 +203,8 @@ class NoiseModelDM:
         if np.isfinite(objective_value(sensor, theta, self.chunk)):  # M_i(θ) positive definite at every sample
             return theta, "unit-free least squares"
         weights = NoiseLevels(np.diag(torque_scale(sensor)), np.zeros((sensor.n, sensor.n)), 1.0, 0.0, 0)
-        return self._solve(sensor, cons, central_point(theta, cons) if self.constrained else theta, weights)[0], \
-            "unit-free least squares"
+        return self._solve(sensor, cons, central_point(theta, cons) if self.constrained else theta, weights,
+                           LEVELS_TOL)[0], "unit-free least squares"
 
     def _check(self, sensor, theta, noise) -> NoiseCheck | None:
         W = np.diag(1.0 / np.mean(sensor.residual(theta) ** 2, axis=0))
@@ -209,17 +213,19 @@ class NoiseModelDM:
         except (MetricError, NotPositiveDefinite, np.linalg.LinAlgError):
             return None
 
-    def _solve(self, problem, cons, theta, noise: NoiseLevels):
-        """θ minimising f with the levels fixed, from θ, on the closed set ``cons``: with Σ_a = 0 WLS's quadratic in Σ_τ⁻¹
-        from its sufficient statistics (one pass); else f is not convex: the interior point's non-convex mode."""
+    def _solve(self, problem, cons, theta, noise: NoiseLevels, tol: float | None = None):
+        """θ minimising f with the levels fixed, from θ, on the closed set ``cons``, to ``tol`` (None: the estimator's):
+        with Σ_a = 0 WLS's quadratic in Σ_τ⁻¹ from its sufficient statistics (one pass); else f is not convex: the
+        interior point's non-convex mode."""
         S, A = noise.sigma_tau, noise.sigma_a
+        tol = self.tol if tol is None else max(tol, self.tol)
         if self.solver == "cvxpy":
-            return solve_noise_model_cvxpy(problem, cons, theta, S, A, self.tol, self.max_iter, self.cvxpy_solver)
+            return solve_noise_model_cvxpy(problem, cons, theta, S, A, tol, self.max_iter, self.cvxpy_solver)
         if not np.any(A):
             stats = statistics(problem, np.linalg.inv(S), self.chunk)
             objective, theta_ls = quadratic_objective(stats.H, stats.g, stats.c, problem.parameters)
             try:
-                fit, info = run_quadratic(cons, theta, self.tol, self.max_iter, objective,
+                fit, info = run_quadratic(cons, theta, tol, self.max_iter, objective,
                                           stopping_scale(stats.c - stats.g @ theta_ls, stats.c))
                 return toward_start(fit, theta, stats.H, cons, lambda th: value_or_inf(objective, th)), info
             except SolverError:  # the convex-mode steps stalled (arms near a block's boundary): the general path
@@ -232,7 +238,7 @@ class NoiseModelDM:
             scale = noise_model_scale(problem, theta, S, A, self.chunk)
         except NotPositiveDefinite:
             raise MetricError("dm: the noise model's covariance is not positive definite at the start") from None
-        theta, _, _, info = run_interior_point(problem, cons, theta, None, None, self.tol, self.max_iter, self.chunk,
+        theta, _, _, info = run_interior_point(problem, cons, theta, None, None, tol, self.max_iter, self.chunk,
                                                False, objective=objective, f_scale=scale, convex=False,
                                                acceptable=ACCEPTABLE)
         return theta, info

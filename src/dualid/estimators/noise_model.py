@@ -100,20 +100,11 @@ def noise_model_sums(problem, theta: np.ndarray, sigma_tau: np.ndarray, sigma_a:
         Q = block.metric.apply(u, rows)  # [M_k u]_k
         grad += 2.0 * (w.reshape(-1) @ Y.reshape(-1, p)) - 2.0 * np.einsum("ca,cak->k", u, P)
         SP = np.matmul(sigma_a, P)  # Σ_a P (c, n, p)
-        D = Y - Q - _bmm(M, SP)
-        Z = _bmm(Li, D).reshape(-1, p)
+        D = Y - Q - np.matmul(M, SP)
+        Z = np.matmul(Li, D).reshape(-1, p)
         gn += 2.0 * (Z.T @ Z)
         neg += 2.0 * (P.reshape(-1, p).T @ SP.reshape(-1, p))
     return f, grad, gn, neg
-
-
-def _bmm(A: np.ndarray, X: np.ndarray) -> np.ndarray:
-    """A_i X_i for A (c, n, n), X (c, n, p): a loop over the small n, vectorised over samples and columns (numpy's
-    batched matmul of many 7×7 by 7×p products is several times slower)."""
-    out = A[:, :, 0, None] * X[:, None, 0, :]
-    for b in range(1, A.shape[2]):
-        out += A[:, :, b, None] * X[:, None, b, :]
-    return out
 
 
 def _positive_definite(K: np.ndarray) -> bool:
