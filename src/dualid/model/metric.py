@@ -130,7 +130,9 @@ class AffineMetric:
     def apply(self, w: np.ndarray, rows: slice | np.ndarray = slice(None)) -> np.ndarray:
         """(N', n, p): the columns M_ik w_i for w (N', n)."""
         out = np.zeros((w.shape[0], w.shape[1], self.n_params))
-        return -self.apply_quad(w, rows, out)[0]
+        for t, _, Eu in self.factors(w, rows):
+            out[:, :, _as_slice(t.indices)] += np.matmul(np.swapaxes(t.J[rows], 1, 2), np.swapaxes(Eu, 1, 2))
+        return out
 
     def apply_quad(self, w: np.ndarray, rows: slice | np.ndarray = slice(None),
                    out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
