@@ -255,3 +255,17 @@ def test_without_velocities_the_acceleration_noise_has_no_shape_and_dm_says_so()
     problem, _ = eiv_problem(7, N=300, torque=0.05, regressor=0.0)
     res = NoiseModelDM().fit(replace(problem, v=np.zeros_like(problem.v)))  # e.g. logs of Y and τ only
     assert res.noise.choice == "no acceleration noise (the velocities are 0: Σ_a has no shape): WLS"
+
+
+def test_a_first_round_over_its_budget_starts_again_from_the_papers_optimum(monkeypatch):
+    """The first round from a least-squares pilot has LEVELS_MAX_ITER iterations; beyond them the fit starts again
+    from the paper's optimum, reaches the same optimum, and records why."""
+    import dualid.estimators.noise_dm as noise_dm
+
+    problem, _ = eiv_problem(5, N=200)
+    fit = NoiseModelDM().fit(problem)
+    assert fit.info["start"] == "unit-free least squares" and fit.noise.acceleration_share > 0
+    monkeypatch.setattr(noise_dm, "LEVELS_MAX_ITER", 2)
+    again = NoiseModelDM().fit(problem)
+    assert again.info["start"] == "dm-paper (the fit from the unit-free least squares pilot failed)"
+    assert again.status == "optimal" and rel(problem.Y @ again.theta, problem.Y @ fit.theta) < 1e-6
