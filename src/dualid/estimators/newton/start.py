@@ -177,9 +177,9 @@ def starting_point(problem, cons: FeasibleSet, chunk: int) -> tuple[np.ndarray, 
 
 
 def toward_start(theta, start, H, cons, value):
-    """Of the minimisers θ + M z (M: the null space of H = ½∇²f, f unchanged) a central one toward ``start`` (the fit's
-    start; Jacobi-scaled chart): an interior point drifts along unseen directions, pushed by its barrier alone (DFKI
-    WLS: Joint1.Iyy = Izz = 110 kg m² → 0.0098, the same predictions). ``value``: θ → f."""
+    """Of the minimisers θ + M z (M: the null space of H = ½∇²f, f unchanged) the one nearest ``start`` (the fit's start;
+    Jacobi-scaled chart; to 1e-6 of that distance², strictly inside): an interior point drifts along unseen directions,
+    pushed by its barrier alone (DFKI WLS: Joint1.Iyy = Izz = 110 kg m² → 0.0098, the same predictions). ``value``: θ → f."""
     d = jacobi_scale(H)
     _, U, keep = gram_eigh(H / np.outer(d, d))
     M, z0 = U[:, ~keep] / d[:, None], U[:, ~keep].T @ (d * (start - theta))
@@ -188,7 +188,7 @@ def toward_start(theta, start, H, cons, value):
     reduced = FeasibleSet(tuple(LMI(c.name, np.arange(M.shape[1]), np.stack([c.dC(m) for m in M.T]), c.C(theta))
                                 for c in cons.lmis), cons.G @ M, cons.G @ theta + cons.h, cons.names)
     try:
-        z, _ = run_quadratic(reduced, np.zeros(M.shape[1]), 1e-3, 100, lambda z, order: Derivatives(
+        z, _ = run_quadratic(reduced, np.zeros(M.shape[1]), 1e-6, 100, lambda z, order: Derivatives(
             float((z - z0) @ (z - z0)), 2.0 * (z - z0), 2.0 * np.eye(len(z))), float(z0 @ z0))
     except SolverError:
         return theta
