@@ -58,7 +58,9 @@ def test_dual_metric_minimiser_is_the_same_in_every_chart_while_ols_moves(seed):
         dm_other = DualMetric(solver="newton").fit(other)
         assert rel(dm_other.theta, dm.theta) < 1e-6, name
         assert rel(dm_other.objective, dm.objective) < 1e-6, name
-        assert rel(OLS().fit(other).theta, ols.theta) > 1e-3, name
+    # OLS moves under a change of units (a random chart may be close to a multiple of a rotation, which it does not see)
+    units = problem.in_coordinates(np.diag([1e3, 1.0, 1e-3]))
+    assert rel(OLS().fit(units).theta, ols.theta) > 1e-3
 
 
 @settings(max_examples=3, deadline=None)
