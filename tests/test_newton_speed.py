@@ -9,7 +9,7 @@ from dualid.bench.runner import base_samples, build_problem
 from dualid.estimators.least_squares import wls_reference
 from dualid.estimators.newton.objective import statistics
 from dualid.metric_guard import guard_info
-from dualid.model.consistency import max_step_psd, max_step_psd_batched, feasible_set
+from dualid.model.consistency import feasible_set, max_step_blocks, max_step_psd_batched
 
 
 @pytest.fixture(scope="module")
@@ -29,8 +29,11 @@ def test_the_batched_max_step_is_the_generalised_eigenvalue_bound():
     # reference: X + α dX ≻ 0 ⇔ α < −1/λ_min(dX, X), scipy's generalised symmetric eigenproblem per block
     lam = min(scipy.linalg.eigh(d, x, eigvals_only=True)[0] for x, d in zip(X, dX))
     assert max_step_psd_batched(X, dX) == pytest.approx(-1.0 / lam, rel=1e-10)
-    assert max_step_psd(X[2], dX[2]) == pytest.approx(-1.0 / scipy.linalg.eigh(dX[2], X[2], eigvals_only=True)[0],
-                                                       rel=1e-10)
+    assert max_step_blocks([X[2]], [dX[2]]) == pytest.approx(
+        -1.0 / scipy.linalg.eigh(dX[2], X[2], eigvals_only=True)[0], rel=1e-10)
+    # blocks of two sizes (a body's 4×4 beside a joint's 1×1: 1 − α > 0 ⇔ α < 1), one batched call per size
+    assert max_step_blocks(list(X) + [np.eye(1)], list(dX) + [-np.eye(1)]) == pytest.approx(min(-1.0 / lam, 1.0),
+                                                                                            rel=1e-10)
     assert max_step_psd_batched(X, np.abs(dX) * 0 + np.eye(4)) == np.inf  # a PSD direction never leaves the cone
 
 

@@ -148,11 +148,6 @@ def repair_psd(X: np.ndarray, floor: float = 1e-14) -> np.ndarray:
         return (U * np.maximum(lam, floor * max(lam.max(), 1e-300))) @ U.T
 
 
-def max_step_psd(X: np.ndarray, dX: np.ndarray) -> float:
-    """Largest α with X + α dX ≻ 0 for X ≻ 0."""
-    return max_step_psd_batched(X[None], dX[None])
-
-
 def max_step_blocks(X: list, dX: list) -> float:
     """Largest α with X_b + α dX_b ≻ 0 for every block b (X_b ≻ 0): one batched call per block size."""
     sizes: dict[int, list[int]] = {}
