@@ -109,7 +109,7 @@ def main() -> None:
     load0 = [round(x, 2) for x in os.getloadavg()]
     with tempfile.TemporaryDirectory(prefix="dualid-dask-") as tmp:
         path = Path(tmp) / "all.parquet"
-        shape = write_parquet(path, args.n)
+        shape = write_parquet(path, args.n, "crazyflie")
         (Path(tmp) / "parts").mkdir()
         parts = split(path, args.files, Path(tmp) / "parts")
         rows = run(path, parts, args.methods.split(","), args.chunk, [int(w) for w in args.workers.split(",")],

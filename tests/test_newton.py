@@ -268,7 +268,7 @@ def test_warm_start_from_a_subsample_starts_at_its_optimum_and_reaches_the_same_
     warm = fit_dual_metric_newton(problem, warm_start_samples=25)
     assert re.fullmatch(r"warm start from 25 samples \(\d+ iterations\)", warm.info["start"])  # no fallback
     # the full solve starts at the subsample's optimum: f there, from an independent SDP fit of the
-    # same strided subsample (the warm start solves it to 1e-4 only, hence rtol)
+    # same strided subsample (the warm start solves it to WARM_TOL = 1e-6 only, hence rtol)
     sub = problem.subset(slice(0, None, problem.N // 25))
     theta_sub = DualMetric(solver="cvxpy", allow_unidentifiable=True).fit(sub).theta
     f_sub = dual_metric_derivatives(problem, theta_sub, 0, 4096).f
