@@ -280,6 +280,22 @@ def test_warm_start_from_a_subsample_starts_at_its_optimum_and_reaches_the_same_
     np.testing.assert_allclose(problem.Y @ warm.theta, problem.Y @ cold.theta, atol=1e-5 * np.abs(problem.Y @ cold.theta).max())
 
 
+def test_a_large_subsample_is_itself_warm_started_and_the_optimum_is_the_same(monkeypatch):
+    """The subsample's solve is the same procedure: large enough (here with MIN_WARM lowered; by default 50,000 of
+    N ≥ 200,000 samples), it starts from its own strided subsample."""
+    import dualid.estimators.newton.fit as newton_fit
+
+    monkeypatch.setattr(newton_fit, "MIN_WARM", 100)
+    problem, _ = rigid_body_problem(crazyflie_like(), 4000, seed=7, noise=0.05)
+    cold = fit_dual_metric_newton(problem, warm_start_samples=0)
+    warm = fit_dual_metric_newton(problem, warm_start_samples=800)
+    assert re.fullmatch(r"warm start from 800 samples \(\d+ iterations\), itself from a warm start from 100 samples "
+                        r"\(\d+ iterations\)", warm.info["start"])
+    assert warm.info["relative_gap"] <= 1e-9
+    np.testing.assert_allclose(warm.objective, cold.objective, rtol=1e-8)
+    np.testing.assert_allclose(problem.Y @ warm.theta, problem.Y @ cold.theta, atol=1e-5 * np.abs(problem.Y @ cold.theta).max())
+
+
 def test_a_failed_warm_start_is_recorded_and_the_cold_start_runs():
     problem, _ = rigid_body_problem(crazyflie_like(), 60, seed=7, noise=0.05)
     cold = fit_dual_metric_newton(problem, warm_start_samples=0)

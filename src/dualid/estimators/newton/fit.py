@@ -88,6 +88,40 @@ def check_bounds(problem: IdentificationProblem, constrained: bool) -> None:
         )
 
 
+def _solve(problem, cons, tol, max_iter, chunk, verbose, warm_start_samples) -> tuple[np.ndarray, dict, str]:
+    """(θ, info, start) by the interior point from a warm start on a strided subsample (itself solved so) or cold."""
+    warm, failed_warm = None, ""  # the subsample: warm_start_samples when N > 4× that, else N/8 from 8 × MIN_WARM on
+    m = warm_start_samples if problem.N > 4 * warm_start_samples else problem.N // 8
+    if warm_start_samples and m >= min(warm_start_samples, MIN_WARM) and problem.N > 4 * m:
+        sub = problem.subset(slice(0, None, problem.N // m))
+        try:  # the subsample solved the same way (from its own subsample if it is large: 6,250 of 50,000 samples)
+            th, info_sub, start_sub = _solve(sub, cons, WARM_TOL, max_iter, chunk, verbose, warm_start_samples)
+            try:  # the objective's scale, from the subsample (saves a pass over all samples)
+                f_scale = force_scale(sub, th, chunk) * problem.N / sub.N
+            except np.linalg.LinAlgError:
+                f_scale = None
+            warm = (th, dual_metric_derivatives(problem, th, 2, chunk))  # M_i(θ) ≻ 0 on every sample?
+            start = f"warm start from {sub.N} samples ({info_sub['iterations']} iterations)" + (
+                f", itself from a {start_sub}" if start_sub.startswith("warm") else "")
+        except SolverError as exc:  # recorded in info["start"]; the cold start below decides
+            warm, failed_warm = None, f"warm start from {sub.N} samples failed ({exc.status}); "
+        except NotPositiveDefinite:
+            warm, failed_warm = None, f"warm start from {sub.N} samples left some M_i(θ) indefinite; "
+    if warm is not None:
+        try:  # duals re-centred at θ at WARM_GAP: the subsample's own sit too close to its boundary (they would jam)
+            theta, _, _, info = run_interior_point(problem, cons, warm[0], None, None, tol, min(max_iter, WARM_MAX_ITER),
+                                                chunk, verbose, der=warm[1], gap0=WARM_GAP, f_scale=f_scale,
+                                                balance=0.0)
+        except SolverError as exc:  # the subsample's optimum can sit near a boundary the full data move away from
+            warm = None
+            failed_warm = f"{start} failed ({exc.status}); "
+    if warm is None:
+        theta, start = starting_point(problem, cons, chunk)
+        theta, _, _, info = run_interior_point(problem, cons, theta, None, None, tol, max_iter, chunk, verbose)
+        start = failed_warm + start
+    return theta, info, start
+
+
 def fit_dual_metric_newton(
     problem: IdentificationProblem,
     *,
@@ -102,47 +136,12 @@ def fit_dual_metric_newton(
     """Dual-metric least squares by a primal–dual interior-point Newton method (see module doc).
 
     tol: relative tolerance on f for (duality gap + squared Newton decrement of the Lagrangian); chunk: samples per
-    pass (memory O(chunk·n·p)); raises SolverError after max_iter iterations. warm_start_samples: when N > 4× this
-    (or N ≥ 8 × MIN_WARM: an eighth of the samples), first solve on an evenly strided subsample of that size (to
-    WARM_TOL) and start from its θ, the duals re-centred at a small gap (WARM_GAP); 0 disables it.
-    """
+    pass (memory O(chunk·n·p)); raises SolverError after max_iter iterations. warm_start_samples: when N > 4× this (or
+    N ≥ 8 × MIN_WARM: N/8), first solve an evenly strided subsample of that size so (to WARM_TOL), start from its θ."""
     t0 = time.perf_counter()
     cons = feasible_set(problem.parameters, constrained)
     check_bounds(problem, constrained)
-    warm, failed_warm = None, ""
-    # the subsample: warm_start_samples when N > 4× that; else an eighth of the data from 8 × MIN_WARM samples on
-    # (at N = 100,000 a 12,500-sample warm start saves about 6 of the 9 full passes)
-    m = warm_start_samples if problem.N > 4 * warm_start_samples else problem.N // 8
-    if warm_start_samples and m >= min(warm_start_samples, MIN_WARM) and problem.N > 4 * m:
-        sub = problem.subset(slice(0, None, problem.N // m))
-        theta, start = starting_point(sub, cons, chunk)
-        try:
-            th, _, _, info_sub = run_interior_point(sub, cons, theta, None, None, WARM_TOL, max_iter, chunk, verbose)
-            try:  # the objective's scale, from the subsample (saves a pass over all samples)
-                f_scale = force_scale(sub, th, chunk) * problem.N / sub.N
-            except np.linalg.LinAlgError:
-                f_scale = None
-            der = dual_metric_derivatives(problem, th, 2, chunk)  # M_i(θ) ≻ 0 on every sample?
-            warm = (th, der)
-            start = f"warm start from {sub.N} samples ({info_sub['iterations']} iterations)"
-        except SolverError as exc:  # recorded in info["start"]; the cold start below decides
-            warm, failed_warm = None, f"warm start from {sub.N} samples failed ({exc.status}); "
-        except NotPositiveDefinite:
-            warm, failed_warm = None, f"warm start from {sub.N} samples left some M_i(θ) indefinite; "
-    if warm is not None:
-        # primal warm start; duals re-centred at θ with a small gap (WARM_GAP f): the subsample's own duals sit
-        # too close to its boundary for the full problem and would jam the iterations
-        try:
-            theta, Z, z, info = run_interior_point(problem, cons, warm[0], None, None, tol, min(max_iter, WARM_MAX_ITER),
-                                                chunk, verbose, der=warm[1], gap0=WARM_GAP, f_scale=f_scale,
-                                                balance=0.0)
-        except SolverError as exc:  # the subsample's optimum can sit near a boundary the full data move away from
-            warm = None
-            failed_warm = f"{start} failed ({exc.status}); "
-    if warm is None:
-        theta, start = starting_point(problem, cons, chunk)
-        theta, Z, z, info = run_interior_point(problem, cons, theta, None, None, tol, max_iter, chunk, verbose)
-        start = failed_warm + start
+    theta, info, start = _solve(problem, cons, tol, max_iter, chunk, verbose, warm_start_samples)
     f = info.pop("objective")
     info["start"] = start
     candidate = info.pop("diverging_candidate", None)
