@@ -280,6 +280,19 @@ def test_warm_start_from_a_subsample_starts_at_its_optimum_and_reaches_the_same_
     np.testing.assert_allclose(problem.Y @ warm.theta, problem.Y @ cold.theta, atol=1e-5 * np.abs(problem.Y @ cold.theta).max())
 
 
+def test_the_default_warm_start_begins_at_eight_thousand_samples_and_keeps_the_optimum():
+    """From N = 8 × MIN_WARM = 8,000 samples the fit starts from an eighth of them (1,000 here)."""
+    problem, _ = rigid_body_problem(crazyflie_like(), 8000, seed=3, noise=0.05)
+    cold = fit_dual_metric_newton(problem, warm_start_samples=0)
+    warm = fit_dual_metric_newton(problem)
+    assert re.fullmatch(r"warm start from 1000 samples \(\d+ iterations\)", warm.info["start"])
+    assert warm.info["iterations"] < cold.info["iterations"]
+    np.testing.assert_allclose(warm.objective, cold.objective, rtol=1e-8)
+    np.testing.assert_allclose(problem.Y @ warm.theta, problem.Y @ cold.theta, atol=1e-5 * np.abs(problem.Y @ cold.theta).max())
+    below = problem.subset(slice(0, 7992))
+    assert "warm" not in fit_dual_metric_newton(below).info["start"]
+
+
 def test_a_large_subsample_is_itself_warm_started_and_the_optimum_is_the_same(monkeypatch):
     """The subsample's solve is the same procedure: large enough (here with MIN_WARM lowered; by default 50,000 of
     N ≥ 200,000 samples), it starts from its own strided subsample."""

@@ -18,7 +18,7 @@ from dualid.model.consistency import feasible_set
 from dualid.problem import IdentificationProblem
 
 WARM_TOL = 1e-6  # the subsample's tolerance (its optimum is far from the full one anyway; 1e-8 cost 2 of its passes) …
-MIN_WARM = 5_000  # smallest default warm-start subsample
+MIN_WARM = 1_000  # smallest default warm-start subsample (so from N = 8,000 on)
 WARM_GAP = 1e-8  # … and the gap (× f) the full problem's duals are re-centred at (1e-6: a third full pass; Crazyflie 1e6)
 WARM_MAX_ITER = 10  # full-data iterations a warm start may take before the cold start takes over (it needs 2–4 where
 # it helps; where the subsample's optimum is no guide — e.g. an optimum at infinity — each further one is a wasted pass)
