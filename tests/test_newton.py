@@ -294,8 +294,8 @@ def test_the_default_warm_start_begins_at_eight_thousand_samples_and_keeps_the_o
 
 
 def test_a_large_subsample_is_itself_warm_started_and_the_optimum_is_the_same(monkeypatch):
-    """The subsample's solve is the same procedure: large enough (here with MIN_WARM lowered; by default 50,000 of
-    N ≥ 200,000 samples), it starts from its own strided subsample."""
+    """The subsample's solve is the same procedure: large enough (here with MIN_WARM lowered to 100: one nested
+    level on 4,000 samples; by default from N = 64,000 on), it starts from its own strided subsample."""
     import dualid.estimators.newton.fit as newton_fit
 
     monkeypatch.setattr(newton_fit, "MIN_WARM", 100)
