@@ -41,8 +41,15 @@ def test_recovers_truth_from_noiseless_drag_data(name):
     problem, theta = drag_problem(np.random.default_rng(0), N=40, n=3)
     result = ESTIMATORS[name].fit(problem)
     np.testing.assert_allclose(result.theta, theta, rtol=RTOL.get(name, 1e-6))
-    if not name.startswith("wls"):  # W = Σ̂⁻¹ grows without bound as the residuals vanish
-        assert result.objective == pytest.approx(0.0, abs=1e-7)
+    assert result.objective == pytest.approx(0.0, abs=1e-7)
+    if name.startswith("wls"):  # Σ̂ from rounding-level residuals would weigh rounding: the identity instead, said
+        assert result.info["covariance"] == "identity" and "rounding level" in result.info["fallback"]
+
+
+def test_wls_weights_come_from_the_residuals_once_there_is_noise():
+    problem, _ = drag_problem(np.random.default_rng(0), N=40, n=3, noise=1e-4)  # Σr² ≈ 7e-11 Στ²: noise
+    result = WLS().fit(problem)
+    assert result.info["covariance"] == "ols residuals" and "fallback" not in result.info
 
 
 @pytest.mark.parametrize("name", sorted(ESTIMATORS))

@@ -19,7 +19,7 @@ import numpy as np
 
 from dualid.errors import ConfigError, ConsistencyError, DataError, DualidError, SolverError
 from dualid.estimators.base import check_covariance, check_solver, freeze_options
-from dualid.estimators.newton.objective import energy_statistics, statistics
+from dualid.estimators.newton.objective import ROUNDING, energy_statistics, statistics
 from dualid.estimators.quadratic_fit import closed_fit, fit_quadratic
 from dualid.estimators.quadratic_newton import fit_quadratic_newton
 from dualid.estimators.result import IdentificationResult
@@ -123,20 +123,22 @@ def _residual_products(problem, theta: np.ndarray) -> np.ndarray:
 def covariance_weight(problem: IdentificationProblem, covariance, reference: _Common) -> tuple[np.ndarray, dict]:
     """W = Σ̂⁻¹ from a given covariance, or from the residuals of OLS under the same constraints, fitted as
     ``closed_fit`` (on the closed feasible set where its infimum is not attained, as the WLS fit that follows)."""
-    theta_ols = None
+    theta_ols, extra = None, {}
     if covariance is None:
-        theta_ols = closed_fit(problem, statistics(problem), np.eye(problem.n), "ols", reference, null_step=False).theta
-        covariance = residual_covariance(problem, theta_ols)
-        source = "ols residuals"
+        stats = statistics(problem)
+        theta_ols = closed_fit(problem, stats, np.eye(problem.n), "ols", reference, null_step=False).theta
+        covariance, source = residual_covariance(problem, theta_ols), "ols residuals"
+        if problem.N * np.trace(covariance) <= ROUNDING * stats.c:  # exact data: a rounding residual estimates no noise
+            covariance, source = np.eye(problem.n), "identity"
+            extra = {"fallback": "identity weights: the OLS residual is at rounding level (exact data)"}
     else:
-        covariance = np.asarray(covariance, dtype=float)
-        source = "given"
+        covariance, source = np.asarray(covariance, dtype=float), "given"
         if covariance.shape != (problem.n, problem.n):
             raise DataError(f"covariance: expected shape ({problem.n}, {problem.n}) for this problem's "
                             f"{problem.n} coordinates, got {covariance.shape}")
     W = np.linalg.inv(covariance)
     return 0.5 * (W + W.T), {"covariance": source, "covariance_diag": covariance.diagonal().tolist(),
-                             "covariance_matrix": covariance.tolist(), "theta_ols": theta_ols}
+                             "covariance_matrix": covariance.tolist(), "theta_ols": theta_ols, **extra}
 
 
 @dataclass(frozen=True)
@@ -152,10 +154,9 @@ class WLS(_Common):
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
         W, info = covariance_weight(problem, self.covariance, self)
-        S = np.asarray(info["covariance_matrix"])
-        return self._guarded(closed_fit(problem, statistics(problem, W), S, self.name, self, info={
-            k: v for k, v in info.items() if k in ("covariance", "covariance_matrix")}), problem, info["theta_ols"],
-            "pilot (ols)")
+        keep = {k: v for k, v in info.items() if k in ("covariance", "covariance_matrix", "fallback")}
+        return self._guarded(closed_fit(problem, statistics(problem, W), np.asarray(info["covariance_matrix"]), self.name,
+                                        self, info=keep), problem, info["theta_ols"], "pilot (ols)")
 
 
 @dataclass(frozen=True)
@@ -225,8 +226,8 @@ class RegularizedWLS(_Common):
         gamma = float(self.gamma) * (problem.N * problem.n if self.per_equation else 1.0)
         return self._guarded(self._fit(
             problem, statistics(problem, W), regularizer=(self.regularizer, theta0, gamma),
-            info={"covariance": info["covariance"], "covariance_matrix": info["covariance_matrix"], "gamma": gamma,
-                  "prior_floor": float(self.prior_floor), "prior_lifted": lifted},
+            info={**{k: v for k, v in info.items() if k in ("covariance", "covariance_matrix", "fallback")},
+                  "gamma": gamma, "prior_floor": float(self.prior_floor), "prior_lifted": lifted},
         ), problem, theta0, "prior θ₀")
 
 
