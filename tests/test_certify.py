@@ -63,9 +63,11 @@ def test_an_accurate_clarabel_solution_is_kept_and_certified():
     assert result.info["cvxpy_above_certified"] <= 1e-7 and result.info["certified_gap"] <= 1e-9
 
 
-@pytest.mark.parametrize("method", ["ols", "energy", "wls"])
+@pytest.mark.parametrize("method", ["ols", "energy"])
 def test_exact_data_are_certified_at_the_rounding_floor(method):
-    """f(θ̂) ~ 1e-26 (exact torques): no relative test on f can pass, but f ≥ 0 certifies θ̂ to f(θ̂)/f(0)."""
+    """f(θ̂) ~ 1e-26 (exact torques): no relative test on f can pass, but f ≥ 0 certifies θ̂ to f(θ̂)/f(0). (WLS on
+    exact data weights by a noise at the rounding floor, 1e-12 mean τ_j²: there Clarabel's answer is not at the
+    floor, and the interior point solves it: test_estimators.)"""
     problem, _ = corpus_problem("chain RR, 2 dof, exact")
     result = make_estimator(method, allow_unidentifiable=True, options={"solver": "cvxpy"}).fit(problem)
     assert (result.status, result.solver) == ("optimal", "CLARABEL")

@@ -42,8 +42,8 @@ def test_recovers_truth_from_noiseless_drag_data(name):
     result = ESTIMATORS[name].fit(problem)
     np.testing.assert_allclose(result.theta, theta, rtol=RTOL.get(name, 1e-6))
     assert result.objective == pytest.approx(0.0, abs=1e-7)
-    if name.startswith("wls"):  # Σ̂ from rounding-level residuals would weigh rounding: the identity instead, said
-        assert result.info["covariance"] == "identity" and "rounding level" in result.info["fallback"]
+    if name.startswith("wls"):  # Σ̂ from rounding-level residuals would weigh rounding: 1e-12 mean τ_j² instead, said
+        assert result.info["covariance"] == "rounding floor" and "exact data" in result.info["fallback"]
 
 
 def test_wls_weights_come_from_the_residuals_once_there_is_noise():

@@ -129,8 +129,8 @@ def covariance_weight(problem: IdentificationProblem, covariance, reference: _Co
         theta_ols = closed_fit(problem, stats, np.eye(problem.n), "ols", reference, null_step=False).theta
         covariance, source = residual_covariance(problem, theta_ols), "ols residuals"
         if problem.N * np.trace(covariance) <= ROUNDING * stats.c:  # exact data: a rounding residual estimates no noise
-            covariance, source = np.eye(problem.n), "identity"
-            extra = {"fallback": "identity weights: the OLS residual is at rounding level (exact data)"}
+            covariance = ROUNDING * np.diag(np.diag(residual_covariance(problem, np.zeros(problem.p))))  # mean τ_j²
+            source, extra = "rounding floor", {"fallback": "exact data (OLS residual at rounding): W = 1/(1e-12 mean τ_j²)"}
     else:
         covariance, source = np.asarray(covariance, dtype=float), "given"
         if covariance.shape != (problem.n, problem.n):
