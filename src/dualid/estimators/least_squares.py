@@ -137,8 +137,8 @@ def covariance_weight(problem: IdentificationProblem, covariance, reference: _Co
             raise DataError(f"covariance: expected shape ({problem.n}, {problem.n}) for this problem's "
                             f"{problem.n} coordinates, got {covariance.shape}")
     W = np.linalg.inv(covariance)
-    return 0.5 * (W + W.T), {"covariance": source, "covariance_diag": covariance.diagonal().tolist(),
-                             "covariance_matrix": covariance.tolist(), "theta_ols": theta_ols, **extra}
+    return 0.5 * (W + W.T), {"covariance": source, "covariance_matrix": covariance.tolist(), **extra,
+                             "theta_ols": theta_ols}
 
 
 @dataclass(frozen=True)
@@ -154,9 +154,9 @@ class WLS(_Common):
 
     def fit(self, problem: IdentificationProblem) -> IdentificationResult:
         W, info = covariance_weight(problem, self.covariance, self)
-        keep = {k: v for k, v in info.items() if k in ("covariance", "covariance_matrix", "fallback")}
+        theta_ols = info.pop("theta_ols")
         return self._guarded(closed_fit(problem, statistics(problem, W), np.asarray(info["covariance_matrix"]), self.name,
-                                        self, info=keep), problem, info["theta_ols"], "pilot (ols)")
+                                        self, info=info), problem, theta_ols, "pilot (ols)")
 
 
 @dataclass(frozen=True)
@@ -223,11 +223,11 @@ class RegularizedWLS(_Common):
         theta0, lifted = lift_prior(problem.parameters, theta0, float(self.prior_floor))
         theta0 = check_nominal(problem.parameters, theta0, strict=True)
         W, info = covariance_weight(problem, self.covariance, self)
+        info.pop("theta_ols")  # the guard's reference here is θ₀
         gamma = float(self.gamma) * (problem.N * problem.n if self.per_equation else 1.0)
         return self._guarded(self._fit(
             problem, statistics(problem, W), regularizer=(self.regularizer, theta0, gamma),
-            info={**{k: v for k, v in info.items() if k in ("covariance", "covariance_matrix", "fallback")},
-                  "gamma": gamma, "prior_floor": float(self.prior_floor), "prior_lifted": lifted},
+            info={**info, "gamma": gamma, "prior_floor": float(self.prior_floor), "prior_lifted": lifted},
         ), problem, theta0, "prior θ₀")
 
 
