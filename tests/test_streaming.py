@@ -7,7 +7,7 @@ import pytest
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.newton import dual_metric_derivatives
 from dualid.estimators.newton.objective import energy_statistics, statistics
-from dualid.estimators.newton.weighted import weighted_statistics
+from dualid.estimators.newton.weighted import weighted_statistics, whitener
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.problem import IdentificationProblem
 from dualid.streaming import ArraySource, ChunkedProblem, ParquetSource
@@ -65,14 +65,14 @@ def test_chunked_statistics_equal_the_materialised_ones(data):
                         ("energy", energy_statistics(problem, chunk=50))):
             H, g, c = reference[key]
             assert _rel(st.H, H) < 1e-12 and _rel(st.g, g) < 1e-12 and abs(st.c - c) / c < 1e-12, key
-    # the per-sample weight C_i = M_i(θ): Σ Y_iᵀ C_i⁻¹ Y_i against dense solves
+    # a constant weight C: Σ Y_iᵀ C⁻¹ Y_i against dense solves
     theta = data[0].nominal
-    M = whole.metric.evaluate(theta)
-    MiY = np.linalg.solve(M, whole.Y)
-    H = np.einsum("nap,naq->pq", whole.Y, MiY)
-    g = np.einsum("nap,na->p", MiY, whole.tau)
+    C = whole.metric.evaluate(theta)[0]
+    CiY = np.linalg.solve(C, whole.Y)
+    H = np.einsum("nap,naq->pq", whole.Y, CiY)
+    g = np.einsum("nap,na->p", CiY, whole.tau)
     for problem in (whole, chunked):
-        Hc, gc, cc = weighted_statistics(problem, lambda b, rows: b.metric.evaluate(theta, rows), chunk=64)
+        Hc, gc, cc = weighted_statistics(problem, whitener(problem, C), chunk=64)
         assert _rel(Hc, H) < 1e-12 and _rel(gc, g) < 1e-12
     # the dual-metric derivatives, chunked over the source's blocks and the solver's chunks
     d0, d1 = dual_metric_derivatives(whole, theta, 2, 10_000), dual_metric_derivatives(chunked, theta, 2, 50)

@@ -49,7 +49,7 @@ def _problem():
 
 def test_the_weighted_fit_reaches_the_infimum_approached_as_the_mass_grows():
     problem, names = _problem()
-    result = fit_weighted_newton(problem, lambda block, rows: np.ones((1, 1, 1)))
+    result = fit_weighted_newton(problem, np.ones((1, 1)))
     f_inf = 2 * A**2 + 2 * EXTRA  # Izz → 0 (the closure of Izz ≥ mc_x²/m), mc_x = B
     # before the closure: 1.3e-6 above f_inf at j0.m = 3,845 kg, reported optimal (relative gap 6.7e-11)
     assert result.objective == pytest.approx(f_inf, rel=1e-9)

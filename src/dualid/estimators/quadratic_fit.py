@@ -25,7 +25,7 @@ from dualid.estimators.base import (
     solve_cvxpy,
 )
 from dualid.estimators.newton.objective import Statistics, statistics
-from dualid.estimators.newton.weighted import fit_weighted_newton, not_positive_definite
+from dualid.estimators.newton.weighted import fit_weighted_newton, whitener
 from dualid.estimators.result import IdentificationResult
 from dualid.identifiability import check_identifiable
 from dualid.linalg import gram_eigh, gram_rank
@@ -228,40 +228,29 @@ def closed_fit(problem: IdentificationProblem, stats: Statistics, S: np.ndarray,
         f"{est.engine} stops by rounding, so {est.engine} was not run")
     common = {"constrained": True, "solver": "newton", "solver_options": {},
               "allow_unidentifiable": est.allow_unidentifiable}
-    return fit_weighted(problem, np.asarray(S, dtype=float)[None], method, common, info, null_step=null_step)
+    return fit_weighted(problem, S, method, common, info, null_step=null_step)
 
 
 def fit_weighted(sensor: IdentificationProblem, C, method: str, common: dict, info: dict,
                  what: str = "the weight's covariance", null_step: bool = True) -> IdentificationResult:
-    """argmin Σ r_iᵀ C_i⁻¹ r_i (C (N, n, n) or (1, n, n), ≻ 0, or a function rows → C_i of a block of
-    samples, so no N-sized array is needed) under the constraints.
-
-    solver "newton": the interior point on the constant metric M_i = C_i from the weighted sufficient statistics
-    (``newton.weighted``); a cvxpy solver: whitening, C_i = L_i L_iᵀ, r̃_i = L_i⁻¹ r_i, then OLS in ``fit_quadratic``.
-    """
-    weight = C if callable(C) else (lambda block, rows, C=np.asarray(C): C if C.shape[0] == 1 else C[rows])
+    """argmin Σ r_iᵀ C⁻¹ r_i, C (n, n) ≻ 0, under the constraints. Solver "newton": the interior point on the constant
+    metric M_i = C from the weighted sufficient statistics (``newton.weighted``); a cvxpy solver: whitening,
+    C = L Lᵀ, r̃_i = L⁻¹ r_i, then OLS in ``fit_quadratic``."""
+    C = np.asarray(C, dtype=float)
     if common["solver"] == "newton":
         if not common["allow_unidentifiable"]:
             check_identifiable(sensor, what=f"{method} regressor")
         try:  # from the weighted statistics (two passes over the data; phase I on the closed set if the cheap
             # start fails: no fit of the materialised metric without the closure, model.closure)
-            result = fit_weighted_newton(sensor, weight, constrained=common["constrained"], method=method,
+            result = fit_weighted_newton(sensor, C, constrained=common["constrained"], method=method,
                                          what=f"{method}: {what}", null_step=null_step, **common["solver_options"])
             return dataclasses.replace(result, info={**result.info, **info})
-        except np.linalg.LinAlgError:
-            pass  # the message below
         except SolverError as exc:  # the same problem by cvxpy (whitened); recorded in the result
             info = {**info, "solver_fallback": f"CLARABEL after newton failed: {str(exc)[:200]}"}
             common = {**common, "solver": "CLARABEL", "solver_options": {}}
     if not isinstance(sensor, IdentificationProblem):  # streamed: whitening needs every sample at once
         sensor = sensor.materialise()
-    C = np.broadcast_to(weight(sensor, slice(None)), (sensor.N, sensor.n, sensor.n))
-    try:
-        L = np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 1, 2)))
-    except np.linalg.LinAlgError as exc:
-        lam = np.linalg.eigvalsh(C)[:, 0]
-        raise not_positive_definite(sensor, f"{method}: {what}", int(np.sum(~(lam > 0))), lam.min()) from exc
-    white = sensor.in_coordinates(np.swapaxes(np.linalg.inv(L), 1, 2))
+    white = sensor.in_coordinates(whitener(sensor, C, f"{method}: {what}").T)
     return fit_quadratic(
         white, statistics(white), method=method, constrained=common["constrained"], solver=common["solver"],
         solver_options=common["solver_options"], allow_unidentifiable=common["allow_unidentifiable"], info=info,

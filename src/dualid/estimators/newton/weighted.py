@@ -1,20 +1,17 @@
-"""The interior-point method on a *constant* metric, from sufficient statistics: argmin Σ r_iᵀ C_i⁻¹ r_i.
+"""The interior-point method on a *constant* weight, from sufficient statistics: argmin Σ r_iᵀ C⁻¹ r_i.
 
-With M_i(θ) = C_i independent of θ the dual-metric objective is the quadratic
+With M_i(θ) = C independent of θ and of the sample the dual-metric objective is the quadratic
 
-    f(θ) = θᵀHθ − 2gᵀθ + c,   H = Σ Y_iᵀ C_i⁻¹ Y_i,  g = Σ Y_iᵀ C_i⁻¹ τ_i,  c = Σ τ_iᵀ C_i⁻¹ τ_i,
+    f(θ) = θᵀHθ − 2gᵀθ + c,   H = Σ Y_iᵀ C⁻¹ Y_i,  g = Σ Y_iᵀ C⁻¹ τ_i,  c = Σ τ_iᵀ C⁻¹ τ_i,
 
-so one pass over the samples (whitened rows L_i⁻¹ Y_i, C_i = L_i L_iᵀ) reduces the fit to a p-sized problem, solved
-with the iterations, chart-invariant start and stopping rule of ``fit_dual_metric_newton`` on M_i = C_i: the same θ
-up to rounding, for two passes over the data instead of two per iteration. C_i is a function of a block of rows (no
-(N, n, n) array); a constant weight (one (1, n, n) block) is factored once per fit (result.info["weight"]).
+so one pass over the samples (whitened rows L⁻¹ Y_i, C = L Lᵀ factored once per fit) reduces the fit to a p-sized
+problem, solved with the iterations, chart-invariant start and stopping rule of ``fit_dual_metric_newton`` on
+M_i = C: the same θ up to rounding, for two passes over the data instead of two per iteration.
 """
 
 from __future__ import annotations
 
-import copy
 import time
-from collections.abc import Callable
 
 import numpy as np
 
@@ -24,18 +21,10 @@ from dualid.estimators.newton.interior_point import direction_label, direction_n
 from dualid.estimators.newton.objective import CHUNK, Derivatives
 from dualid.estimators.newton.start import constant_metric_start, toward, toward_start
 from dualid.estimators.result import IdentificationResult
-from dualid.linalg import forward_substitute, solve_psd, tri_inverse
+from dualid.linalg import solve_psd, tri_inverse
 from dualid.model.closure import on_closure
 from dualid.model.consistency import central_point, feasible_set
 from dualid.problem import IdentificationProblem, additive, sample_blocks
-
-# (block, rows) → C_i (c, n, n) symmetric positive definite, for the samples ``rows`` of the in-memory ``block``
-# (see dualid.problem.sample_blocks; for an in-memory problem the block is the problem itself)
-Weight = Callable[[IdentificationProblem, slice], np.ndarray]
-
-
-def _weight(weight: Weight, block: IdentificationProblem, rows: slice) -> np.ndarray:
-    return np.broadcast_to(weight(block, rows), (len(range(block.N)[rows]), block.n, block.n))
 
 
 def not_positive_definite(problem, what: str, bad: int, low: float) -> MetricError:
@@ -46,150 +35,47 @@ def not_positive_definite(problem, what: str, bad: int, low: float) -> MetricErr
     )
 
 
-class _Whitening:
-    """(block, rows) → the block's whitened rows (L_i⁻¹ Y_i, L_i⁻¹ τ_i), C_i = L_i L_iᵀ, for one fit: a constant weight
-    (one (1, n, n) block) factored once, else a Cholesky per sample. ``kind``: "constant", "per-sample", "mixed" (both,
-    by block) or "factor" (the caller's W_i)."""
-
-    def __init__(self, problem: IdentificationProblem, weight: Weight, what: str, whiten=None):
-        self.problem, self.weight, self.what, self.whiten = problem, weight, what, whiten
-        self.C = self.Li = None  # the constant weight (n, n) and its L⁻¹, once factored
-        self.kinds: set[str] = set()
-
-    def on(self, problem) -> "_Whitening":
-        """This whitening for the samples of ``problem``: itself, or (for a partition of a spread problem, where this
-        whitening arrived without its problem) a copy bound to the partition, keeping the factored weight."""
-        if self.problem is problem:
-            return self
-        other = copy.copy(self)
-        other.problem, other.kinds = problem, set()
-        return other
-
-    def __getstate__(self) -> dict:  # sent to the workers of a spread problem: the weight, not the problem
-        return {**self.__dict__, "problem": None}
-
-    @property
-    def kind(self) -> str:
-        return "mixed" if len(self.kinds) > 1 else next(iter(self.kinds), "none")
-
-    def _factored(self, block: IdentificationProblem, rows: slice) -> tuple[str, np.ndarray]:
-        """(kind, F) for the block's rows, recorded in ``kinds``: the caller's W_i (c, n, n), C_i⁻¹ = W_iᵀ W_i
-        ("factor": no Cholesky), the constant weight's L⁻¹ (n, n) ("constant") or the per-sample L_i (c, n, n)."""
-        if self.whiten is not None:
-            kind, F = "factor", self.whiten(block, rows)
-        else:
-            C = np.asarray(self.weight(block, rows))
-            if C.ndim == 3 and C.shape[0] == 1:
-                kind, F = "constant", self._constant(C[0])
-            else:
-                kind, F = "per-sample", _factor(self.problem, block, self.weight, rows, self.what, C)
-        self.kinds.add(kind)
-        return kind, F
-
-    def __call__(self, block: IdentificationProblem, rows: slice) -> tuple[np.ndarray, np.ndarray]:
-        kind, F = self._factored(block, rows)
-        if kind == "constant":
-            return np.matmul(F, block.Y[rows]), block.tau[rows] @ F.T
-        W = F if kind == "factor" else tri_inverse(F)  # L_i⁻¹ per sample
-        return np.matmul(W, block.Y[rows]), np.einsum("cab,cb->ca", W, block.tau[rows])
-
-    def residual(self, block: IdentificationProblem, rows: slice, theta: np.ndarray) -> np.ndarray:
-        """The whitened residuals L_i⁻¹ r_i (c, n) at θ: r_i first, then one n-vector per sample to whiten (not Y)."""
-        Y = block.Y[rows]
-        r = (Y.reshape(-1, Y.shape[-1]) @ theta).reshape(Y.shape[:2]) - block.tau[rows]  # (c, n)
-        kind, F = self._factored(block, rows)
-        if kind == "constant":
-            return r @ F.T
-        return np.einsum("cab,cb->ca", F, r) if kind == "factor" else forward_substitute(F, r)
-
-    def _constant(self, C: np.ndarray) -> np.ndarray:
-        if self.Li is None or not np.array_equal(C, self.C):
-            try:
-                L = np.linalg.cholesky(C)
-            except np.linalg.LinAlgError:
-                L = None
-            if L is None or not np.all(np.isfinite(L)):  # the same C at every sample: all of them fail
-                raise not_positive_definite(self.problem, self.what, self.problem.N, float(np.linalg.eigvalsh(C)[0]))
-            self.C, self.Li = C.copy(), tri_inverse(L[None])[0]
-        return self.Li
-
-
-def _factor(problem, block: IdentificationProblem, weight: Weight, rows: slice, what: str, C: np.ndarray) -> np.ndarray:
-    """L (c, n, n), C_i = L_i L_iᵀ, a Cholesky per sample of C = weight(block, rows); MetricError (counting the
-    samples of the whole problem) if some C_i is not ≻ 0."""
-    c = len(range(block.N)[rows])
+def whitener(problem, C: np.ndarray, what: str = "the weight's covariance") -> np.ndarray:
+    """L⁻¹ (n, n), C = L Lᵀ; MetricError (every sample fails) when C is not positive definite."""
+    C = np.asarray(C, dtype=float)
     try:
-        L = np.linalg.cholesky(np.broadcast_to(C, (c, block.n, block.n)))
+        L = np.linalg.cholesky(C)
     except np.linalg.LinAlgError:
         L = None
     if L is None or not np.all(np.isfinite(L)):
-        bad, low = 0, np.inf
-        for b, r, _ in sample_blocks(problem, CHUNK):  # the whole count, for the message
-            lam = np.linalg.eigvalsh(_weight(weight, b, r))[:, 0]
-            bad, low = bad + int(np.sum(~(lam > 0))), min(low, float(lam.min()))
-        raise not_positive_definite(problem, what, bad, low)
-    return L
-
-
-def _whitening(problem, weight, what: str, whiten=None) -> _Whitening:
-    return weight if isinstance(weight, _Whitening) else _Whitening(problem, weight, what, whiten)
-
-
-def weighted_statistics(problem: IdentificationProblem, weight: Weight, chunk: int = CHUNK,
-                        what: str = "the weight's covariance", energy: bool = False, whiten=None):
-    """(H, g, c) = Σ Y_iᵀC_i⁻¹Y_i, Σ Y_iᵀC_i⁻¹τ_i, Σ τ_iᵀC_i⁻¹τ_i accumulated over chunks of samples; with
-    energy=True also (H_e, g_e) of the energy residual v_iᵀ r_i, from the same pass. weight: a Weight, or the
-    fit's ``_Whitening`` (which keeps a constant weight's factor between passes)."""
-    white = _whitening(problem, weight, what, whiten)
-    H, g, c, He, ge, kinds = _weighted_sums(problem, white, chunk, energy)
-    white.kinds |= kinds
-    if energy:
-        return 0.5 * (H + H.T), g, c, He, ge
-    return 0.5 * (H + H.T), g, c
+        raise not_positive_definite(problem, what, problem.N, float(np.linalg.eigvalsh(C)[0]))
+    return tri_inverse(L[None])[0]
 
 
 @additive
-def _weighted_sums(problem, white: "_Whitening", chunk: int, energy: bool):
-    """(H, g, c, H_e, g_e, the weight kinds seen) summed over the samples, as ``weighted_statistics``."""
-    white = white.on(problem)
+def weighted_statistics(problem: IdentificationProblem, Li: np.ndarray, chunk: int = CHUNK, energy: bool = False):
+    """(H, g, c) = Σ Y_iᵀC⁻¹Y_i, Σ Y_iᵀC⁻¹τ_i, Σ τ_iᵀC⁻¹τ_i for C⁻¹ = Liᵀ Li (``whitener``), over chunks of samples;
+    with energy=True also (H_e, g_e) of the energy residual v_iᵀ r_i, from the same pass."""
     p = problem.p
-    H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
-    He, ge = np.zeros((p, p)), np.zeros(p)
+    H, g, c, He, ge = np.zeros((p, p)), np.zeros(p), 0.0, np.zeros((p, p)), np.zeros(p)
     for block, rows, _ in sample_blocks(problem, chunk):
         if energy:
             e = np.einsum("nap,na->np", block.Y[rows], block.v[rows])
-            He += e.T @ e
-            ge += e.T @ np.einsum("na,na->n", block.tau[rows], block.v[rows])
-        Z, z = white(block, rows)
-        Z2, z1 = Z.reshape(-1, p), z.reshape(-1)
-        H += Z2.T @ Z2
-        g += Z2.T @ z1
-        c += float(z1 @ z1)
-    return H, g, c, He, ge, white.kinds
-
-
-def weighted_objective(problem: IdentificationProblem, weight: Weight, theta: np.ndarray, chunk: int = CHUNK) -> float:
-    """Σ r_iᵀ C_i⁻¹ r_i from the residuals (no cancellation, unlike θᵀHθ − 2gᵀθ + c); weight as in
-    ``weighted_statistics``."""
-    white = _whitening(problem, weight, "the weight")
-    f, kinds = _weighted_residual_sum(problem, white, theta, chunk)
-    white.kinds |= kinds
-    return f
+            He, ge = He + e.T @ e, ge + e.T @ np.einsum("na,na->n", block.tau[rows], block.v[rows])
+        Z, z = np.matmul(Li, block.Y[rows]).reshape(-1, p), (block.tau[rows] @ Li.T).reshape(-1)
+        H, g, c = H + Z.T @ Z, g + Z.T @ z, c + float(z @ z)
+    return (0.5 * (H + H.T), g, c, He, ge) if energy else (0.5 * (H + H.T), g, c)
 
 
 @additive
-def _weighted_residual_sum(problem, white: "_Whitening", theta: np.ndarray, chunk: int) -> tuple[float, set]:
-    white = white.on(problem)
+def weighted_objective(problem: IdentificationProblem, Li: np.ndarray, theta: np.ndarray, chunk: int = CHUNK) -> float:
+    """Σ r_iᵀ C⁻¹ r_i from the residuals (no cancellation, unlike θᵀHθ − 2gᵀθ + c), C⁻¹ = Liᵀ Li."""
     f = 0.0
     for block, rows, _ in sample_blocks(problem, chunk):
-        e = white.residual(block, rows, theta)
+        Y = block.Y[rows]
+        e = ((Y.reshape(-1, Y.shape[-1]) @ theta).reshape(Y.shape[:2]) - block.tau[rows]) @ Li.T
         f += float(np.sum(e * e))
-    return f, white.kinds
+    return f
 
 
 def fit_weighted_newton(
     problem: IdentificationProblem,
-    weight: Weight,
+    C: np.ndarray,
     *,
     constrained: bool = True,
     tol: float = 1e-9,
@@ -199,19 +85,14 @@ def fit_weighted_newton(
     verbose: bool = False,
     warm_start_samples: int | None = None,  # accepted for option compatibility; unused (no pass per iteration)
     what: str = "the weight's covariance",
-    whiten=None,
-    objective_pass: bool = True,
     null_step: bool = True,  # False: no move along the null space (a pilot whose θ feeds only its residuals)
 ) -> IdentificationResult:
-    """argmin Σ r_iᵀ C_i⁻¹ r_i under the constraints (module doc); when the cheap start fails, from the weighted
-    LS's central point or a phase I on the same (closed) feasible set (``newton.start.constant_metric_start``).
-    whiten: (block, rows) → W_i (c, n, n) with C_i⁻¹ = W_iᵀ W_i, when the caller has that factor (no Cholesky);
-    objective_pass=False skips the pass for the result's objective (NaN: the caller computes it, e.g. the bounded
-    fixed point in its own pass)."""
+    """argmin Σ r_iᵀ C⁻¹ r_i under the constraints (module doc), C (n, n) ≻ 0; when the cheap start fails, from the
+    weighted LS's central point or a phase I on the same (closed) feasible set (``newton.start.constant_metric_start``)."""
     t0 = time.perf_counter()
     check_bounds(problem, constrained)
-    white = _Whitening(problem, weight, what, whiten)
-    H, g, c, H_e, g_e = weighted_statistics(problem, white, chunk, energy=True)
+    Li = whitener(problem, C, what)
+    H, g, c, H_e, g_e = weighted_statistics(problem, Li, chunk, energy=True)
     # parameters f cannot see that only loosen a block: solved on the closed set, then completed (model.closure)
     cons, done = on_closure(feasible_set(problem.parameters, constrained), H, c, problem.parameters.names)
     theta_f = solve_psd(H, g, rtol=1e-10)  # the unconstrained weighted LS (min-norm): the frozen-metric LS
@@ -237,14 +118,14 @@ def fit_weighted_newton(
                                         objective=objective, f_scale=c)
     theta = toward_start(theta, theta0, H, cons, f_of) if null_step else theta
     info.pop("objective")
-    info.update(start=start, statistics="one pass (H = Σ YᵀC⁻¹Y)", weight=white.kind)
+    info.update(start=start, statistics="one pass (H = Σ YᵀC⁻¹Y)")
     names = problem.parameters.names  # the iterates' direction by parameter name (no arrays in info), as newton.fit
     if "diverging_candidate" in info:
         info["diverging_candidate"] = direction_names(info["diverging_candidate"], names)
     if "diverging_direction" in info:
         info["diverging_direction"] = direction_label(info["diverging_direction"], names)
     theta, info = done(theta, info)
-    f = weighted_objective(problem, white, theta, chunk) if objective_pass else float("nan")
-    return IdentificationResult(method, theta, problem.parameters, f, "optimal", "newton", time.perf_counter() - t0,
+    return IdentificationResult(method, theta, problem.parameters, weighted_objective(problem, Li, theta, chunk),
+                                "optimal", "newton", time.perf_counter() - t0,
                                 info["iterations"], constrained, info)
 
