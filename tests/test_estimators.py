@@ -52,6 +52,22 @@ def test_wls_weights_come_from_the_residuals_once_there_is_noise():
     assert result.info["covariance"] == "ols residuals" and "fallback" not in result.info
 
 
+def test_every_wls_weight_takes_the_rounding_floor_on_exact_data():
+    """The residual covariance, the dual-metric guard's WLS reference: on exact data 1e-12 mean τ_j², said so."""
+    from dualid.estimators.least_squares import residual_covariance, wls_reference
+
+    exact, theta = drag_problem(np.random.default_rng(0), N=40, n=3)
+    S, fallback = residual_covariance(exact, theta)
+    np.testing.assert_allclose(S, 1e-12 * np.diag(np.mean(exact.tau**2, axis=0)), rtol=1e-12)
+    assert "exact data" in fallback and "exact data" in wls_reference(exact, True)[1]
+    np.testing.assert_allclose(wls_reference(exact, True)[0], theta, rtol=1e-6)
+    noisy, _ = drag_problem(np.random.default_rng(0), N=40, n=3, noise=1e-4)
+    S, fallback = residual_covariance(noisy, theta)
+    r = noisy.residual(theta)
+    np.testing.assert_allclose(S, r.T @ r / noisy.N, rtol=1e-12)
+    assert fallback is None and "exact" not in wls_reference(noisy, True)[1]
+
+
 @pytest.mark.parametrize("name", sorted(ESTIMATORS))
 def test_recovers_truth_from_noiseless_pan_tilt_data(name, pan_tilt_noiseless):
     problem, theta = pan_tilt_noiseless

@@ -98,26 +98,26 @@ class OLS(_Common):
         return self._guarded(self._fit(problem, statistics(problem)), problem)
 
 
-def residual_covariance(problem: IdentificationProblem, theta: np.ndarray, floor: float = 1e-9) -> np.ndarray:
-    """Σ̂ = (1/N) Σ r_i r_iᵀ, with eigenvalues floored at floor·tr(Σ̂)/n (and an absolute 1e-300).
-
-    The floor keeps W = Σ̂⁻¹ finite when a coordinate fits exactly (noiseless data, or a passive
-    joint whose modelled torque is identically zero).
-    """
-    S = _residual_products(problem, theta) / problem.N
-    w, U = np.linalg.eigh(0.5 * (S + S.T))
-    w = np.maximum(w, max(floor * np.trace(S) / problem.n, 1e-300))
-    return (U * w) @ U.T
+def residual_covariance(problem, theta: np.ndarray, floor: float = 1e-9) -> tuple[np.ndarray, str | None]:
+    """(Σ̂, fallback): Σ̂ = (1/N) Σ r_i r_iᵀ with eigenvalues floored at floor·tr(Σ̂)/n (and 1e-300), so that W = Σ̂⁻¹ is
+    finite where a coordinate fits exactly (a passive joint). A residual at rounding (N tr Σ̂ ≤ ROUNDING Σ‖τ_i‖²: exact
+    data) estimates no noise: Σ̂ is then ROUNDING diag(mean τ_j²), unit-free per coordinate, and ``fallback`` says so."""
+    R, T = _residual_products(problem, theta)
+    exact = np.trace(R) <= ROUNDING * np.trace(T)
+    w, U = np.linalg.eigh((T if exact else R) / problem.N)
+    S = (U * np.maximum(w, max(floor * np.sum(w) / problem.n, 1e-300))) @ U.T
+    return (ROUNDING * np.diag(np.diag(S)), "exact data (rounding residual): Σ̂ = 1e-12 mean τ_j²") if exact else (S, None)
 
 
 @additive
-def _residual_products(problem, theta: np.ndarray) -> np.ndarray:
-    """Σ r_i r_iᵀ (n, n)."""
-    S = np.zeros((problem.n, problem.n))
+def _residual_products(problem, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(Σ r_i r_iᵀ, Σ τ_i τ_iᵀ), each (n, n)."""
+    S, T = np.zeros((2, problem.n, problem.n))
     for block, rows, _ in sample_blocks(problem, 16384):
-        r = block.Y[rows] @ theta - block.tau[rows]
-        S += r.T @ r
-    return S
+        tau = block.tau[rows]
+        r = block.Y[rows] @ theta - tau
+        S, T = S + r.T @ r, T + tau.T @ tau
+    return S, T
 
 
 def covariance_weight(problem: IdentificationProblem, covariance, reference: _Common) -> tuple[np.ndarray, dict]:
@@ -125,12 +125,9 @@ def covariance_weight(problem: IdentificationProblem, covariance, reference: _Co
     ``closed_fit`` (on the closed feasible set where its infimum is not attained, as the WLS fit that follows)."""
     theta_ols, extra = None, {}
     if covariance is None:
-        stats = statistics(problem)
-        theta_ols = closed_fit(problem, stats, np.eye(problem.n), "ols", reference, null_step=False).theta
-        covariance, source = residual_covariance(problem, theta_ols), "ols residuals"
-        if problem.N * np.trace(covariance) <= ROUNDING * stats.c:  # exact data: a rounding residual estimates no noise
-            covariance = ROUNDING * np.diag(np.diag(residual_covariance(problem, np.zeros(problem.p))))  # mean τ_j²
-            source, extra = "rounding floor", {"fallback": "exact data (OLS residual at rounding): W = 1/(1e-12 mean τ_j²)"}
+        theta_ols = closed_fit(problem, statistics(problem), np.eye(problem.n), "ols", reference, null_step=False).theta
+        covariance, fallback = residual_covariance(problem, theta_ols)
+        source, extra = ("ols residuals", {}) if fallback is None else ("rounding floor", {"fallback": fallback})
     else:
         covariance, source = np.asarray(covariance, dtype=float), "given"
         if covariance.shape != (problem.n, problem.n):
@@ -242,11 +239,12 @@ def wls_reference(problem: IdentificationProblem, constrained: bool) -> tuple[np
         ols = statistics(problem)
         theta_ols, _ = fit_quadratic_newton(ols.H, ols.g, ols.c, problem.parameters, constrained=constrained,
                                             tol=REFERENCE_TOL, max_iter=REFERENCE_MAX_ITER)
-        W = np.linalg.inv(residual_covariance(problem, theta_ols))
+        S, fallback = residual_covariance(problem, theta_ols)
+        W = np.linalg.inv(S)
         wls = statistics(problem, 0.5 * (W + W.T))
         theta, _ = fit_quadratic_newton(wls.H, wls.g, wls.c, problem.parameters, constrained=constrained,
                                         tol=REFERENCE_TOL, max_iter=REFERENCE_MAX_ITER)
-        return theta, f"newton (tol {REFERENCE_TOL:g})"
+        return theta, f"newton (tol {REFERENCE_TOL:g})" + ("" if fallback is None else f"; {fallback}")
     except (SolverError, np.linalg.LinAlgError) as exc:
         theta = WLS(constrained=constrained, allow_unidentifiable=True).fit(problem).theta
         return theta, f"the WLS estimator (the interior point to {REFERENCE_TOL:g} failed: {str(exc)[:120]})"

@@ -145,11 +145,12 @@ class NoiseModelDM:
         if why and pilot == "dm-paper":  # the pilot is the paper's constrained optimum: dm returns it
             theta, f, choice = theta_pilot, objective_value(sensor, theta_pilot, self.chunk), f"dm-paper: {why}"
         elif why:  # WLS in the residual variances at θ̂, from the same start
-            S = np.diag(np.diag(residual_covariance(sensor, theta)))
-            wls = NoiseLevels(S, np.zeros_like(S), 1.0, 0.0, 0)
+            S, fallback = residual_covariance(sensor, theta)
+            wls = NoiseLevels(np.diag(np.diag(S)), np.zeros_like(S), 1.0, 0.0, 0)
             theta, info = self._solve(sensor, cons, start, wls)
             run["status"] = _status(info)
-            f, choice = noise_model_objective(sensor, theta, S, wls.sigma_a, self.chunk), f"wls: {why}"
+            f, choice = (noise_model_objective(sensor, theta, wls.sigma_tau, wls.sigma_a, self.chunk),
+                         f"wls: {why}" + ("" if fallback is None else f"; {fallback}"))
         return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0,
                             None if why else guard)
 
