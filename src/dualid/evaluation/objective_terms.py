@@ -7,7 +7,7 @@ import numpy as np
 
 from dualid.errors import ConfigError, MetricError
 from dualid.estimators.dual_metric import DualMetric
-from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS, covariance_weight
+from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS, covariance_weight, residual_covariance
 from dualid.estimators.newton.objective import NotPositiveDefinite, dual_metric_derivatives
 from dualid.estimators.noise_dm import NoiseModelDM
 from dualid.estimators.noise_model import noise_model_covariance, noise_model_derivatives
@@ -35,10 +35,11 @@ def _weights(problem: IdentificationProblem, result: IdentificationResult, est):
         else:
             W = np.linalg.inv(np.asarray(S, dtype=float))
         return problem, 0.5 * (W + W.T), None
-    if isinstance(est, NoiseModelDM):  # dm returned WLS (its noise check): its weight, the residual variances
+    if isinstance(est, NoiseModelDM):  # dm's torque-noise fit (its check): W = S⁻¹, S its residual covariance (the
+        # Fisher information of θ with the covariance profiled out is WLS's in S; rounding floor on exact data)
         sensor = problem.in_sensor_chart()
-        r = sensor.residual(np.asarray(result.theta))
-        return sensor, np.diag(1.0 / np.mean(r**2, axis=0)), None
+        W = np.linalg.inv(residual_covariance(sensor, np.asarray(result.theta))[0])
+        return sensor, 0.5 * (W + W.T), None
     raise ConfigError(f"uncertainty: no sandwich for estimator {type(est).__name__} (method {result.method!r}); "
                            "supported: OLS, WLS, EnergyLS, RegularizedWLS, NoiseModelDM (dm), DualMetric (dm-paper); "
                            "use the block bootstrap (dualid.bootstrap; in a fit config: "
