@@ -19,6 +19,11 @@ Metrics of a fit θ̂ on the held-out run (joint errors divided by the joint's c
 - forward dynamics: NCC (``dualid.evaluation.scores.score_run``, ±T/72 shift) of M̂⁻¹(τ − ĥ) from the
   measured q, v, τ against the true accelerations, mean over joints;
 - CPU time of ``fit`` (process time), status, physical consistency; a fit that raises is a counted failure.
+Method ``dm-true-levels`` (not in the method table): ``dm``'s objective at the simulation's noise levels instead of
+estimated ones, and without its held-out check: what the noise model's fit can do when its levels are exact. They
+are the mean squares per joint of the two parts of the training residual at the true θ, r_i = M_i δa_i + e_i: δa_i
+the measured minus the true accelerations (encoder noise, quantisation, the filter's error), Σ_a = diag(mean δa²);
+e_i the rest (torque noise, the velocities' error), Σ_τ = diag(mean e²).
 Summary ratios (per case, paired per data set, median over robots × seeds): method ÷ best of (OLS, WLS,
 dm-paper), ÷ dm-paper, ÷ WLS, for the clean error, the floor ratio and the base error.
 
@@ -50,6 +55,7 @@ from authors_example import fmt, header, output_paths, provenance  # noqa: E402
 from dualid.bench import mujoco_arms as ma  # noqa: E402
 from dualid.errors import DualidError  # noqa: E402
 from dualid.estimators.methods import make_estimator  # noqa: E402
+from dualid.estimators.noise_dm import NoiseModelDM  # noqa: E402
 from dualid.evaluation.prediction import PredictionData  # noqa: E402
 from dualid.evaluation.scores import score_run, shift_window  # noqa: E402
 from dualid.identifiability import base_parameters  # noqa: E402
@@ -68,6 +74,7 @@ CASES = {
 ROBOTS = tuple(ma.ROBOTS)
 BASELINES = ("ols", "wls", "dm-paper")
 DEFAULT_METHODS = ("ols", "wls", "dm-paper", "dm")
+ORACLE = "dm-true-levels"
 METRICS = ("clean_error", "floor_ratio", "base_error")
 HERE = Path(__file__).resolve().parent
 
@@ -110,19 +117,36 @@ class HeldOut:
 
 
 def dataset(robot: str, seed: int, case: str, train_s: float = TRAIN_S, test_s: float = TEST_S):
-    """(identification problem, HeldOut) of one robot, seed and noise case. The arm's joint terms depend on
-    (robot, seed); the motion and noise on (robot, seed, case)."""
+    """(identification problem, HeldOut, the training run's true noise levels (Σ_τ, Σ_a)) of one robot, seed and noise
+    case. The arm's joint terms depend on (robot, seed); the motion and noise on (robot, seed, case)."""
     _, torque, encoder, bits = CASES[case]
     r = ROBOTS.index(robot) if robot in ROBOTS else len(ROBOTS)
     arm = ma.sim_arm(robot, np.random.default_rng([seed, r]))
     rng = np.random.default_rng([seed, r, list(CASES).index(case)])
     train = ma.measure(arm, rng, train_s, FS, torque, encoder, bits, WINDOW, name="train")
     test = ma.measure(arm, rng, test_s, FS, torque, encoder, bits, WINDOW, name="test")
-    return build_problem(arm.ident, train.measured), HeldOut(arm, test, rng, torque)
+    problem = build_problem(arm.ident, train.measured)
+    da = train.measured.a - train.a  # the accelerations' error; the rest of the residual at the truth is the torque's
+    e = problem.residual(arm.theta_true) - np.einsum("cab,cb->ca", problem.metric.evaluate(arm.theta_true), da)
+    levels = np.diag(np.mean(e**2, axis=0)), np.diag(np.mean(da**2, axis=0))
+    return problem, HeldOut(arm, test, rng, torque), levels
 
 
-def fit_one(key: str, problem, held: HeldOut) -> dict:
-    estimator = make_estimator(key, allow_unidentifiable=True)
+class TrueLevelsDM(NoiseModelDM):
+    """``dm``'s fit at given levels without its held-out check (the check asks whether estimated levels fit)."""
+
+    def _check(self, sensor, theta, noise):
+        return None
+
+
+def _estimator(key: str, levels):
+    if key == ORACLE:
+        return TrueLevelsDM(sigma_tau=levels[0], sigma_a=levels[1], allow_unidentifiable=True)
+    return make_estimator(key, allow_unidentifiable=True)
+
+
+def fit_one(key: str, problem, held: HeldOut, levels) -> dict:
+    estimator = _estimator(key, levels)
     start = time.process_time()
     try:
         result = estimator.fit(problem)
@@ -132,7 +156,8 @@ def fit_one(key: str, problem, held: HeldOut) -> dict:
     cpu = time.process_time() - start
     extra = {"second_start": second_start(estimator, problem, result)} if key == "dm" else {}
     return {"method": key, "failed": False, "cpu_s": cpu, "status": result.status,
-            "consistent": bool(result.is_consistent), **held.scores(result.theta), **extra}
+            "consistent": bool(result.is_consistent), **held.scores(result.theta), **extra,
+            **({"choice": result.noise.choice} if result.noise is not None else {})}
 
 
 def second_start(est, problem, result) -> float | None:
@@ -164,10 +189,10 @@ def second_start(est, problem, result) -> float | None:
 
 
 def run_dataset(robot: str, seed: int, case: str, methods, **sizes) -> list[dict]:
-    problem, held = dataset(robot, seed, case, **sizes)
+    problem, held, levels = dataset(robot, seed, case, **sizes)
     tag = {"robot": robot, "seed": seed, "case": case, "N": problem.N}
     truth = {**tag, "method": "truth", "failed": False, **held.scores(held.theta_true)}
-    return [truth] + [{**tag, **fit_one(key, problem, held)} for key in methods]
+    return [truth] + [{**tag, **fit_one(key, problem, held, levels)} for key in methods]
 
 
 def _median(x) -> float | None:
@@ -269,8 +294,8 @@ def to_markdown(result: dict) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--method", action="append", help=f"a key of dualid's method table (repeatable; default "
-                    f"{' '.join(DEFAULT_METHODS)})")
+    ap.add_argument("--method", action="append", help=f"a key of dualid's method table, or {ORACLE} (repeatable; "
+                    f"default {' '.join(DEFAULT_METHODS)})")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     ap.add_argument("--robots", nargs="+", choices=ROBOTS, default=list(ROBOTS))
     ap.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), metavar="CASE",
@@ -283,7 +308,8 @@ def main(argv=None) -> int:
     methods = list(args.method or DEFAULT_METHODS)
     for key in methods:
         try:
-            make_estimator(key, allow_unidentifiable=True)
+            if key != ORACLE:
+                make_estimator(key, allow_unidentifiable=True)
         except DualidError as exc:
             print(f"error: --method {key}: {exc}", file=sys.stderr)
             return 2
