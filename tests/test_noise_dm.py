@@ -304,3 +304,35 @@ def test_the_torque_noise_likelihood_is_the_generalised_residual_variance():
     mixed = replace(problem, Y=np.einsum("ba,ibk->iak", B, problem.Y), tau=problem.tau @ B)
     assert covariance_ml_derivatives(pair_statistics(mixed, t), t, 0).f == pytest.approx(
         d.f * abs(np.linalg.det(B)) ** (2 / 3), rel=1e-9)
+
+
+def test_the_torque_noise_fallback_on_exact_data_and_on_a_failed_solve(monkeypatch):
+    """On exact data the torque-noise likelihood has no maximum (log det → −∞): the fallback is WLS at the rounding
+    floor and recovers the truth; where the likelihood's interior point fails, WLS in the residual covariance at the
+    start, said in the choice."""
+    import dualid.estimators.noise_dm as noise_dm
+    from dualid.errors import SolverError
+
+    guard = noise_dm.reference_guard
+    calls = []
+
+    def flagged(*args, **kwargs):  # the fit's own guard flags a ghost: the fallback runs
+        calls.append(1)
+        return {**guard(*args, **kwargs), "degenerate": True} if len(calls) % 2 == 1 else guard(*args, **kwargs)
+
+    monkeypatch.setattr(noise_dm, "reference_guard", flagged)
+    exact, theta = eiv_problem(0, N=300, torque=0.0, regressor=0.0)
+    res = NoiseModelDM().fit(exact)
+    assert res.noise.choice.startswith("wls (exact data") and rel(res.theta, theta) < 1e-6
+    real = noise_dm.run_interior_point
+
+    def failing(*args, **kwargs):
+        if kwargs.get("f_scale") == 0.0:  # the likelihood's solve
+            raise SolverError("line search failed", status="line_search_failed")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(noise_dm, "run_interior_point", failing)
+    noisy, _ = eiv_problem(0, N=1000, torque=0.05, regressor=0.3)
+    res = NoiseModelDM().fit(noisy)
+    assert res.noise.choice.startswith("wls (the likelihood's solve failed: line search failed)")
+    assert res.is_consistent and res.status == "optimal"

@@ -148,7 +148,7 @@ class NoiseModelDM:
         if why and pilot == "dm-paper":  # the pilot is the paper's constrained optimum: dm returns it
             theta, f, choice = theta_pilot, objective_value(sensor, theta_pilot, self.chunk), f"dm-paper: {why}"
         elif why:  # the residual as torque noise alone, of a full unknown covariance, from the same start
-            theta, info, S, how = self._torque_ml(sensor, cons, start)
+            theta, info, S, how = self._torque_ml(sensor, cons, start, theta_pilot)
             run["status"] = _status(info)
             f, choice = noise_model_objective(sensor, theta, S, np.zeros_like(S), self.chunk), f"{how}: {why}"
         return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0,
@@ -189,24 +189,30 @@ class NoiseModelDM:
                                     time.perf_counter() - t0, run["iterations"], self.constrained,
                                     {"rounds": run["rounds"], "start": run["start"], **guard, **completed}, noise=record)
 
-    def _torque_ml(self, problem, cons, theta):
+    def _torque_ml(self, problem, cons, theta, theta_pilot):
         """(θ, info, the residual covariance at θ, what θ is): the maximum likelihood of a torque noise with a full
-        unknown covariance (``torque_ml``) by the interior point from θ; on exact data (the residual at
-        θ at rounding) WLS at the rounding floor (``residual_covariance``)."""
-        S, exact = residual_covariance(problem, theta)
-        if exact is not None:
-            wls = NoiseLevels(S, np.zeros_like(S), 1.0, 0.0, 0)
-            return *self._solve(problem, cons, theta, wls), S, f"wls ({exact})"
-        stats = pair_statistics(problem, theta, self.chunk)
+        unknown covariance (``torque_ml``) by the interior point from θ. WLS instead, from θ, in a noise at the rounding
+        floor on exact data (the least-squares pilot's residual at rounding: there the likelihood has no maximum), and
+        in the residual covariance at θ where the interior point fails (said in ``what θ is``)."""
+        S, exact = residual_covariance(problem, theta_pilot)
+        if exact is None:
+            stats = pair_statistics(problem, theta, self.chunk)
 
-        def objective(th, order):
-            return covariance_ml_derivatives(stats, th, order)
+            def objective(th, order):
+                return covariance_ml_derivatives(stats, th, order)
 
-        fit, _, _, info = run_interior_point(problem, cons, theta, None, None, self.tol, self.max_iter, self.chunk,
-                                             False, objective=objective, f_scale=0.0, convex=False, acceptable=ACCEPTABLE)
-        gram = np.einsum("akal->kl", stats[1].reshape(problem.n, problem.p, problem.n, problem.p))  # Σ Y_iᵀ Y_i
-        theta = toward_start(fit, theta, gram, cons, lambda th: value_or_inf(objective, th))
-        return theta, info, residual_covariance(problem, theta)[0], "full-covariance ml"
+            try:
+                fit, _, _, info = run_interior_point(problem, cons, theta, None, None, self.tol, self.max_iter,
+                                                     self.chunk, False, objective=objective, f_scale=0.0,
+                                                     convex=False, acceptable=ACCEPTABLE)
+            except SolverError as exc:
+                S, exact = residual_covariance(problem, theta)[0], f"the likelihood's solve failed: {str(exc)[:120]}"
+            else:
+                gram = np.einsum("akal->kl", stats[1].reshape(problem.n, problem.p, problem.n, problem.p))  # Σ YᵢᵀYᵢ
+                theta = toward_start(fit, theta, gram, cons, lambda th: value_or_inf(objective, th))
+                return theta, info, residual_covariance(problem, theta)[0], "full-covariance ml"
+        wls = NoiseLevels(S, np.zeros_like(S), 1.0, 0.0, 0)
+        return *self._solve(problem, cons, theta, wls), S, f"wls ({exact})"
 
     def _paper_optimum(self, problem) -> np.ndarray:
         """The paper's dual-metric optimum (the same θ in every chart); where its infimum is at infinity, where the
