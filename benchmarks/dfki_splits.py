@@ -130,8 +130,10 @@ def to_markdown(result: dict) -> str:
     chosen = [r["noise_choice"] for r in rows if r["ok"] and r.get("noise_choice")]
     if chosen:
         kept = sum(c == "noise model" for c in chosen)
-        out += ["", f"`dm` kept its noise-model fit on {kept} of {len(chosen)} splits and returned WLS (its noise check "
-                "found a residual that is not the modelled noise) on the others."]
+        rest = sorted({c.split(":")[0] for c in chosen if c != "noise model"})
+        out += ["", f"`dm` kept its noise-model fit on {kept} of {len(chosen)} splits and returned "
+                f"{' or '.join(rest) or 'nothing else'} (its noise check found a residual that is not the modelled "
+                "noise) on the others."]
     return "\n".join(out) + "\n"
 
 

@@ -62,7 +62,7 @@ def client():
 
 def _fit(method, problem):
     result = make_estimator(method).fit(problem)
-    if method == "dm":  # the comparison covers the noise model's passes, not only its WLS fallback
+    if method == "dm":  # the comparison covers the noise model's passes, not only its fallback
         assert result.noise.choice == "noise model" and result.noise.acceleration_share > 0
     return result.theta
 
