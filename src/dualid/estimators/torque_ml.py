@@ -18,10 +18,15 @@ from dualid.problem import additive, sample_blocks
 CURVATURE_FLOOR = 1e-6  # the handed Hessian's smallest eigenvalue in its diagonal scaling (covariance_ml_derivatives)
 
 
-@additive
 def pair_statistics(problem, theta0: np.ndarray, chunk: int = CHUNK) -> tuple:
     """(θ0, Σ vec Y_i vec Y_iᵀ (np, np), Σ vec Y_i r_iᵀ (np, n), Σ r_i r_iᵀ (n, n)), r_i at θ0: S(θ) about θ0, one pass.
     About θ0, not from Σ τ_i τ_iᵀ: there S would be a difference of terms ~1/(noise share) larger than itself."""
+    theta0 = np.asarray(theta0, dtype=float)
+    return (theta0, *_pair_sums(problem, theta0, chunk))
+
+
+@additive
+def _pair_sums(problem, theta0: np.ndarray, chunk: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     n, p = problem.n, problem.p
     G, D, S = np.zeros((n * p, n * p)), np.zeros((n * p, n)), np.zeros((n, n))
     for block, rows, _ in sample_blocks(problem, chunk):
@@ -29,7 +34,7 @@ def pair_statistics(problem, theta0: np.ndarray, chunk: int = CHUNK) -> tuple:
         r = (Y.reshape(-1, p) @ theta0).reshape(-1, n) - block.tau[rows]
         Y = Y.reshape(-1, n * p)
         G, D, S = G + Y.T @ Y, D + Y.T @ r, S + r.T @ r
-    return theta0, G, D, S
+    return G, D, S
 
 
 def covariance_ml_derivatives(stats, theta: np.ndarray, order: int = 2) -> Derivatives:
