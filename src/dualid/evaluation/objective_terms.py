@@ -67,7 +67,8 @@ def derivatives(problem: IdentificationProblem, result: IdentificationResult, es
             g = 2.0 * np.einsum("nap,na->np", problem.Y[rows], w) - problem.metric.quad(w, rows)
             np.add.at(G, labels[rows], g)
         return d.hess, G, d.f
-    if isinstance(est, NoiseModelDM) and result.noise is not None and fallback != "wls":
+    refit = fallback.startswith(("full-covariance ml", "wls"))  # dm's torque-noise fit or WLS: quadratic forms
+    if isinstance(est, NoiseModelDM) and result.noise is not None and not refit:
         return _noise_model_pass(problem.in_sensor_chart(), result, theta, labels, G, chunk)
     chart, W, L = _weights(problem, result, est)
     H, f = _quadratic_pass(chart, W, L, theta, labels, G, chunk)
