@@ -81,25 +81,6 @@ def test_two_workers_fit_the_in_memory_theta(data, client, method):
     assert len(client.scheduler_info()["workers"]) == 2
 
 
-def test_dms_torque_noise_fit_runs_on_the_workers(data, client, monkeypatch):
-    """dm's torque-noise fit (the fallback from a fit its guard flags, forced here) sums its pair statistics and
-    residual covariances on the workers and gives the in-memory θ."""
-    import dualid.estimators.noise_dm as noise_dm
-
-    model, paths, whole = data
-    guard, calls = noise_dm.reference_guard, []
-
-    def flagged(*args, **kwargs):  # the fit's own guard flags a ghost; the result's guard is the real one
-        calls.append(1)
-        return {**guard(*args, **kwargs), "degenerate": True} if len(calls) % 2 == 1 else guard(*args, **kwargs)
-
-    monkeypatch.setattr(noise_dm, "reference_guard", flagged)
-    problem = DaskProblem.from_files(model, paths, client, chunk=100)
-    spread, local = make_estimator("dm").fit(problem), make_estimator("dm").fit(whole)
-    assert spread.noise.choice.startswith("full-covariance ml") and spread.noise.choice == local.noise.choice
-    assert _rel(spread.theta, local.theta) < 1e-8 and problem.client_passes == 0
-
-
 def test_a_missing_partition_is_seen(data, client):
     """The 1e-10 comparison discriminates: the fit without one of the four files is far from the whole one."""
     model, paths, whole = data

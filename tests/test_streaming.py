@@ -160,27 +160,3 @@ def test_streamed_regularized_fit_equals_the_in_memory_fit(data, key):
     a, b = est.fit(whole), est.fit(_chunked(data))
     assert a.status == b.status == "optimal"
     assert abs(b.objective - a.objective) <= 1e-8 * abs(a.objective)
-
-
-def test_dms_torque_noise_fallback_streams(data, monkeypatch):
-    """dm's torque-noise fit (here the fallback from a fit its guard flags) runs on streamed data, its pair statistics
-    and residual covariances as passes, and gives the in-memory fit."""
-    import dualid.estimators.noise_dm as noise_dm
-
-    model, (q, v, a, tau), _ = data
-    a = a + 0.3 * np.random.default_rng(4).normal(size=a.shape)  # noise in the regressor: dm keeps its noise model
-    whole = IdentificationProblem(model.regressor(q, v, a), tau, model.metric(q), v, model.parameters,
-                                  coordinates=model.coordinates)
-    chunked = ChunkedProblem(model, ArraySource(q, v, a, tau, chunk=128))
-    guard, calls = noise_dm.reference_guard, []
-
-    def flagged(*args, **kwargs):  # the fit's own guard flags a ghost; the result's guard is the real one
-        calls.append(1)
-        return {**guard(*args, **kwargs), "degenerate": True} if len(calls) % 2 == 1 else guard(*args, **kwargs)
-
-    monkeypatch.setattr(noise_dm, "reference_guard", flagged)
-    est = make_estimator("dm", allow_unidentifiable=True)
-    a_fit, b_fit = est.fit(whole), est.fit(chunked)
-    assert a_fit.noise.choice.startswith("full-covariance ml") and b_fit.noise.choice == a_fit.noise.choice
-    assert abs(b_fit.objective - a_fit.objective) <= 1e-6 * abs(a_fit.objective)
-    assert np.max(np.abs(whole.residual(b_fit.theta) - whole.residual(a_fit.theta))) <= 1e-4 * np.max(np.abs(tau))

@@ -115,29 +115,6 @@ def test_dm_without_acceleration_noise_has_wls_intervals_with_the_same_covarianc
     np.testing.assert_allclose(u_dm.covariance, u_wls.covariance, rtol=1e-5)
 
 
-def test_dms_torque_noise_fit_has_wls_intervals_in_its_residual_covariance(monkeypatch):
-    """Where dm fits its residual as torque noise of full covariance (here forced by flagging its fit as a ghost), its
-    intervals are WLS's with that covariance: θ's Fisher information with the covariance profiled out."""
-    import dualid.estimators.noise_dm as noise_dm
-    from dualid.estimators.least_squares import residual_covariance
-    from tests.test_noise_dm import eiv_problem
-
-    guard, calls = noise_dm.reference_guard, []
-
-    def flagged(*args, **kwargs):  # the fit's own guard flags a ghost; the result's guard is the real one
-        calls.append(1)
-        return {**guard(*args, **kwargs), "degenerate": True} if len(calls) % 2 == 1 else guard(*args, **kwargs)
-
-    monkeypatch.setattr(noise_dm, "reference_guard", flagged)
-    problem, _ = eiv_problem(0, N=1000, torque=0.05, regressor=0.3)
-    dm = NoiseModelDM()
-    fit = dm.fit(problem)
-    assert fit.noise.choice.startswith("full-covariance ml")
-    wls = WLS(covariance=residual_covariance(problem, fit.theta)[0])
-    u_wls = base_uncertainty(problem, wls.fit(problem), wls)
-    np.testing.assert_allclose(base_uncertainty(problem, fit, dm).covariance, u_wls.covariance, rtol=1e-4)
-
-
 def test_dm_per_sample_gradients_sum_to_its_objective_gradient():
     """The sandwich's per-sample gradients of dm's objective (noise model fixed) add up to the gradient of
     Σ r_iᵀ(Σ_τ + M_i(θ)Σ_aM_i(θ))⁻¹r_i, checked by central differences at a point away from the optimum."""

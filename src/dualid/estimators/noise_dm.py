@@ -18,10 +18,8 @@ the same fit; the objective is invariant when Σ_τ, Σ_a are carried covariantl
    under the physical-consistency constraints, from the pilot moved strictly inside them, then from the last θ
    with the levels re-estimated at it; a solve whose θ only feeds the levels (the pilot's, the first round's) stops
    at LEVELS_TOL;
-4. the held-out check (``noise_model.check_noise_model``) and the metric guard against the pilot. When the residual
-   is not the modelled noise (unmodelled torques), or the fit is degenerate against its pilot (a ghost): the pilot
-   where it is the paper's optimum, else the residual as a torque noise of full unknown covariance, by maximum
-   likelihood (``torque_ml``: unmodelled torques correlate the joints' residuals);
+4. the held-out check (``noise_model.check_noise_model``): WLS when the residual is not the modelled noise; the
+   metric guard against the pilot: a degenerate fit (a ghost) gives way to the pilot (the paper's optimum) or WLS;
 5. the result records the noise levels (sensor chart), their residual shares and the rounds in ``result.noise``.
 
 solver="cvxpy" makes step 3's θ-solves by majorize–minimize instead, each step one conic problem (a batched SDP):
@@ -45,7 +43,6 @@ from dualid.estimators.newton.interior_point import run_interior_point
 from dualid.estimators.newton.objective import CHUNK, objective_value, statistics, stopping_scale, value_or_inf
 from dualid.estimators.noise_model import (NoiseCheck, NoiseLevels, check_noise_model, estimate_noise, given_levels,
                                            noise_model_derivatives, noise_model_objective, noise_model_scale)
-from dualid.estimators.torque_ml import covariance_ml_derivatives, pair_statistics
 from dualid.estimators.newton.start import run_quadratic, toward_start
 from dualid.estimators.quadratic_newton import quadratic_objective
 from dualid.estimators.result import IdentificationResult, NoiseRecord
@@ -147,10 +144,13 @@ class NoiseModelDM:
                    f"{guard.get('metric_ratio_min', np.nan):.2g}…{guard.get('metric_ratio_max', np.nan):.3g})")
         if why and pilot == "dm-paper":  # the pilot is the paper's constrained optimum: dm returns it
             theta, f, choice = theta_pilot, objective_value(sensor, theta_pilot, self.chunk), f"dm-paper: {why}"
-        elif why:  # the residual as torque noise alone, of a full unknown covariance, from the same start
-            theta, info, S, how = self._torque_ml(sensor, cons, start, theta_pilot)
+        elif why:  # WLS in the residual variances at θ̂, from the same start
+            S, fallback = residual_covariance(sensor, theta)
+            wls = NoiseLevels(np.diag(np.diag(S)), np.zeros_like(S), 1.0, 0.0, 0)
+            theta, info = self._solve(sensor, cons, start, wls)
             run["status"] = _status(info)
-            f, choice = noise_model_objective(sensor, theta, S, np.zeros_like(S), self.chunk), f"{how}: {why}"
+            f, choice = (noise_model_objective(sensor, theta, wls.sigma_tau, wls.sigma_a, self.chunk),
+                         f"wls: {why}" + ("" if fallback is None else f"; {fallback}"))
         return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0,
                             None if why else guard)
 
@@ -188,31 +188,6 @@ class NoiseModelDM:
         return IdentificationResult(self.name, theta, problem.parameters, f, run["status"], solver,
                                     time.perf_counter() - t0, run["iterations"], self.constrained,
                                     {"rounds": run["rounds"], "start": run["start"], **guard, **completed}, noise=record)
-
-    def _torque_ml(self, problem, cons, theta, theta_pilot):
-        """(θ, info, the residual covariance at θ, what θ is): the maximum likelihood of a torque noise with a full
-        unknown covariance (``torque_ml``) by the interior point from θ. WLS instead, from θ, in a noise at the rounding
-        floor on exact data (the least-squares pilot's residual at rounding: there the likelihood has no maximum), and
-        in the residual covariance at θ where the interior point fails (said in ``what θ is``)."""
-        S, exact = residual_covariance(problem, theta_pilot)
-        if exact is None:
-            stats = pair_statistics(problem, theta, self.chunk)
-
-            def objective(th, order):
-                return covariance_ml_derivatives(stats, th, order)
-
-            try:
-                fit, _, _, info = run_interior_point(problem, cons, theta, None, None, self.tol, self.max_iter,
-                                                     self.chunk, False, objective=objective, f_scale=0.0,
-                                                     convex=False, acceptable=ACCEPTABLE)
-            except SolverError as exc:
-                S, exact = residual_covariance(problem, theta)[0], f"the likelihood's solve failed: {str(exc)[:120]}"
-            else:
-                gram = np.einsum("akal->kl", stats[1].reshape(problem.n, problem.p, problem.n, problem.p))  # Σ YᵢᵀYᵢ
-                theta = toward_start(fit, theta, gram, cons, lambda th: value_or_inf(objective, th))
-                return theta, info, residual_covariance(problem, theta)[0], "full-covariance ml"
-        wls = NoiseLevels(S, np.zeros_like(S), 1.0, 0.0, 0)
-        return *self._solve(problem, cons, theta, wls), S, f"wls ({exact})"
 
     def _paper_optimum(self, problem) -> np.ndarray:
         """The paper's dual-metric optimum (the same θ in every chart); where its infimum is at infinity, where the

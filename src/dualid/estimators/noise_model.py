@@ -34,9 +34,8 @@ of the noise). WLS (W = Σ̂⁻¹, Σ̂ the diagonal of the residual covariance 
 each of two contiguous halves, unconstrained from θ̂ (WLS in one exact Newton step, dm in NEWTON_STEPS damped ones),
 and scored on the other half in W. ``excess`` is the measured held-out gap dm − WLS minus the predicted one, over
 WLS's held-out loss: near 0 when the residual is the modelled noise, positive when it is not (unmodelled torques the
-fit tried to absorb by moving M(θ)). The noise model is rejected (``dm`` then fits the residual as a torque noise of
-full unknown covariance, ``torque_ml``, and says so) when the excess is both relevant (> EXCESS_TOL) and
-significant (> Z_REJECT standard errors, from contiguous blocks of samples).
+fit tried to absorb by moving M(θ)). The noise model is rejected (``dm`` returns WLS, and says so) when the excess is
+both relevant (> EXCESS_TOL) and significant (> Z_REJECT standard errors, from contiguous blocks of samples).
 """
 
 from __future__ import annotations

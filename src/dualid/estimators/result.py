@@ -24,8 +24,7 @@ class NoiseRecord:
     source: str  # "estimated" | "fixed" (given by the user)
     rounds: int  # noise-level / θ alternations
     pilot_objective: float  # the pilot's objective
-    choice: str = "noise model"  # what θ̂ is: "noise model", or "full-covariance ml: …" / "dm-paper: …" when dm fell
-    # back (and why)
+    choice: str = "noise model"  # what θ̂ is: "noise model", or "wls: …" / "dm-paper: …" when dm fell back (and why)
     check_excess: float = float("nan")  # held-out loss beyond the noise model's prediction, share of WLS's (noise_model)
     check_measured_gap: float = float("nan")  # held-out loss dm − WLS, share of WLS's
     check_predicted_gap: float = float("nan")  # … as the noise model predicts it

@@ -7,7 +7,7 @@ import numpy as np
 
 from dualid.errors import ConfigError, MetricError
 from dualid.estimators.dual_metric import DualMetric
-from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS, covariance_weight, residual_covariance
+from dualid.estimators.least_squares import OLS, WLS, EnergyLS, RegularizedWLS, covariance_weight
 from dualid.estimators.newton.objective import NotPositiveDefinite, dual_metric_derivatives
 from dualid.estimators.noise_dm import NoiseModelDM
 from dualid.estimators.noise_model import noise_model_covariance, noise_model_derivatives
@@ -35,11 +35,10 @@ def _weights(problem: IdentificationProblem, result: IdentificationResult, est):
         else:
             W = np.linalg.inv(np.asarray(S, dtype=float))
         return problem, 0.5 * (W + W.T), None
-    if isinstance(est, NoiseModelDM):  # dm's torque-noise fit (its check): W = S⁻¹, S its residual covariance (the
-        # Fisher information of θ with the covariance profiled out is WLS's in S; rounding floor on exact data)
+    if isinstance(est, NoiseModelDM):  # dm returned WLS (its noise check): its weight, the residual variances
         sensor = problem.in_sensor_chart()
-        W = np.linalg.inv(residual_covariance(sensor, np.asarray(result.theta))[0])
-        return sensor, 0.5 * (W + W.T), None
+        r = sensor.residual(np.asarray(result.theta))
+        return sensor, np.diag(1.0 / np.mean(r**2, axis=0)), None
     raise ConfigError(f"uncertainty: no sandwich for estimator {type(est).__name__} (method {result.method!r}); "
                            "supported: OLS, WLS, EnergyLS, RegularizedWLS, NoiseModelDM (dm), DualMetric (dm-paper); "
                            "use the block bootstrap (dualid.bootstrap; in a fit config: "
@@ -67,8 +66,7 @@ def derivatives(problem: IdentificationProblem, result: IdentificationResult, es
             g = 2.0 * np.einsum("nap,na->np", problem.Y[rows], w) - problem.metric.quad(w, rows)
             np.add.at(G, labels[rows], g)
         return d.hess, G, d.f
-    refit = fallback.startswith(("full-covariance ml", "wls"))  # dm's torque-noise fit or WLS: quadratic forms
-    if isinstance(est, NoiseModelDM) and result.noise is not None and not refit:
+    if isinstance(est, NoiseModelDM) and result.noise is not None and fallback != "wls":
         return _noise_model_pass(problem.in_sensor_chart(), result, theta, labels, G, chunk)
     chart, W, L = _weights(problem, result, est)
     H, f = _quadratic_pass(chart, W, L, theta, labels, G, chunk)

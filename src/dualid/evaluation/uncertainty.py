@@ -19,8 +19,7 @@ The Hessian and per-sample gradients are:
   Hessian 2 Σ D_iᵀM_i⁻¹D_i, D_i = Y_i − [M_ik w_i]_k (estimators.newton.objective);
 - dm: f_i = r_iᵀC_i(θ)⁻¹r_i with its estimated noise model C_i = Σ_τ + M_iΣ_aM_i (held fixed),
   ∇f_i = 2 Y_iᵀw_i − 2 [u_iᵀM_ik w_i]_k (w_i = C_i⁻¹r_i, u_i = Σ_aM_iw_i), H the Hessian of
-  estimators.noise_model (with Σ_a = 0 that is WLS's); where it fitted the residual as a torque noise of full
-  covariance (its check), WLS's quadratic form in that residual covariance;
+  estimators.noise_model (with Σ_a = 0 that is WLS's); where its check returned WLS, WLS's quadratic form;
 - logdet: + γ tr(C⁻¹V_k C⁻¹V_l) per block; pullback: + 2γ g_b; the data term's per-sample gradients are
   taken at its own (unregularised) minimiser, where the residuals are the noise: at θ̂ they would also
   carry the prior's systematic pull, which is not sampling variation for a fixed design.
