@@ -16,6 +16,8 @@ from dualid.estimators.newton.objective import dual_metric_derivatives, force_sc
 from dualid.linalg import NewtonSystem, NotPositiveDefinite, SecantCorrection, positive_definite
 from dualid.model.consistency import FeasibleSet, repair_psd
 
+LARGE_LMI = 32  # blocks of this size or more assemble their Newton term by one GEMM (einsum: 4× slower at 64, the
+# plausible step's region on a 7-DoF arm); smaller ones keep einsum, whose rounding the stress corpus was tuned on
 RESTART = 1.0  # non-convex f only: after a step that lowered f by Δf > the duality gap, the barrier restarts at
 # μ = RESTART · Δf / ν with the dual re-centred (Z_b = μ C_b⁻¹, z = μ / s), as the barrier update of Nocedal & Wright
 # §19.3 and IPOPT's monotone μ (not below the optimality error, here the observed decrease). For convex f the gap
@@ -138,7 +140,9 @@ def run_interior_point(problem, cons: FeasibleSet, theta, Z, z, tol, max_iter, c
         for c, Zb, Ci in zip(cons.lmis, Z, Cinv):
             r_dual[c.idx] -= np.einsum("kab,ba->k", c.V, Zb)
             barrier_grad[c.idx] += np.einsum("kab,ba->k", c.V, Ci)
-            K[np.ix_(c.idx, c.idx)] += np.einsum("kab,lba->kl", c.V @ Zb, c.V @ Ci)  # tr(V_k Z V_l C⁻¹), O(k² m²)
+            VZ, VC = c.V @ Zb, c.V @ Ci  # tr(V_k Z V_l C⁻¹), O(k² m²); a large block (the plausible step's confidence
+            K[np.ix_(c.idx, c.idx)] += (np.einsum("kab,lba->kl", VZ, VC) if len(Zb) < LARGE_LMI else  # region) by GEMM
+                                        VZ.reshape(len(VZ), -1) @ np.swapaxes(VC, 1, 2).reshape(len(VC), -1).T)
         if len(s):
             r_dual -= cons.G.T @ z
             barrier_grad += cons.G.T @ (1.0 / s)
