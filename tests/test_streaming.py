@@ -7,7 +7,8 @@ import pytest
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.newton import dual_metric_derivatives
 from dualid.estimators.newton.objective import energy_statistics, statistics
-from dualid.estimators.newton.weighted import weighted_statistics, whitener
+from dualid.estimators.newton.objective import weighted_sums
+from dualid.estimators.newton.weighted import whitener
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.problem import IdentificationProblem
 from dualid.streaming import ArraySource, ChunkedProblem, ParquetSource
@@ -72,7 +73,7 @@ def test_chunked_statistics_equal_the_materialised_ones(data):
     H = np.einsum("nap,naq->pq", whole.Y, CiY)
     g = np.einsum("nap,na->p", CiY, whole.tau)
     for problem in (whole, chunked):
-        Hc, gc, cc = weighted_statistics(problem, whitener(problem, C), chunk=64)
+        Hc, gc, cc = weighted_sums(problem, whitener(problem, C).T, chunk=64)
         assert _rel(Hc, H) < 1e-12 and _rel(gc, g) < 1e-12
     # the dual-metric derivatives, chunked over the source's blocks and the solver's chunks
     d0, d1 = dual_metric_derivatives(whole, theta, 2, 10_000), dual_metric_derivatives(chunked, theta, 2, 50)

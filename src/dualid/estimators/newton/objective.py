@@ -158,16 +158,20 @@ def statistics(problem: IdentificationProblem, W: np.ndarray | None = None, chun
     if W is not None:  # W = F Fᵀ (eigen-factor, W ⪰ 0): Σ Y_iᵀ W Y_i = Σ (Fᵀ Y_i)ᵀ (Fᵀ Y_i), one GEMM per chunk
         lam, U = np.linalg.eigh(0.5 * (np.asarray(W, dtype=float) + np.asarray(W, dtype=float).T))
         F = U * np.sqrt(np.clip(lam, 0.0, None))
-    H, g, c = _sums(problem, F, chunk)
+    H, g, c = weighted_sums(problem, F, chunk)
     return Statistics(0.5 * (H + H.T), g, c, W)
 
 
 @additive
-def _sums(problem, F: np.ndarray | None, chunk: int) -> tuple[np.ndarray, np.ndarray, float]:
-    """Σ A_iᵀA_i, Σ A_iᵀt_i, Σ t_iᵀt_i with A_i = FᵀY_i, t_i = Fᵀτ_i (F None: the identity)."""
+def weighted_sums(problem, F: np.ndarray | None, chunk: int, energy: bool = False) -> tuple:
+    """Σ A_iᵀA_i, Σ A_iᵀt_i, Σ t_iᵀt_i with A_i = FᵀY_i, t_i = Fᵀτ_i (F None: the identity); with energy=True also
+    the energy residual's Σ e_i e_iᵀ, Σ e_i y_i (``energy_statistics``) from the same pass."""
     p = problem.p
-    H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
+    H, g, c, He, ge = np.zeros((p, p)), np.zeros(p), 0.0, np.zeros((p, p)), np.zeros(p)
     for block, rows, _ in sample_blocks(problem, chunk):
+        if energy:
+            e, y = _energy_rows(block, rows)
+            He, ge = He + e.T @ e, ge + e.T @ y
         Yc, tau = block.Y[rows], block.tau[rows]
         if F is not None:
             Yc, tau = np.matmul(F.T, Yc), tau @ F
@@ -175,7 +179,13 @@ def _sums(problem, F: np.ndarray | None, chunk: int) -> tuple[np.ndarray, np.nda
         H += A.T @ A
         g += A.T @ t
         c += float(t @ t)
-    return H, g, c
+    return (H, g, c, He, ge) if energy else (H, g, c)
+
+
+def _energy_rows(block, rows) -> tuple[np.ndarray, np.ndarray]:
+    """The energy residual's rows e_i = Y_iᵀ v_i and targets y_i = v_iᵀ τ_i of a block's samples."""
+    return (np.einsum("nap,na->np", block.Y[rows], block.v[rows]),
+            np.einsum("na,na->n", block.tau[rows], block.v[rows]))
 
 
 def energy_statistics(problem: IdentificationProblem, chunk: int = 16384) -> Statistics:
@@ -188,8 +198,7 @@ def _energy_sums(problem, chunk: int) -> tuple[np.ndarray, np.ndarray, float]:
     p = problem.p
     H, g, c = np.zeros((p, p)), np.zeros(p), 0.0
     for block, rows, _ in sample_blocks(problem, chunk):
-        e = np.einsum("nap,na->np", block.Y[rows], block.v[rows])
-        y = np.einsum("na,na->n", block.tau[rows], block.v[rows])
+        e, y = _energy_rows(block, rows)
         H += e.T @ e
         g += e.T @ y
         c += float(y @ y)

@@ -18,7 +18,7 @@ import numpy as np
 from dualid.errors import MetricError
 from dualid.estimators.newton.fit import check_bounds
 from dualid.estimators.newton.interior_point import direction_label, direction_names, run_interior_point
-from dualid.estimators.newton.objective import CHUNK, Derivatives
+from dualid.estimators.newton.objective import CHUNK, Derivatives, weighted_sums
 from dualid.estimators.newton.start import constant_metric_start, toward, toward_start
 from dualid.estimators.result import IdentificationResult
 from dualid.linalg import solve_psd, tri_inverse
@@ -36,7 +36,8 @@ def not_positive_definite(problem, what: str, bad: int, low: float) -> MetricErr
 
 
 def whitener(problem, C: np.ndarray, what: str = "the weight's covariance") -> np.ndarray:
-    """L⁻¹ (n, n), C = L Lᵀ; MetricError (every sample fails) when C is not positive definite."""
+    """L⁻¹ (n, n), C = L Lᵀ (``weighted_sums`` with F = L⁻ᵀ sums the whitened rows); MetricError (every sample fails)
+    when C is not positive definite."""
     C = np.asarray(C, dtype=float)
     try:
         L = np.linalg.cholesky(C)
@@ -45,21 +46,6 @@ def whitener(problem, C: np.ndarray, what: str = "the weight's covariance") -> n
     if L is None or not np.all(np.isfinite(L)):
         raise not_positive_definite(problem, what, problem.N, float(np.linalg.eigvalsh(C)[0]))
     return tri_inverse(L[None])[0]
-
-
-@additive
-def weighted_statistics(problem: IdentificationProblem, Li: np.ndarray, chunk: int = CHUNK, energy: bool = False):
-    """(H, g, c) = Σ Y_iᵀC⁻¹Y_i, Σ Y_iᵀC⁻¹τ_i, Σ τ_iᵀC⁻¹τ_i for C⁻¹ = Liᵀ Li (``whitener``), over chunks of samples;
-    with energy=True also (H_e, g_e) of the energy residual v_iᵀ r_i, from the same pass."""
-    p = problem.p
-    H, g, c, He, ge = np.zeros((p, p)), np.zeros(p), 0.0, np.zeros((p, p)), np.zeros(p)
-    for block, rows, _ in sample_blocks(problem, chunk):
-        if energy:
-            e = np.einsum("nap,na->np", block.Y[rows], block.v[rows])
-            He, ge = He + e.T @ e, ge + e.T @ np.einsum("na,na->n", block.tau[rows], block.v[rows])
-        Z, z = np.matmul(Li, block.Y[rows]).reshape(-1, p), (block.tau[rows] @ Li.T).reshape(-1)
-        H, g, c = H + Z.T @ Z, g + Z.T @ z, c + float(z @ z)
-    return (0.5 * (H + H.T), g, c, He, ge) if energy else (0.5 * (H + H.T), g, c)
 
 
 @additive
@@ -88,11 +74,13 @@ def fit_weighted_newton(
     null_step: bool = True,  # False: no move along the null space (a pilot whose θ feeds only its residuals)
 ) -> IdentificationResult:
     """argmin Σ r_iᵀ C⁻¹ r_i under the constraints (module doc), C (n, n) ≻ 0; when the cheap start fails, from the
-    weighted LS's central point or a phase I on the same (closed) feasible set (``newton.start.constant_metric_start``)."""
+    weighted LS's central point or a phase I on the same (closed) feasible set
+    (``newton.start.constant_metric_start``)."""
     t0 = time.perf_counter()
     check_bounds(problem, constrained)
     Li = whitener(problem, C, what)
-    H, g, c, H_e, g_e = weighted_statistics(problem, Li, chunk, energy=True)
+    H, g, c, H_e, g_e = weighted_sums(problem, Li.T, chunk, energy=True)  # whitened rows L⁻¹Y_i, τ_i L⁻ᵀ
+    H = 0.5 * (H + H.T)
     # parameters f cannot see that only loosen a block: solved on the closed set, then completed (model.closure)
     cons, done = on_closure(feasible_set(problem.parameters, constrained), H, c, problem.parameters.names)
     theta_f = solve_psd(H, g, rtol=1e-10)  # the unconstrained weighted LS (min-norm): the frozen-metric LS
