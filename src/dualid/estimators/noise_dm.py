@@ -8,18 +8,20 @@ torque noise; this objective is consistent under both when the noise levels are 
 (the fixed point "weights at θ_k, weighted LS, repeat") do not do it: the gain is the ∂C/∂θ term.
 
 The fit, in the problem's sensor chart (so every chart the problem records, configuration-dependent ones too, gives
-the same fit; the objective is invariant when Σ_τ, Σ_a are carried covariantly):
+the same fit; the noise levels are covariant per coordinate, so a coordinate or the forces in other units by hand too):
 1. pilot: least squares in weights 1/mean τ_j² (unconstrained; constrained where M(θ) is not positive definite);
    with a passive coordinate (τ_j ≡ 0), the paper's dual-metric optimum;
-2. the noise levels from its residuals (``noise_model.estimate_noise``: Σ_τ per joint, Σ_a = σ_a² diag(mean v²),
-   equivariant under per-coordinate units). When the likelihood does not support acceleration noise, Σ_a = 0 and
-   ``dm`` is WLS in Σ_τ: one quadratic fit from its sufficient statistics, under the same constraints;
+2. the noise levels from its residuals (``noise_model.estimate_noise``: Σ_τ per joint, Σ_a = σ_a² diag(mean v²): the
+   sensors are independent). When the likelihood does not support acceleration noise, ``dm`` is WLS in the pilot's
+   residual covariance (step 4's fallback: one quadratic fit from its sufficient statistics, same constraints);
 3. ROUNDS times: θ by dualid's primal–dual interior point on f (gradient and Hessian of ``noise_model``)
    under the physical-consistency constraints, from the pilot moved strictly inside them, then from the last θ
    with the levels re-estimated at it; a solve whose θ only feeds the levels (the pilot's, the first round's) stops
    at LEVELS_TOL;
-4. the held-out check (``noise_model.check_noise_model``): WLS when the residual is not the modelled noise; the
-   metric guard against the pilot: a degenerate fit (a ghost) gives way to the pilot (the paper's optimum) or WLS;
+4. the held-out check (``noise_model.check_noise_model``) and the metric guard against the pilot: when the residual
+   is not the modelled noise, or the fit is degenerate (a ghost), ``dm`` returns WLS in the pilot's residual
+   covariance (full: correlated residuals, which model error makes, are weighed as WLS weighs them), or, where the
+   pilot is the paper's optimum, that optimum;
 5. the result records the noise levels (sensor chart), their residual shares and the rounds in ``result.noise``.
 
 solver="cvxpy" makes step 3's θ-solves by majorize–minimize instead, each step one conic problem (a batched SDP):
@@ -30,7 +32,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -128,12 +130,18 @@ class NoiseModelDM:
             paper = self._inside(self._paper_optimum(sensor), cons)
             theta, noise, run = self._rounds(sensor, sample, cons, paper, theta_pilot)
             run.update(start=f"dm-paper (the fit from the {pilot} pilot failed)", pilot=pilot)
-        f, choice = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk), "noise model"
-        if not noise.acceleration_share > 0:
+        if not noise.acceleration_share > 0:  # torque noise alone: WLS (the given Σ_τ, or the pilot's residuals')
             why = ("given" if self.sigma_tau is not None else f"2 log-likelihood ratio {noise.likelihood_ratio:.3g}"
                    if np.isfinite(noise.likelihood_ratio) else "the velocities are 0: Σ_a has no shape")
-            choice = f"no acceleration noise ({why}): WLS"
-            return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, None, choice, t0)
+            note = ""
+            if self.sigma_tau is None:  # recorded: the covariance the fit used
+                theta, f, run["status"], note, S = self._wls(sensor, cons, start, theta_pilot)
+                noise = replace(noise, sigma_tau=S)
+            else:
+                f = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk)
+            return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, None,
+                                f"no acceleration noise ({why}): WLS{note}", t0)
+        f, choice = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk), "noise model"
         check = self._check(sample, theta, noise)
         guard, why = reference_guard(sensor, done(theta, {})[0], theta_pilot, f"pilot ({pilot})"), None
         if check is not None and check.rejected:
@@ -144,15 +152,19 @@ class NoiseModelDM:
                    f"{guard.get('metric_ratio_min', np.nan):.2g}…{guard.get('metric_ratio_max', np.nan):.3g})")
         if why and pilot == "dm-paper":  # the pilot is the paper's constrained optimum: dm returns it
             theta, f, choice = theta_pilot, objective_value(sensor, theta_pilot, self.chunk), f"dm-paper: {why}"
-        elif why:  # WLS in the residual variances at θ̂, from the same start
-            S, fallback = residual_covariance(sensor, theta)
-            wls = NoiseLevels(np.diag(np.diag(S)), np.zeros_like(S), 1.0, 0.0, 0)
-            theta, info = self._solve(sensor, cons, start, wls)
-            run["status"] = _status(info)
-            f, choice = (noise_model_objective(sensor, theta, wls.sigma_tau, wls.sigma_a, self.chunk),
-                         f"wls: {why}" + ("" if fallback is None else f"; {fallback}"))
+        elif why:
+            theta, f, run["status"], note, _ = self._wls(sensor, cons, start, theta_pilot)
+            choice = f"wls: {why}{note}"
         return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0,
                             None if why else guard)
+
+    def _wls(self, sensor, cons, start, theta_pilot):
+        """WLS in the pilot's residual covariance (the pilot: the same in every unit, where OLS is not), under the
+        constraints from ``start``: (θ, f, status, a note of the exact-data floor if used, Σ̂)."""
+        S, fallback = residual_covariance(sensor, theta_pilot)
+        theta, info = self._solve(sensor, cons, start, NoiseLevels(S, np.zeros_like(S), 1.0, 0.0, 0))
+        f = noise_model_objective(sensor, theta, S, np.zeros_like(S), self.chunk)
+        return theta, f, _status(info), "" if fallback is None else f"; {fallback}", S
 
     def _inside(self, theta, cons):  # θ, or (constrained, θ not strictly inside cons) its central point: a start
         return central_point(theta, cons) if self.constrained and not cons.margin(theta) > 0 else theta
@@ -168,12 +180,12 @@ class NoiseModelDM:
         for k in range(1 if fixed else ROUNDS):
             if not fixed:
                 noise = estimate_noise(sample, theta_pilot if k == 0 else theta, start=noise if k else None)
-            last = fixed or k == ROUNDS - 1 or not noise.acceleration_share > 0
+                if not noise.acceleration_share > 0:  # no acceleration noise: ``fit`` returns WLS
+                    break
+            last = fixed or k == ROUNDS - 1
             theta, info = self._solve(sensor, cons, theta, noise, *((None, None) if last else (LEVELS_TOL, budget)))
             run.update(iterations=run["iterations"] + info["iterations"], rounds=run["rounds"] + 1,
                        status=_status(info))
-            if not noise.acceleration_share > 0:  # no acceleration noise: the noise model is WLS's
-                break
         return theta, noise, run
 
     def _result(self, problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0, guard=None):
@@ -214,7 +226,8 @@ class NoiseModelDM:
                            LEVELS_TOL)[0], "unit-free least squares"
 
     def _check(self, sensor, theta, noise) -> NoiseCheck | None:
-        W = np.diag(1.0 / np.mean(sensor.residual(theta) ** 2, axis=0))
+        r = sensor.residual(theta)
+        W = np.linalg.inv(r.T @ r / sensor.N)
         try:
             return check_noise_model(sensor, theta, noise.sigma_tau, noise.sigma_a, W, self.chunk)
         except (MetricError, NotPositiveDefinite, np.linalg.LinAlgError):

@@ -30,11 +30,11 @@ samples and a held-out sample with measured Y_i = Y*_i + ΔY_i (ΔY_i θ = M_i(�
     ‖Y*_i Δ‖²_W ≈ ‖Y_i Δ‖²_W − tr(W M̄_i(Δ) Σ_a M̄_i(Δ))       (M̄(Δ) = M(Δ) − M(0), the linear part)
 
 with θ* ≈ the full-data fit θ̂ (for the consistent fit the first term is its estimation variance, about p/(n N_train)
-of the noise). WLS (W = Σ̂⁻¹, Σ̂ the diagonal of the residual covariance at θ̂) and dm (levels fixed) are fitted on
+of the noise). WLS (W = Σ̂⁻¹, Σ̂ the residual covariance at θ̂) and dm (levels fixed) are fitted on
 each of two contiguous halves, unconstrained from θ̂ (WLS in one exact Newton step, dm in NEWTON_STEPS damped ones),
 and scored on the other half in W. ``excess`` is the measured held-out gap dm − WLS minus the predicted one, over
 WLS's held-out loss: near 0 when the residual is the modelled noise, positive when it is not (unmodelled torques the
-fit tried to absorb by moving M(θ)). The noise model is rejected (``dm`` returns WLS, and says so) when the excess is
+fit tried to absorb by moving M(θ)). The noise model is rejected (``dm`` says so and falls back) when the excess is
 both relevant (> EXCESS_TOL) and significant (> Z_REJECT standard errors, from contiguous blocks of samples).
 """
 
