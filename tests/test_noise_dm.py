@@ -246,6 +246,13 @@ def test_a_degenerate_fit_without_a_passive_coordinate_falls_back_to_wls(monkeyp
     wls = WLS(covariance=S).fit(problem)
     assert res.is_consistent and rel(problem.Y @ res.theta, problem.Y @ wls.theta) < 1e-5
     assert rel(problem.Y @ res.theta, problem.Y @ kept.theta) > 1e-3
+    # its intervals weigh the residuals as that WLS fit does
+    from dualid.evaluation.objective_terms import derivatives
+
+    labels = np.arange(problem.N) % 4
+    H, G, f = derivatives(problem, res, NoiseModelDM(), labels)
+    H_w, G_w, f_w = derivatives(problem, replace(wls, theta=res.theta), WLS(covariance=S), labels)
+    assert rel(H, H_w) < 1e-8 and rel(G, G_w) < 1e-8 and rel(f, f_w) < 1e-8
 
 
 def test_a_stalled_quadratic_solve_falls_back_to_the_general_path(monkeypatch):

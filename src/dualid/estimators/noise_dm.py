@@ -140,7 +140,8 @@ class NoiseModelDM:
             else:
                 f = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk)
             return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, None,
-                                f"no acceleration noise ({why}): WLS{note}", t0)
+                                f"no acceleration noise ({why}): WLS{note}", t0,
+                                extra={"covariance_matrix": np.asarray(noise.sigma_tau).tolist()})
         f, choice = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk), "noise model"
         check = self._check(sample, theta, noise)
         guard, why = reference_guard(sensor, done(theta, {})[0], theta_pilot, f"pilot ({pilot})"), None
@@ -152,11 +153,12 @@ class NoiseModelDM:
                    f"{guard.get('metric_ratio_min', np.nan):.2g}…{guard.get('metric_ratio_max', np.nan):.3g})")
         if why and pilot == "dm-paper":  # the pilot is the paper's constrained optimum: dm returns it
             theta, f, choice = theta_pilot, objective_value(sensor, theta_pilot, self.chunk), f"dm-paper: {why}"
-        elif why:
-            theta, f, run["status"], note, _ = self._wls(sensor, cons, start, theta_pilot)
-            choice = f"wls: {why}{note}"
+        extra = {}
+        if why and pilot != "dm-paper":
+            theta, f, run["status"], note, S = self._wls(sensor, cons, start, theta_pilot)
+            choice, extra = f"wls: {why}{note}", {"covariance_matrix": S.tolist()}  # its weight (sensor chart)
         return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0,
-                            None if why else guard)
+                            None if why else guard, extra)
 
     def _wls(self, sensor, cons, start, theta_pilot):
         """WLS in the pilot's residual covariance (the pilot: the same in every unit, where OLS is not), under the
@@ -188,8 +190,10 @@ class NoiseModelDM:
                        status=_status(info))
         return theta, noise, run
 
-    def _result(self, problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0, guard=None):
-        """The result of θ (completed by ``done``); ``guard``: θ's metric guard against the pilot, if already made."""
+    def _result(self, problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0, guard=None,
+                extra=None):
+        """The result of θ (completed by ``done``); ``guard``: θ's metric guard against the pilot, if already made;
+        ``extra``: more info (the covariance of a WLS fit)."""
         theta, completed = done(theta, {})
         gaps = (np.nan,) * 3 if check is None else (check.excess, check.measured_gap, check.predicted_gap)
         record = NoiseRecord(noise.sigma_tau, noise.sigma_a, noise.torque_share, noise.acceleration_share,
@@ -199,7 +203,8 @@ class NoiseModelDM:
         solver = "newton" if self.solver == "newton" else f"cvxpy-mm/{self.cvxpy_solver}"
         return IdentificationResult(self.name, theta, problem.parameters, f, run["status"], solver,
                                     time.perf_counter() - t0, run["iterations"], self.constrained,
-                                    {"rounds": run["rounds"], "start": run["start"], **guard, **completed}, noise=record)
+                                    {"rounds": run["rounds"], "start": run["start"], **guard, **completed, **(extra or {})},
+                                    noise=record)
 
     def _paper_optimum(self, problem) -> np.ndarray:
         """The paper's dual-metric optimum (the same θ in every chart); where its infimum is at infinity, where the

@@ -35,10 +35,8 @@ def _weights(problem: IdentificationProblem, result: IdentificationResult, est):
         else:
             W = np.linalg.inv(np.asarray(S, dtype=float))
         return problem, 0.5 * (W + W.T), None
-    if isinstance(est, NoiseModelDM):  # dm returned WLS (its noise check): its weight, the residual variances
-        sensor = problem.in_sensor_chart()
-        r = sensor.residual(np.asarray(result.theta))
-        return sensor, np.diag(1.0 / np.mean(r**2, axis=0)), None
+    if isinstance(est, NoiseModelDM):  # dm returned WLS (its noise check): its weight, in the sensor chart
+        return problem.in_sensor_chart(), np.linalg.inv(np.asarray(result.info["covariance_matrix"], dtype=float)), None
     raise ConfigError(f"uncertainty: no sandwich for estimator {type(est).__name__} (method {result.method!r}); "
                            "supported: OLS, WLS, EnergyLS, RegularizedWLS, NoiseModelDM (dm), DualMetric (dm-paper); "
                            "use the block bootstrap (dualid.bootstrap; in a fit config: "
