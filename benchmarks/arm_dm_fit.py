@@ -34,6 +34,8 @@ import time
 import numpy as np
 import pinocchio as pin
 
+from dualid.errors import OutputError
+from dualid.report.outdir import check_output_files
 from dualid.errors import DualidError
 from dualid.estimators.dual_metric import DualMetric
 from dualid.estimators.least_squares import OLS, WLS
@@ -227,7 +229,12 @@ def main():
     ap.add_argument("--durations", type=float, nargs="+", default=[20.0])
     ap.add_argument("--families", nargs="+", default=["noise", "model"])
     ap.add_argument("--out", default=None)
+    ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
+    try:  # before the work: an existing result is not replaced without --force
+        check_output_files([args.out] if args.out else [], args.force)
+    except OutputError as exc:
+        ap.error(str(exc))
     cases = []
     if "noise" in args.families:
         cases += [("noise", lv) for lv in (0.0, 0.02, 0.05, 0.10)]

@@ -149,13 +149,16 @@ def header(result: dict) -> str:
 
 def output_paths(out: str, force: bool) -> tuple[Path, Path]:
     """(json, md) paths of OUT; SystemExit(2) when one exists and --force is not given."""
+    from dualid.errors import OutputError
+    from dualid.report.outdir import check_output_files
+
     json_path = Path(out)
     md_path = json_path.with_suffix(".md")
-    existing = [str(p) for p in (json_path, md_path) if p.exists()]
-    if existing and not force:
-        print(f"error: {', '.join(existing)} exists; pass --force to replace it", file=sys.stderr)
-        raise SystemExit(2)
-    json_path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        check_output_files([json_path, md_path], force)
+    except OutputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
     return json_path, md_path
 
 

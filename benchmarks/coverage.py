@@ -44,6 +44,8 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
+from dualid.errors import OutputError
+from dualid.report.outdir import check_output_files
 from dualid.bench import arms  # noqa: E402
 from dualid.data.trajectory import Trajectory  # noqa: E402
 from dualid.estimators.methods import make_estimator  # noqa: E402
@@ -181,7 +183,12 @@ def main(argv=None) -> int:
     ap.add_argument("--bootstrap", type=int, default=0, metavar="R",
                     help="also a block bootstrap of ols with R resamples of 50 segments (refits: costly)")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "coverage"))
+    ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args(argv)
+    try:  # before the work: an existing result is not replaced without --force
+        check_output_files([Path(args.out) / "results.json", Path(args.out) / "results.md"], args.force)
+    except OutputError as exc:
+        ap.error(str(exc))
     t0 = time.time()
     res = run(args.reps, args.seed, args.seconds, tuple(args.methods.split(",")), args.bootstrap)
     try:

@@ -19,6 +19,8 @@ import time
 
 import numpy as np
 
+from dualid.errors import OutputError
+from dualid.report.outdir import check_output_files
 from dualid.estimators.dual_metric import DualMetric
 from dualid.estimators.least_squares import WLS
 from dualid.estimators.noise_dm import NoiseModelDM
@@ -59,7 +61,12 @@ def main():
     ap.add_argument("--low-seeds", type=int, default=5)
     ap.add_argument("--size", default="default")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
+    try:  # before the work: an existing result is not replaced without --force
+        check_output_files([args.out] if args.out else [], args.force)
+    except OutputError as exc:
+        ap.error(str(exc))
     rows = []
     for ds in args.data_seeds:
         t0 = time.time()

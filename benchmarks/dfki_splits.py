@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dualid.errors import OutputError
+from dualid.report.outdir import check_output_files
 import dualid
 
 HERE = Path(__file__).resolve().parent
@@ -58,7 +60,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--methods", default="ols,wls,dm,dm-paper")
     ap.add_argument("--out", type=Path, default=HERE / "dfki_splits")
+    ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args(argv)
+    try:  # before the work: an existing result is not replaced without --force
+        check_output_files([args.out / "results.json", args.out / "results.md"], args.force)
+    except OutputError as exc:
+        ap.error(str(exc))
     methods = [make(s) for s in re.split(r",(?![^{]*})", args.methods)]  # commas inside {…} belong to the JSON
     rigid = dualid.RigidBodyModel.from_urdf(DATA / "pendubot_model_2.1.urdf")
     model = dualid.with_joint_terms(rigid, viscous=True, coulomb=True, coulomb_velocity=0.01, armature=True)

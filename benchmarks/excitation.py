@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dualid.errors import OutputError
+from dualid.report.outdir import check_output_files
 from dualid.bench.arms import aggregate, random_arm, torque_nrmse
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DualidError
@@ -212,7 +214,12 @@ def main(argv=None) -> int:
     ap.add_argument("--draws", type=int, default=4)
     ap.add_argument("--robots", default="arm7,dfki")
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args(argv)
+    try:  # before the work: an existing result is not replaced without --force
+        check_output_files([args.out / "results.json", args.out / "results.md"], args.force)
+    except OutputError as exc:
+        ap.error(str(exc))
     if args.quick:
         args.seeds, args.restarts, args.maxiter, args.draws = 1, 1, 20, 2
     common = {"period": 10.0, "harmonics": 5, "grid": 100}

@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from dualid.errors import OutputError
+from dualid.report.outdir import check_output_files
 from dualid.robot.config import FitConfig
 from dualid.robot.fit import fit_robot
 
@@ -67,7 +69,12 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
+    try:  # before the work: an existing result is not replaced without --force
+        check_output_files([args.out] if args.out else [], args.force)
+    except OutputError as exc:
+        ap.error(str(exc))
     results = {"command": "PYTHONPATH=src python -W ignore benchmarks/floating_logs.py --seeds "
                           + " ".join(map(str, args.seeds)), "seeds": {}}
     t0 = time.time()

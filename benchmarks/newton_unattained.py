@@ -18,6 +18,8 @@ import time
 import warnings
 from pathlib import Path
 
+from dualid.errors import OutputError
+from dualid.report.outdir import check_output_files
 from dualid.bench.corpus import with_mass_bounds
 
 CASES = ["rank-deficient 4 dof, N = 12", "rank-deficient 6 dof, N = 30", "point-mass link, 3 dof, 5 %",
@@ -55,7 +57,12 @@ def sdp(problem, tol):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("benchmarks/newton_unattained.md"))
+    ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
+    try:  # before the work: an existing result is not replaced without --force
+        check_output_files([args.out], args.force)
+    except OutputError as exc:
+        ap.error(str(exc))
     from dualid.bench.corpus import problem as corpus_problem
 
     warnings.simplefilter("ignore")

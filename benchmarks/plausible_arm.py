@@ -29,6 +29,8 @@ import time
 
 import numpy as np
 
+from dualid.errors import OutputError
+from dualid.report.outdir import check_output_files
 from dualid.bench.arms import make_run, random_arm
 from dualid.data.trajectory import Trajectory
 from dualid.errors import DualidError
@@ -140,7 +142,12 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--out", default="benchmarks/plausible_arm.json")
+    ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
+    try:  # before the work: an existing result is not replaced without --force
+        check_output_files([args.out], args.force)
+    except OutputError as exc:
+        ap.error(str(exc))
     rows = []
     for case in ("exact", "noisy", "noisy-logdet"):
         for seed in range(args.seeds):

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dualid.errors import OutputError
+from dualid.report.outdir import check_output_files
 from dualid.bench.urdf_arm import arm_runs, arm_urdf, example_robot_urdf, log_arrays, prior_urdf, urdf_arm
 from dualid.model.rigid_body import RigidBodyModel
 from dualid.report.robot import write_fit
@@ -84,7 +86,12 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--out", type=Path, default=Path(__file__).with_suffix(".json"))
+    ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
+    try:  # before the work: an existing result is not replaced without --force
+        check_output_files([args.out], args.force)
+    except OutputError as exc:
+        ap.error(str(exc))
     results = []
     for seed in range(args.seeds):
         with tempfile.TemporaryDirectory() as d:

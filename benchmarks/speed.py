@@ -25,6 +25,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from dualid.errors import OutputError
+from dualid.report.outdir import check_output_files
 
 ROOT = Path(__file__).resolve().parents[1]
 HERE = Path(__file__).resolve().parent
@@ -152,7 +154,12 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=5, help="repetitions of the quick rows (best kept)")
     ap.add_argument("--baseline-src", type=Path, help="another source tree (its src folder): its quick rows "
                     "are measured too, interleaved with this tree's")
+    ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
+    try:  # before the work: an existing result is not replaced without --force
+        check_output_files([HERE / "speed.json", HERE / "speed.md"], args.force)
+    except OutputError as exc:
+        ap.error(str(exc))
     sources = {"now": ROOT / "src"} | ({"before": args.baseline_src.resolve()} if args.baseline_src else {})
     rows = measure(sources, args.repeat)
     if not args.no_main_job:

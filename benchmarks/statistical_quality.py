@@ -54,6 +54,8 @@ ME_N = 3000
 DEFAULT_METHODS = "ols,wls,dm-paper,dm"
 
 
+from dualid.errors import OutputError
+from dualid.report.outdir import check_output_files
 from dualid.bench import arms as sb  # noqa: E402
 
 
@@ -442,7 +444,12 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2, help="processes (at most 2)")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "statistical_quality"))
     ap.add_argument("--render", metavar="RESULTS_JSON", help="only rewrite results.md next to an existing results.json")
+    ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args(argv)
+    try:  # before the work: an existing result is not replaced without --force
+        check_output_files([Path(args.render).parent / "results.md"] if args.render else [Path(args.out) / "results.json", Path(args.out) / "results.md"], args.force)
+    except OutputError as exc:
+        ap.error(str(exc))
     if args.render:
         path = Path(args.render)
         (path.parent / "results.md").write_text(to_markdown(json.loads(path.read_text())))

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dualid.errors import OutputError
+from dualid.report.outdir import check_output_files
 from dualid.bench.corpus import cases
 from dualid.bench.corpus_run import fits
 
@@ -99,7 +101,12 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="only the cases of the fast test subset")
     ap.add_argument("--no-large", action="store_true", help="without the N = 1e5 and 1e6 problems")
     ap.add_argument("--case", default="", help="only the cases whose name contains this text")
+    ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
+    try:  # before the work: an existing result is not replaced without --force
+        check_output_files([args.out / "results.json", args.out / "results.md"], args.force)
+    except OutputError as exc:
+        ap.error(str(exc))
     t_start, load0 = time.time(), os.getloadavg()
     rows = []
     for c in cases(large=not args.no_large):

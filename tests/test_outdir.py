@@ -6,7 +6,7 @@ import json
 import pytest
 
 from dualid.errors import OutputError
-from dualid.report.outdir import MANIFEST, output_dir, write_output
+from dualid.report.outdir import MANIFEST, check_output_files, output_dir, write_output
 
 
 def _write(files):
@@ -73,3 +73,15 @@ def test_output_path_is_a_file(tmp_path):
     f.write_text("x")
     with pytest.raises(OutputError, match=f"^output directory {f}: exists and is a file, expected a directory$"):
         write_output(f, True, _write({"a": "1"}))
+
+
+def test_a_script_output_file_is_not_replaced_without_force(tmp_path):
+    """A benchmark's result files: an existing one is named and refused before any work; with force it may be
+    replaced, and missing directories are made."""
+    kept = tmp_path / "results.json"
+    kept.write_text("{}")
+    new = tmp_path / "sub" / "results.md"
+    with pytest.raises(OutputError, match="results.json: exists; pass --force to replace it"):
+        check_output_files([kept, new], force=False)
+    assert kept.read_text() == "{}" and not new.parent.exists()
+    assert check_output_files([kept, new], force=True) == [kept, new] and new.parent.is_dir()

@@ -40,6 +40,19 @@ def _manifest(directory: Path) -> list[str]:
     return files
 
 
+def check_output_files(paths, force: bool) -> list[Path]:
+    """Files a script is about to write, checked before its work: OutputError naming those that exist unless
+    ``force``; their directories are made. The paths, as Paths."""
+    paths = [Path(p) for p in paths]
+    existing = [str(p) for p in paths if p.exists()]
+    if existing and not force:
+        raise OutputError(f"{', '.join(existing)}: {'exists' if len(existing) == 1 else 'exist'}; pass --force to "
+                          "replace " + ("it" if len(existing) == 1 else "them"))
+    for p in paths:
+        p.parent.mkdir(parents=True, exist_ok=True)
+    return paths
+
+
 def check_output_dir(out: str | Path, force: bool) -> Path:
     """Fail early (before a long computation) if ``out`` cannot be written under the policy."""
     out = Path(out)
