@@ -166,7 +166,7 @@ def crazyflie_urdf(base: pin.Inertia, core: pin.Inertia, pendulum: pin.Inertia, 
 def crazyflie_logs(urdf: Path, n_runs: int, duration: float, seed: int) -> list[dict[str, np.ndarray]]:
     from dualid.systems import crazyflie as cfs
     from dualid.systems import crazyflie_model as cfm
-    from dualid.systems.crazyflie_control import _random_reference
+    from dualid.systems.crazyflie_control import random_reference
 
     # the URDF is the simulator's model: same mass matrix at random states with the true inertias
     truth = cfm.build_model()
@@ -180,7 +180,7 @@ def crazyflie_logs(urdf: Path, n_runs: int, duration: float, seed: int) -> list[
     rng = np.random.default_rng(seed)
     lo, hi = noise.gain_error
     gains = 1.0 + rng.choice([-1.0, 1.0]) * rng.uniform(lo, hi) + noise.motor_spread * rng.standard_normal(4)
-    raw = cfs.simulate(_random_reference(rng, n_runs), duration, noise, rng, gains=gains)
+    raw = cfs.simulate(random_reference(rng, n_runs), duration, noise, rng, gains=gains)
     logs = []
     for b in range(n_runs):
         q = raw.q[b]
