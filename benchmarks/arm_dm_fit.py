@@ -34,9 +34,8 @@ import time
 import numpy as np
 import pinocchio as pin
 
-from dualid.errors import OutputError
+from dualid.errors import DualidError, OutputError
 from dualid.report.outdir import check_output_files
-from dualid.errors import DualidError
 from dualid.estimators.dual_metric import DualMetric
 from dualid.estimators.least_squares import OLS, WLS
 from dualid.estimators.noise_dm import NoiseModelDM

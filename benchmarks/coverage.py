@@ -44,8 +44,8 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from dualid.errors import OutputError
-from dualid.report.outdir import check_output_files
+from dualid.errors import OutputError  # noqa: E402
+from dualid.report.outdir import check_output_files  # noqa: E402
 from dualid.bench import arms  # noqa: E402
 from dualid.data.trajectory import Trajectory  # noqa: E402
 from dualid.estimators.methods import make_estimator  # noqa: E402

@@ -25,6 +25,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
 from dualid.errors import OutputError
 from dualid.report.outdir import check_output_files
 

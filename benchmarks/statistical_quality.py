@@ -54,8 +54,8 @@ ME_N = 3000
 DEFAULT_METHODS = "ols,wls,dm-paper,dm"
 
 
-from dualid.errors import OutputError
-from dualid.report.outdir import check_output_files
+from dualid.errors import OutputError  # noqa: E402
+from dualid.report.outdir import check_output_files  # noqa: E402
 from dualid.bench import arms as sb  # noqa: E402
 
 
