@@ -232,8 +232,8 @@ class NoiseModelDM:
 
     def _check(self, sensor, theta, noise) -> NoiseCheck | None:
         r = sensor.residual(theta)
-        W = np.linalg.inv(r.T @ r / sensor.N)
-        try:
+        try:  # WLS's weight: the inverse residual covariance at θ̂ (singular: no check)
+            W = np.linalg.inv(r.T @ r / sensor.N)
             return check_noise_model(sensor, theta, noise.sigma_tau, noise.sigma_a, W, self.chunk)
         except (MetricError, NotPositiveDefinite, np.linalg.LinAlgError):
             return None

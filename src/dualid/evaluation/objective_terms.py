@@ -36,6 +36,9 @@ def _weights(problem: IdentificationProblem, result: IdentificationResult, est):
             W = np.linalg.inv(np.asarray(S, dtype=float))
         return problem, 0.5 * (W + W.T), None
     if isinstance(est, NoiseModelDM):  # dm returned WLS (its noise check): its weight, in the sensor chart
+        if "covariance_matrix" not in result.info:
+            raise ConfigError("uncertainty (dm): the result does not record the covariance its WLS fit used "
+                              "(info['covariance_matrix']); fit it again with this version of dualid")
         return problem.in_sensor_chart(), np.linalg.inv(np.asarray(result.info["covariance_matrix"], dtype=float)), None
     raise ConfigError(f"uncertainty: no sandwich for estimator {type(est).__name__} (method {result.method!r}); "
                            "supported: OLS, WLS, EnergyLS, RegularizedWLS, NoiseModelDM (dm), DualMetric (dm-paper); "
