@@ -291,3 +291,31 @@ def test_a_first_round_over_its_budget_starts_again_from_the_papers_optimum(monk
     again = NoiseModelDM().fit(problem)
     assert again.info["start"] == "dm-paper (the fit from the unit-free least squares pilot failed)"
     assert again.status == "optimal" and rel(problem.Y @ again.theta, problem.Y @ fit.theta) < 1e-6
+
+
+def test_a_noise_model_fit_that_does_not_converge_gives_way_to_the_pilots_estimator(monkeypatch):
+    """When the noise model's θ-solves fail (from the pilot and again from the paper's optimum; the Crazyflie's
+    barely swinging ghost regime does this), dm returns its pilot's estimator and says why, instead of raising: the
+    paper's optimum where that is the pilot (a passive coordinate), else WLS in the pilot's residual covariance."""
+    import dualid.estimators.noise_dm as noise_dm
+    from dualid.errors import SolverError
+    from dualid.paper.study import low_data_subset
+    from dualid.problem import build_problem
+    from dualid.systems.base import make_system
+
+    def failing(*args, **kwargs):
+        raise SolverError("dual-metric Newton: no convergence in 300 iterations", status="max_iterations")
+
+    monkeypatch.setattr(noise_dm.NoiseModelDM, "_rounds", failing)
+    system = make_system("crazyflie", seed=1)
+    problem = build_problem(system.model, list(system.train))
+    train = problem.subset(low_data_subset(problem, system.low_data_samples, 2))
+    res = make_estimator("dm", allow_unidentifiable=True).fit(train)
+    assert res.noise.choice == "dm-paper: its noise-model fit did not converge (max_iterations)"
+    paper = make_estimator("dm-paper", allow_unidentifiable=True).fit(train)
+    assert rel(train.Y @ res.theta, train.Y @ paper.theta) < 1e-6
+    driven, _ = eiv_problem(0, N=1000, torque=0.05, regressor=0.3)
+    res = NoiseModelDM().fit(driven)
+    assert res.noise.choice == "wls: its noise-model fit did not converge (max_iterations)"
+    wls = WLS(covariance=np.asarray(res.info["covariance_matrix"])).fit(driven)
+    assert res.is_consistent and rel(driven.Y @ res.theta, driven.Y @ wls.theta) < 1e-5

@@ -124,12 +124,16 @@ class NoiseModelDM:
             budget = None if pilot == "dm-paper" else LEVELS_MAX_ITER
             theta, noise, run = self._rounds(sensor, sample, cons, start, theta_pilot, budget)
             run.update(start=pilot, pilot=pilot)
-        except SolverError:  # unseen parameters drifting outward, or over the budget: from the paper's optimum instead,
-            if pilot == "dm-paper" and in_memory:  # unless the fit started there: the same solve would fail the same way
-                raise
-            paper = self._inside(self._paper_optimum(sensor), cons)
-            theta, noise, run = self._rounds(sensor, sample, cons, paper, theta_pilot)
-            run.update(start=f"dm-paper (the fit from the {pilot} pilot failed)", pilot=pilot)
+        except SolverError as first:  # unseen parameters drifting outward, or over the budget: from the paper's optimum
+            try:  # instead, unless the fit started there (the same solve would fail the same way)
+                if pilot == "dm-paper" and in_memory:
+                    raise first
+                paper = self._inside(self._paper_optimum(sensor), cons)
+                theta, noise, run = self._rounds(sensor, sample, cons, paper, theta_pilot)
+                run.update(start=f"dm-paper (the fit from the {pilot} pilot failed)", pilot=pilot)
+            except SolverError as exc:  # no noise-model fit: the pilot's estimator, as when the check rejects it
+                return self._without_noise_model(problem, sensor, sample, cons, done, start, theta_pilot, pilot,
+                                                 f"its noise-model fit did not converge ({exc.status})", t0)
         if not noise.acceleration_share > 0:  # torque noise alone: WLS (the given Σ_τ, or the pilot's residuals')
             why = ("given" if self.sigma_tau is not None else f"2 log-likelihood ratio {noise.likelihood_ratio:.3g}"
                    if np.isfinite(noise.likelihood_ratio) else "the velocities are 0: Σ_a has no shape")
@@ -159,6 +163,19 @@ class NoiseModelDM:
             choice, extra = f"wls: {why}{note}", {"covariance_matrix": S.tolist()}  # its weight (sensor chart)
         return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0,
                             None if why else guard, extra)
+
+    def _without_noise_model(self, problem, sensor, sample, cons, done, start, theta_pilot, pilot, why, t0):
+        """The pilot's estimator when no noise-model fit exists: the paper's optimum where it is the pilot, else WLS in
+        the pilot's residual covariance; the result records the levels at the pilot and why."""
+        run = {"iterations": 0, "rounds": 0, "status": "optimal", "start": pilot, "pilot": pilot}
+        noise = (estimate_noise(sample, theta_pilot) if self.sigma_tau is None else
+                 given_levels(sample, theta_pilot, np.asarray(self.sigma_tau), np.asarray(self.sigma_a)))
+        if pilot == "dm-paper":
+            theta, f, choice, extra = theta_pilot, objective_value(sensor, theta_pilot, self.chunk), f"dm-paper: {why}", {}
+        else:
+            theta, f, run["status"], note, S = self._wls(sensor, cons, start, theta_pilot)
+            choice, extra = f"wls: {why}{note}", {"covariance_matrix": S.tolist()}
+        return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, None, choice, t0, extra=extra)
 
     def _wls(self, sensor, cons, start, theta_pilot):
         """WLS in the pilot's residual covariance (the pilot: the same in every unit, where OLS is not), under the
