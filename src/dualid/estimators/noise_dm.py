@@ -155,12 +155,10 @@ class NoiseModelDM:
         elif guard.get("degenerate"):  # a ghost: a body made (nearly) massless or vastly heavier than the pilot's
             why = (f"its fit is degenerate against its pilot (generalised eigenvalues of M(θ̂) against M(pilot) "
                    f"{guard.get('metric_ratio_min', np.nan):.2g}…{guard.get('metric_ratio_max', np.nan):.3g})")
-        if why and pilot == "dm-paper":  # the pilot is the paper's constrained optimum: dm returns it
-            theta, f, choice = theta_pilot, objective_value(sensor, theta_pilot, self.chunk), f"dm-paper: {why}"
         extra = {}
-        if why and pilot != "dm-paper":
-            theta, f, run["status"], note, S = self._wls(sensor, cons, start, theta_pilot)
-            choice, extra = f"wls: {why}{note}", {"covariance_matrix": S.tolist()}  # its weight (sensor chart)
+        if why:
+            theta, f, status, choice, extra = self._pilots_estimator(sensor, cons, start, theta_pilot, pilot, why)
+            run["status"] = status or run["status"]
         return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0,
                             None if why else guard, extra)
 
@@ -170,12 +168,17 @@ class NoiseModelDM:
         run = {"iterations": 0, "rounds": 0, "status": "optimal", "start": pilot, "pilot": pilot}
         noise = (estimate_noise(sample, theta_pilot) if self.sigma_tau is None else
                  given_levels(sample, theta_pilot, np.asarray(self.sigma_tau), np.asarray(self.sigma_a)))
-        if pilot == "dm-paper":
-            theta, f, choice, extra = theta_pilot, objective_value(sensor, theta_pilot, self.chunk), f"dm-paper: {why}", {}
-        else:
-            theta, f, run["status"], note, S = self._wls(sensor, cons, start, theta_pilot)
-            choice, extra = f"wls: {why}{note}", {"covariance_matrix": S.tolist()}
+        theta, f, status, choice, extra = self._pilots_estimator(sensor, cons, start, theta_pilot, pilot, why)
+        run["status"] = status or run["status"]
         return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, None, choice, t0, extra=extra)
+
+    def _pilots_estimator(self, sensor, cons, start, theta_pilot, pilot, why):
+        """dm's fallback, the pilot's estimator: the paper's constrained optimum where that is the pilot, else WLS in
+        the pilot's residual covariance. (θ, f, status (None: the pilot's own), choice, extra info: WLS's weight)."""
+        if pilot == "dm-paper":
+            return theta_pilot, objective_value(sensor, theta_pilot, self.chunk), None, f"dm-paper: {why}", {}
+        theta, f, status, note, S = self._wls(sensor, cons, start, theta_pilot)
+        return theta, f, status, f"wls: {why}{note}", {"covariance_matrix": S.tolist()}  # its weight (sensor chart)
 
     def _wls(self, sensor, cons, start, theta_pilot):
         """WLS in the pilot's residual covariance (the pilot: the same in every unit, where OLS is not), under the
