@@ -168,3 +168,31 @@ def test_invariant_under_a_unit_scaling_of_a_parameter():
     np.testing.assert_allclose(back, a_.theta, rtol=1e-4, atol=1e-8)  # conic-solver accuracy (1.2e-5 seen); a unit bug is ×1000
     np.testing.assert_allclose(b_.prior_share, a_.prior_share, atol=1e-4)  # μ from the solution: solver accuracy
     assert b_.statistic == pytest.approx(a_.statistic, rel=1e-6) and b_.divergence == pytest.approx(a_.divergence, rel=1e-6)
+
+
+def test_a_region_solve_ending_on_a_heavy_body_is_checked_from_the_prior(noisy_arm, monkeypatch):
+    """The region's interior point can stop far out when it starts near θ̂'s completed masses (10¹¹ kg: the data do
+    not determine them; simulated Panda). A run ending with a body above HEAVY_RATIO × the prior's moving mass is
+    checked against the penalised sequence from the prior: the same convex problem, the lower R is kept."""
+    import dualid.evaluation.plausible_newton as pn
+
+    problem, theta_hat, prior, unc, masses = noisy_arm
+    honest = plausible_in_region(problem, theta_hat, prior, unc, 0.95)
+    real = pn.run_interior_point
+
+    null = np.linalg.svd(unc.base.C)[2][unc.base.rank:]  # a step that moves the first mass, not β: unseen
+    step = null.T @ np.linalg.lstsq(null.T, np.eye(problem.parameters.p)[0], rcond=None)[0]
+
+    heavy = 50 * prior[masses].sum()
+
+    def stalled(*args, **kwargs):  # the run returns its optimum with that mass blown up 50× the arm's, β unchanged
+        th, Z, z, info = real(*args, **kwargs)
+        return th + (heavy - th[0]) / step[0] * step, Z, z, info
+
+    monkeypatch.setattr(pn, "run_interior_point", stalled)
+    checked = plausible_in_region(problem, theta_hat, prior, unc, 0.95)
+    assert "above 2 × the prior's whole moving mass" in checked.solver_chain
+    assert checked.theta[masses].max() < 2 * prior[masses].sum()
+    assert checked.statistic <= checked.radius2 * (1 + 1e-4)
+    # the penalised sequence reaches the optimum the region's solve finds without the blow-up
+    assert checked.divergence == pytest.approx(honest.divergence, rel=1e-4)

@@ -13,7 +13,10 @@ point inside the region: the prior with θ̂'s base parameters mostly taken over
 point on the segment from the prior to θ̂ (strictly consistent when θ̂ is consistent, the prior being strictly).
 The region's multiplier is read off its dual block.
 
-When neither start is strictly consistent (an unconstrained θ̂) or that run fails, the problem is solved as a
+A run that ends with a body heavier than HEAVY_RATIO × the prior's whole moving mass (a start near θ̂'s completed
+masses, which the data do not determine and the fit may leave at 10¹¹ kg, stalls the iterates there) is checked
+against the penalised sequence below; the lower R is kept. When neither start is strictly consistent (an
+unconstrained θ̂) or that run fails, the problem is solved as a
 sequence of penalised ones, θ(μ) = argmin_θ R(θ) + μ‖u(θ)‖² under the other constraints, from the prior: μ by regula falsi in
 log μ until ‖u‖ ∈ [1 − U_TOL, 1] (KKT with multiplier μ/c²), each solve warm-started from the previous μ's.
 
@@ -183,6 +186,21 @@ def prior_value(rigid, quad_idx, quad_w, theta, theta0, order: int = 0):
     return f, grad, hess
 
 
+HEAVY_RATIO = 2.0  # a link heavier than this × the prior's whole moving mass: not written to a model file, and a
+# region solve ending there is checked against the penalised sequence (``solve_region``)
+
+
+def heavy_links(P, theta: np.ndarray, theta0: np.ndarray) -> list[tuple[str, float, float]]:
+    """[(block, mass, the prior's mass)] of the rigid bodies of ``theta`` heavier than HEAVY_RATIO × the total mass
+    of ``theta0``'s bodies (none when the prior has no mass: nothing to compare with)."""
+    blocks = [b for b in P.blocks if b.kind == "rigid_body"]
+    total = float(sum(max(theta0[b.indices[0]], 0.0) for b in blocks))
+    if not total > 0:
+        return []
+    return [(b.name, float(theta[b.indices[0]]), float(theta0[b.indices[0]])) for b in blocks
+            if theta[b.indices[0]] > HEAVY_RATIO * total]
+
+
 def prior_divergence(problem: IdentificationProblem, theta: np.ndarray, theta0: np.ndarray) -> float:
     """R(θ) of the module docstring (inf where a rigid body is not strictly consistent)."""
     rigid, quad_idx, quad_w, _ = prior_terms(problem, theta0)
@@ -264,34 +282,59 @@ def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: n
     if u_norm(theta) <= 1.0:  # the prior itself is in the region
         return {"theta": theta, "mu": 0.0, "statistic": u_norm(theta) ** 2 * radius2, "G": G,
                 "chain": "the prior is in the region", "solves": 0, "note": ""}
-    region = _region_lmi(W, b)
-    both = dataclasses.replace(cons, lmis=(*cons.lmis, region))
-    t = 1.0 - 0.5 / u_norm(theta)  # u(θ₀ + t(θ̂ − θ₀)) = (1 − t) u(θ₀): inside the region
-    Cs = C / scale[None, :]  # the base parameters in the column-scaled chart
-    towards = (np.linalg.pinv(Cs) @ (Cs @ (scale * (theta_hat - theta)))) / scale  # θ̂'s base parameters, θ₀'s others
-    start = theta + t * towards  # inside the region; else on the way from it to the point with θ̂'s other
-    if both.margin(start) <= 0:  # parameters, strictly consistent when θ̂ is consistent (the prior being strictly)
-        far = theta + t * (np.asarray(theta_hat, dtype=float) - theta)
-        start = far + 0.9 * min(1.0, both.max_step(far, start - far)) * (start - far) if both.margin(far) > 0 else None
-    if start is not None:  # one interior point with the region (its tolerance relative to R at the start)
+    both = dataclasses.replace(cons, lmis=(*cons.lmis, _region_lmi(W, b)))
+    start = _region_start(both, theta, theta_hat, C, scale, 1.0 - 0.5 / u_norm(theta))
+    one = None  # the region's solve, when it ends inside the region but with a body heavier than HEAVY_RATIO allows
+    if start is None:
+        chain.append("no strictly feasible start in the region")
+    else:  # one interior point with the region (its tolerance relative to R at the start)
         try:
             th, Z, _, info = run_interior_point(None, both, start, None, None, TOL * 1e-3, 200, 0, False,
                                                 objective=lambda t_, order: objective(t_, order, 0.0), f_scale=1.0)
-            mu = float(Z[-1][-1, -1])  # Z = μ v vᵀ with v = (−u, 1) at ‖u‖ = 1: the multiplier of μ‖u‖²
-            if u_norm(th) <= 1.0 + 1e-7:  # (a tiny region: u = Wθ − b cancels ~1/c-sized terms in the LMI)
-                return {"theta": th, "mu": mu, "statistic": u_norm(th) ** 2 * radius2, "G": G, "note": "",
-                        "chain": f"interior point with the region as a constraint, {info['iterations']} iterations",
-                        "solves": 1}
-            chain.append(f"interior point with the region as a constraint ended outside it (‖u‖ = {u_norm(th):.9g})")
+            # Z = μ v vᵀ with v = (−u, 1) at ‖u‖ = 1: the multiplier of μ‖u‖²
+            one = {"theta": th, "mu": float(Z[-1][-1, -1]), "statistic": u_norm(th) ** 2 * radius2, "G": G,
+                   "note": "", "solves": 1,
+                   "chain": f"interior point with the region as a constraint, {info['iterations']} iterations"}
+            heavy = heavy_links(P, th, theta0)
+            if u_norm(th) > 1.0 + 1e-7:  # (a tiny region: u = Wθ − b cancels ~1/c-sized terms in the LMI)
+                chain.append(f"interior point with the region as a constraint ended outside it (‖u‖ = {u_norm(th):.9g})")
+                one = None
+            elif not heavy:
+                return one
+            else:  # a start near θ̂'s completed masses (10¹¹ kg: not determined by the data) left the iterates 11
+                # decades apart in scale and the run stopped there; the problem is convex, so the penalised sequence
+                # from the prior solves it too, and the lower R of the two is kept
+                chain.append(f"{one['chain']} ended with the body of {heavy[0][0]} at {heavy[0][1]:.3g} kg (above "
+                             f"{HEAVY_RATIO:g} × the prior's whole moving mass)")
         except (SolverError, ArithmeticError, np.linalg.LinAlgError) as exc:
             chain.append(f"interior point with the region as a constraint failed ({type(exc).__name__})")
-    else:
-        chain.append("no strictly feasible start in the region")
-    th, mu_best, solves, note = _penalised(solve, u_norm, theta, radius2, chain)
-    un = u_norm(th)
-    chain.append(f"interior point, {solves} solves, μ {mu_best:.3g}, statistic {un ** 2 * radius2:.3g}")
-    return {"theta": th, "mu": float(mu_best), "statistic": un ** 2 * radius2, "G": G, "chain": "; ".join(chain),
-            "solves": solves, "note": note}
+    try:
+        th, mu_best, solves, note = _penalised(solve, u_norm, theta, radius2, chain)
+    except SolverError:
+        if one is None:
+            raise
+        return {**one, "chain": "; ".join((*chain, "the penalised sequence failed: the region's solve kept"))}
+    if one is not None and (note or prior_divergence(problem, one["theta"], theta0)
+                            < prior_divergence(problem, th, theta0)):
+        return {**one, "chain": "; ".join((*chain, "the region's solve kept: " + (
+            "the sequence ended outside the region" if note else "its R is lower")))}
+    chain.append(f"interior point, {solves} solves, μ {mu_best:.3g}, statistic {u_norm(th) ** 2 * radius2:.3g}")
+    return {"theta": th, "mu": float(mu_best), "statistic": u_norm(th) ** 2 * radius2, "G": G,
+            "chain": "; ".join(chain), "solves": solves, "note": note}
+
+
+def _region_start(both: FeasibleSet, theta: np.ndarray, theta_hat: np.ndarray, C: np.ndarray, scale: np.ndarray,
+                  t: float) -> np.ndarray | None:
+    """A strictly feasible point of the region problem (``both``: the constraints and the region) from the prior
+    ``theta``: θ₀ + t·(θ̂'s base parameters − θ₀'s), θ₀'s others (inside the region); else on the way from it to
+    θ₀ + t(θ̂ − θ₀) (strictly consistent when θ̂ is consistent, the prior being strictly); None if neither is."""
+    Cs = C / scale[None, :]  # the base parameters in the column-scaled chart
+    towards = (np.linalg.pinv(Cs) @ (Cs @ (scale * (theta_hat - theta)))) / scale
+    start = theta + t * towards
+    if both.margin(start) > 0:
+        return start
+    far = theta + t * (np.asarray(theta_hat, dtype=float) - theta)
+    return far + 0.9 * min(1.0, both.max_step(far, start - far)) * (start - far) if both.margin(far) > 0 else None
 
 
 def _penalised(solve, u_norm, theta: np.ndarray, radius2: float,

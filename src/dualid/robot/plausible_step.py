@@ -18,7 +18,7 @@ import numpy as np
 
 from dualid.errors import ConfigError, ModelFileWarning, PlausibleWarning
 from dualid.evaluation.plausible import PlausibleParameters, plausible_parameters
-from dualid.evaluation.plausible_newton import MASSLESS_SHARE, ball_prior, rounded_prior
+from dualid.evaluation.plausible_newton import HEAVY_RATIO, MASSLESS_SHARE, ball_prior, heavy_links, rounded_prior
 from dualid.evaluation.plausible_region import LEVEL, check_level, plausible_in_region, training_rmse
 from dualid.evaluation.uncertainty import BaseUncertainty
 from dualid.problem import IdentificationProblem
@@ -78,20 +78,6 @@ def choose_plausible(problem: IdentificationProblem, theta_hat: np.ndarray, thet
     return dataclasses.replace(p, fallback_used=True, note=(
         f"no uncertainty of the base parameters ({base_error or 'none'}): the exact-prediction choice instead of "
         f"the {level:g} confidence region"))
-
-
-HEAVY_RATIO = 2.0  # a link heavier than this × the prior's whole moving mass is not written to a model file
-
-
-def heavy_links(P, theta: np.ndarray, theta0: np.ndarray) -> list[tuple[str, float, float]]:
-    """[(block, mass, the prior's mass)] of the rigid bodies of ``theta`` heavier than HEAVY_RATIO × the total mass
-    of ``theta0``'s bodies (none when the prior has no mass: nothing to compare with)."""
-    blocks = [b for b in P.blocks if b.kind == "rigid_body"]
-    total = float(sum(max(theta0[b.indices[0]], 0.0) for b in blocks))
-    if not total > 0:
-        return []
-    return [(b.name, float(theta[b.indices[0]]), float(theta0[b.indices[0]])) for b in blocks
-            if theta[b.indices[0]] > HEAVY_RATIO * total]
 
 
 def refused_files(method: str, P, theta: np.ndarray, theta0: np.ndarray, which: str, links: dict[str, str],
