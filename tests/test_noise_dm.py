@@ -238,9 +238,9 @@ def test_a_degenerate_fit_without_a_passive_coordinate_falls_back_to_wls(monkeyp
     monkeypatch.setattr(noise_dm, "reference_guard", flagged)
     res = NoiseModelDM().fit(problem)
     assert res.noise.choice.startswith("wls: its fit is degenerate against its pilot (generalised eigenvalues")
-    s = np.sqrt(np.mean(problem.tau**2, axis=0))  # the pilot: least squares on each coordinate's force scale
-    pilot = np.linalg.lstsq((problem.Y / s[:, None]).reshape(-1, problem.p), (problem.tau / s).reshape(-1),
-                            rcond=None)[0]
+    L = np.linalg.cholesky(problem.tau.T @ problem.tau / problem.N)  # the pilot: least squares whitened by mean ττᵀ
+    pilot = np.linalg.lstsq(np.linalg.solve(L, problem.Y).reshape(-1, problem.p),
+                            np.linalg.solve(L, problem.tau.T).T.reshape(-1), rcond=None)[0]
     r = problem.residual(pilot)
     S = r.T @ r / problem.N  # the pilot's residual covariance
     wls = WLS(covariance=S).fit(problem)

@@ -9,7 +9,8 @@ torque noise; this objective is consistent under both when the noise levels are 
 
 The fit, in the problem's sensor chart (so every chart the problem records, configuration-dependent ones too, gives
 the same fit; the noise levels are covariant per coordinate, so a coordinate or the forces in other units by hand too):
-1. pilot: least squares in weights 1/mean τ_j² (unconstrained; constrained where M(θ) is not positive definite);
+1. pilot: least squares in the weight (mean τ_i τ_iᵀ)⁻¹ (unconstrained; constrained where M(θ) is not positive
+   definite);
    with a passive coordinate (τ_j ≡ 0), the paper's dual-metric optimum;
 2. the noise levels from its residuals (``noise_model.estimate_noise``: Σ_τ per joint, Σ_a = σ_a² diag(mean v²): the
    sensors are independent). When the likelihood does not support acceleration noise, ``dm`` is WLS in the pilot's
@@ -62,16 +63,21 @@ CHECK_SAMPLES = 20_000  # streamed data: the noise levels and the held-out check
 ROUNDS = 2  # noise levels at the pilot, θ; the levels at that θ, θ again (unless the first round finds Σ_a = 0)
 LEVELS_TOL = 1e-6  # gap of the solves whose θ only feeds the levels (pilot, first round; saves 5–20 %). θ̂ follows the
 # levels: 4 re-charted fits moved (clean error / f) ≤ 5e-6 / 1e-4 at 1e-4, ≤ 2e-7 / 5e-6 at 1e-6, ≤ 1e-5 / 2e-6 at 1e-9
+SINGULAR_TORQUES = 1e-10  # mean ττᵀ as a correlation matrix with an eigenvalue below this: singular (``torque_scale``)
 LEVELS_MAX_ITER = 100  # first round's budget from a least-squares pilot, then from the paper's optimum: such solves
 # converged in 9–40 iterations or not in 300 (11 of 12 xArm7 noise-benchmark fits, 7 s each; statistical benchmark ≤ 32)
 
 
 def torque_scale(problem) -> np.ndarray:
-    """(n,) each coordinate's squared force scale, mean τ_j² (covariant under a unit change of q_j); on a passive
-    coordinate (τ_j = 0) the mean squared norm of its regressor rows, which transforms alike."""
-    scale = np.mean(problem.tau**2, axis=0)
+    """(n, n) the torques' second moment mean τ_i τ_iᵀ (covariant under any constant linear change of coordinates);
+    where it is singular (a passive coordinate, τ_j ≡ 0, or torques linearly dependent) its diagonal, with each
+    passive coordinate's entry the mean squared norm of its regressor rows, which transforms alike."""
+    T = problem.tau.T @ problem.tau / problem.N
+    if np.all(np.linalg.eigvalsh(T / np.sqrt(np.outer(np.diag(T), np.diag(T)) + 1e-300)) > SINGULAR_TORQUES):
+        return T
+    scale = np.diag(T)
     rows = np.einsum("ijk,ijk->j", problem.Y, problem.Y) / problem.N
-    return np.where(scale > 0, scale, np.where(rows > 0, rows, 1.0))
+    return np.diag(np.where(scale > 0, scale, np.where(rows > 0, rows, 1.0)))
 
 
 @dataclass(frozen=True)
@@ -114,7 +120,7 @@ class NoiseModelDM:
         # pilot, closure, noise levels and check: the problem in memory, or a strided subsample of streamed data
         in_memory = isinstance(sensor, IdentificationProblem)
         sample = sensor if in_memory else sensor.subset(strided_rows(sensor.N, CHECK_SAMPLES))
-        R, r, c = _scaled(sample)  # the equations on each coordinate's own force scale: closure and pilot
+        R, r, c = _scaled(sample)  # the equations whitened by the torques' second moment: closure and pilot
         # closed over what f cannot see (model.closure: a mass in its block only grows without bound); done completes θ
         cons, done = on_closure(feasible_set(sample.parameters, self.constrained), R.T @ R, c, sample.parameters.names,
                                 enabled=self.constrained)
@@ -234,8 +240,8 @@ class NoiseModelDM:
             return np.asarray(fit_dual_metric_newton(problem, constrained=self.constrained, chunk=self.chunk).theta)
 
     def _pilot(self, sensor, cons, R, r, c) -> tuple[np.ndarray, str]:
-        """Least squares in weights 1/mean τ_j² (each coordinate's equations on its own torque scale: covariant per
-        coordinate, unlike OLS's), unconstrained; under the constraints, by the interior point, where M(θ) is not
+        """Least squares in the weight (mean τ_i τ_iᵀ)⁻¹ (the equations whitened by the torques' second moment: the same
+        fit in every constant linear chart, unlike OLS's), unconstrained; under the constraints, by the interior point, where M(θ) is not
         positive definite at every sample there. With a passive coordinate (τ_j = 0 on every sample: a floating base,
         the Crazyflie's pendulum joints, a swimmer's body) the paper's dual-metric optimum instead: there the passive
         equations are near-cancellations that least squares barely weighs, f has several basins, and the least-squares
@@ -246,7 +252,7 @@ class NoiseModelDM:
         theta = np.linalg.lstsq(R, r, rcond=np.finfo(float).eps * max(sensor.N * sensor.n, sensor.p))[0]
         if np.isfinite(objective_value(sensor, theta, self.chunk)):  # M_i(θ) positive definite at every sample
             return theta, "unit-free least squares"
-        weights = NoiseLevels(np.diag(torque_scale(sensor)), np.zeros((sensor.n, sensor.n)), 1.0, 0.0, 0)
+        weights = NoiseLevels(torque_scale(sensor), np.zeros((sensor.n, sensor.n)), 1.0, 0.0, 0)
         return self._solve(sensor, cons, central_point(theta, cons) if self.constrained else theta, weights,
                            LEVELS_TOL)[0], "unit-free least squares"
 
@@ -373,14 +379,16 @@ def solve_noise_model_cvxpy(problem, cons, theta0, sigma_tau, sigma_a, tol: floa
 
 
 def _scaled(problem) -> tuple[np.ndarray, np.ndarray, float]:
-    """(R, r, c) with ‖Yw θ − τw‖² = ‖R θ − r‖² + c − ‖r‖², Yw, τw every coordinate's equations divided by its force scale
-    √mean τ_j² (``torque_scale``), stacked: the unit-free least squares of the pilot and the statistics of the closure,
-    by a QR over blocks of samples of [Yw τw] (the singular values of Yw, without a copy of Y)."""
-    s, p = np.sqrt(torque_scale(problem)), problem.p
-    augmented = (np.concatenate([block.Y[rows], block.tau[rows][:, :, None]], axis=2) / s[:, None]  # [Y_i τ_i] / s
-                 for block, rows, _ in sample_blocks(problem, CHUNK_QR))
+    """(R, r, c) with ‖Yw θ − τw‖² = ‖R θ − r‖² + c − ‖r‖², Yw, τw the equations whitened by the torques' second moment
+    T = L Lᵀ (``torque_scale``: Yw_i = L⁻¹Y_i, τw_i = L⁻¹τ_i), stacked: the unit-free least squares of the pilot and
+    the statistics of the closure, the same in every constant linear chart, by a QR over blocks of samples of
+    [Yw τw] (the singular values of Yw, without a copy of Y)."""
+    L, p = np.linalg.cholesky(torque_scale(problem)), problem.p
+    augmented = (np.linalg.solve(L, np.concatenate([block.Y[rows], block.tau[rows][:, :, None]], axis=2))
+                 for block, rows, _ in sample_blocks(problem, CHUNK_QR))  # L⁻¹[Y_i τ_i]
     R = triangular_factor((A.reshape(-1, p + 1) for A in augmented), p + 1)
-    return R[:, :p], R[:, p], float(np.sum(np.einsum("ij,ij->j", problem.tau, problem.tau) / s**2))
+    tw = np.linalg.solve(L, problem.tau.T)
+    return R[:, :p], R[:, p], float(np.sum(tw * tw))
 
 
 __all__ = ["NoiseModelDM", "majorizer_blocks", "solve_noise_model_cvxpy"]
