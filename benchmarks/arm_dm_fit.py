@@ -34,7 +34,7 @@ import time
 import numpy as np
 import pinocchio as pin
 
-from dualid.errors import DualidError, OutputError
+from dualid.errors import DualidError
 from dualid.report.outdir import check_output_files
 from dualid.estimators.dual_metric import DualMetric
 from dualid.estimators.least_squares import OLS, WLS
@@ -230,10 +230,7 @@ def main():
     ap.add_argument("--out", default=None)
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([args.out] if args.out else [], args.force)
-    except OutputError as exc:
-        ap.error(str(exc))
+    check_output_files([args.out] if args.out else [], args.force, ap)  # before the work: an existing result is not replaced without --force
     cases = []
     if "noise" in args.families:
         cases += [("noise", lv) for lv in (0.0, 0.02, 0.05, 0.10)]

@@ -44,7 +44,6 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from dualid.errors import OutputError  # noqa: E402
 from dualid.report.outdir import check_output_files  # noqa: E402
 from dualid.bench import arms  # noqa: E402
 from dualid.data.trajectory import Trajectory  # noqa: E402
@@ -185,10 +184,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "coverage"))
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args(argv)
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([Path(args.out) / "results.json", Path(args.out) / "results.md"], args.force)
-    except OutputError as exc:
-        ap.error(str(exc))
+    check_output_files([Path(args.out) / "results.json", Path(args.out) / "results.md"], args.force, ap)  # before the work: an existing result is not replaced without --force
     t0 = time.time()
     res = run(args.reps, args.seed, args.seconds, tuple(args.methods.split(",")), args.bootstrap)
     try:

@@ -19,7 +19,6 @@ import time
 
 import numpy as np
 
-from dualid.errors import OutputError
 from dualid.report.outdir import check_output_files
 from dualid.estimators.dual_metric import DualMetric
 from dualid.estimators.least_squares import WLS
@@ -66,10 +65,7 @@ def main():
     ap.add_argument("--out", default=None)
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([args.out] if args.out else [], args.force)
-    except OutputError as exc:
-        ap.error(str(exc))
+    check_output_files([args.out] if args.out else [], args.force, ap)  # before the work: an existing result is not replaced without --force
     if args.swing_scale is None:
         system_of = lambda seed, size: make(seed=seed, size=size)  # noqa: E731
     else:

@@ -28,7 +28,6 @@ from pathlib import Path
 
 import numpy as np
 
-from dualid.errors import OutputError
 from dualid.report.outdir import check_output_files
 from dualid.bench.runner import base_samples, build_problem
 from dualid.estimators.newton.objective import cholesky_batch, tri_inverse, dual_metric_derivatives
@@ -118,10 +117,7 @@ def main() -> None:
     ap.add_argument("--no-passes", action="store_true", help="only the whole fits")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([args.out] if args.out else [], args.force)
-    except OutputError as exc:
-        ap.error(str(exc))
+    check_output_files([args.out] if args.out else [], args.force, ap)  # before the work: an existing result is not replaced without --force
     if args.fits and args.baseline_src is None:
         raise SystemExit("--fits needs --baseline-src (the src of a checkout of the code to compare with)")
     fit_rows = fits(args) if args.fits else []

@@ -24,7 +24,6 @@ from pathlib import Path
 
 import numpy as np
 
-from dualid.errors import OutputError
 from dualid.report.outdir import check_output_files
 import dualid
 
@@ -62,10 +61,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=HERE / "dfki_splits")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args(argv)
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([args.out / "results.json", args.out / "results.md"], args.force)
-    except OutputError as exc:
-        ap.error(str(exc))
+    check_output_files([args.out / "results.json", args.out / "results.md"], args.force, ap)  # before the work: an existing result is not replaced without --force
     methods = [make(s) for s in re.split(r",(?![^{]*})", args.methods)]  # commas inside {…} belong to the JSON
     rigid = dualid.RigidBodyModel.from_urdf(DATA / "pendubot_model_2.1.urdf")
     model = dualid.with_joint_terms(rigid, viscous=True, coulomb=True, coulomb_velocity=0.01, armature=True)

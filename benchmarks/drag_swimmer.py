@@ -28,7 +28,6 @@ from pathlib import Path
 
 import numpy as np
 
-from dualid.errors import OutputError
 from dualid.report.outdir import check_output_files
 from dualid.model.drag_spec import DragSpec
 from dualid.robot.config import FitConfig
@@ -107,10 +106,7 @@ def main(argv=None) -> int:
     parser.add_argument("--exact", action="store_true", help="ablation: no sensor noise (exact q, v, τ)")
     parser.add_argument("--force", action="store_true", help="replace existing output files")
     args = parser.parse_args(argv)
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([args.out], args.force)
-    except OutputError as exc:
-        parser.error(str(exc))
+    check_output_files([args.out], args.force, parser)  # before the work: an existing result is not replaced without --force
     results = []
     t0 = time.time()
     for seed in range(args.seeds):

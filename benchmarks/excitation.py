@@ -29,7 +29,6 @@ from pathlib import Path
 
 import numpy as np
 
-from dualid.errors import OutputError
 from dualid.report.outdir import check_output_files
 from dualid.bench.arms import aggregate, random_arm, torque_nrmse
 from dualid.data.trajectory import Trajectory
@@ -216,10 +215,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args(argv)
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([args.out / "results.json", args.out / "results.md"], args.force)
-    except OutputError as exc:
-        ap.error(str(exc))
+    check_output_files([args.out / "results.json", args.out / "results.md"], args.force, ap)  # before the work: an existing result is not replaced without --force
     if args.quick:
         args.seeds, args.restarts, args.maxiter, args.draws = 1, 1, 20, 2
     common = {"period": 10.0, "harmonics": 5, "grid": 100}

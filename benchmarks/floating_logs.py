@@ -21,7 +21,6 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from dualid.errors import OutputError
 from dualid.report.outdir import check_output_files
 from dualid.robot.config import FitConfig
 from dualid.robot.fit import fit_robot
@@ -71,10 +70,7 @@ def main():
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([args.out] if args.out else [], args.force)
-    except OutputError as exc:
-        ap.error(str(exc))
+    check_output_files([args.out] if args.out else [], args.force, ap)  # before the work: an existing result is not replaced without --force
     results = {"command": "PYTHONPATH=src python -W ignore benchmarks/floating_logs.py --seeds "
                           + " ".join(map(str, args.seeds)), "seeds": {}}
     t0 = time.time()

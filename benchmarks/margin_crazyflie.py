@@ -21,7 +21,6 @@ import time
 
 import numpy as np
 
-from dualid.errors import OutputError
 from dualid.report.outdir import check_output_files
 from dualid.estimators.methods import make_estimator
 from dualid.metric_guard import generalized_eigenvalues
@@ -66,10 +65,7 @@ def main():
                     help="the first simulator's ghost regime: pendulum excitation × this, instantaneous motors")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([args.out] if args.out else [], args.force)
-    except OutputError as exc:
-        ap.error(str(exc))
+    check_output_files([args.out] if args.out else [], args.force, ap)  # before the work: an existing result is not replaced without --force
     system_of = (lambda seed, size: make(seed=seed, size=size)) if args.swing_scale is None else \
         barely_swinging(args.swing_scale)
     rows = []

@@ -22,7 +22,6 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from dualid.errors import OutputError  # noqa: E402
 from dualid.estimators.methods import make_estimator  # noqa: E402
 from dualid.report.outdir import check_output_files  # noqa: E402
 from tests.factories import drag_problem, random_chart  # noqa: E402
@@ -45,10 +44,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=None, help="also write the table (markdown) here")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    try:
-        check_output_files([args.out] if args.out else [], args.force)
-    except OutputError as exc:
-        ap.error(str(exc))
+    check_output_files([args.out] if args.out else [], args.force, ap)
     lines = ["| seed | chart | `dm` keeps its noise model | `dm` predictions | `dm` objective | WLS predictions |",
              "| --- | --- | --- | --- | --- | --- |"]
     for seed in (5, 6, 7):

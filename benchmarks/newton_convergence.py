@@ -23,7 +23,6 @@ from pathlib import Path
 
 import numpy as np
 
-from dualid.errors import OutputError
 from dualid.report.outdir import check_output_files
 from dualid.robot.defaults import FIXED_PREPROCESSING_0_1
 
@@ -149,10 +148,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([args.out] if args.out else [], args.force)
-    except OutputError as exc:
-        ap.error(str(exc))
+    check_output_files([args.out] if args.out else [], args.force, ap)  # before the work: an existing result is not replaced without --force
     with tempfile.TemporaryDirectory() as tmp:
         dm = run_dm(Path(tmp), args.sdp_max_n)
     quad = run_quadratic()

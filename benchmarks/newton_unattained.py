@@ -18,7 +18,6 @@ import time
 import warnings
 from pathlib import Path
 
-from dualid.errors import OutputError
 from dualid.report.outdir import check_output_files
 from dualid.bench.corpus import with_mass_bounds
 
@@ -59,10 +58,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("benchmarks/newton_unattained.md"))
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([args.out], args.force)
-    except OutputError as exc:
-        ap.error(str(exc))
+    check_output_files([args.out], args.force, ap)  # before the work: an existing result is not replaced without --force
     from dualid.bench.corpus import problem as corpus_problem
 
     warnings.simplefilter("ignore")

@@ -33,7 +33,6 @@ import numpy as np
 import pinocchio as pin
 from scipy.stats import chi2
 
-from dualid.errors import OutputError
 from dualid.report.outdir import check_output_files
 from dualid.bench.runner import machine
 from dualid.bench.urdf_arm import arm_urdf, example_robot_urdf, joint_ranges
@@ -322,10 +321,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("benchmarks/online_payload"))
     parser.add_argument("--force", action="store_true", help="replace existing output files")
     args = parser.parse_args()
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([args.out.with_suffix(s) for s in (".json", ".png", ".md")], args.force)
-    except OutputError as exc:
-        parser.error(str(exc))
+    check_output_files([args.out.with_suffix(s) for s in (".json", ".png", ".md")], args.force, parser)  # before the work: an existing result is not replaced without --force
     result, rows, windows, threshold = run(args)
     args.out.with_suffix(".json").write_text(json.dumps(result, indent=1, default=float) + "\n")
     figure(rows, windows, threshold, result, args.out.with_suffix(".png"))

@@ -29,7 +29,6 @@ import time
 
 import numpy as np
 
-from dualid.errors import OutputError
 from dualid.report.outdir import check_output_files
 from dualid.bench.arms import make_run, random_arm
 from dualid.data.trajectory import Trajectory
@@ -144,10 +143,7 @@ def main() -> None:
     ap.add_argument("--out", default="benchmarks/plausible_arm.json")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([args.out], args.force)
-    except OutputError as exc:
-        ap.error(str(exc))
+    check_output_files([args.out], args.force, ap)  # before the work: an existing result is not replaced without --force
     rows = []
     for case in ("exact", "noisy", "noisy-logdet"):
         for seed in range(args.seeds):

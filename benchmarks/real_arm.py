@@ -22,7 +22,6 @@ from pathlib import Path
 
 import numpy as np
 
-from dualid.errors import OutputError
 from dualid.report.outdir import check_output_files
 from dualid.bench.urdf_arm import arm_runs, arm_urdf, example_robot_urdf, log_arrays, prior_urdf, urdf_arm
 from dualid.model.rigid_body import RigidBodyModel
@@ -88,10 +87,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path(__file__).with_suffix(".json"))
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([args.out], args.force)
-    except OutputError as exc:
-        ap.error(str(exc))
+    check_output_files([args.out], args.force, ap)  # before the work: an existing result is not replaced without --force
     results = []
     for seed in range(args.seeds):
         with tempfile.TemporaryDirectory() as d:

@@ -26,7 +26,6 @@ import tempfile
 import time
 from pathlib import Path
 
-from dualid.errors import OutputError
 from dualid.report.outdir import check_output_files
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -157,10 +156,7 @@ def main() -> None:
                     "are measured too, interleaved with this tree's")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([HERE / "speed.json", HERE / "speed.md"], args.force)
-    except OutputError as exc:
-        ap.error(str(exc))
+    check_output_files([HERE / "speed.json", HERE / "speed.md"], args.force, ap)  # before the work: an existing result is not replaced without --force
     sources = {"now": ROOT / "src"} | ({"before": args.baseline_src.resolve()} if args.baseline_src else {})
     rows = measure(sources, args.repeat)
     if not args.no_main_job:

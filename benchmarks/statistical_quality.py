@@ -54,7 +54,6 @@ ME_N = 3000
 DEFAULT_METHODS = "ols,wls,dm-paper,dm"
 
 
-from dualid.errors import OutputError  # noqa: E402
 from dualid.report.outdir import check_output_files  # noqa: E402
 from dualid.bench import arms as sb  # noqa: E402
 
@@ -446,10 +445,7 @@ def main(argv=None) -> int:
     ap.add_argument("--render", metavar="RESULTS_JSON", help="only rewrite results.md next to an existing results.json")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args(argv)
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([Path(args.render).parent / "results.md"] if args.render else [Path(args.out) / "results.json", Path(args.out) / "results.md"], args.force)
-    except OutputError as exc:
-        ap.error(str(exc))
+    check_output_files([Path(args.render).parent / "results.md"] if args.render else [Path(args.out) / "results.json", Path(args.out) / "results.md"], args.force, ap)  # before the work: an existing result is not replaced without --force
     if args.render:
         path = Path(args.render)
         (path.parent / "results.md").write_text(to_markdown(json.loads(path.read_text())))

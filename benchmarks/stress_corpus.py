@@ -22,7 +22,6 @@ from pathlib import Path
 
 import numpy as np
 
-from dualid.errors import OutputError
 from dualid.report.outdir import check_output_files
 from dualid.bench.corpus import cases
 from dualid.bench.corpus_run import fits
@@ -103,10 +102,7 @@ def main() -> None:
     ap.add_argument("--case", default="", help="only the cases whose name contains this text")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    try:  # before the work: an existing result is not replaced without --force
-        check_output_files([args.out / "results.json", args.out / "results.md"], args.force)
-    except OutputError as exc:
-        ap.error(str(exc))
+    check_output_files([args.out / "results.json", args.out / "results.md"], args.force, ap)  # before the work: an existing result is not replaced without --force
     t_start, load0 = time.time(), os.getloadavg()
     rows = []
     for c in cases(large=not args.no_large):

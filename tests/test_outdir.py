@@ -85,3 +85,18 @@ def test_a_script_output_file_is_not_replaced_without_force(tmp_path):
         check_output_files([kept, new], force=False)
     assert kept.read_text() == "{}" and not new.parent.exists()
     assert check_output_files([kept, new], force=True) == [kept, new] and new.parent.is_dir()
+
+
+def test_a_script_given_its_parser_exits_with_its_usage(tmp_path, capsys):
+    """With the script's argparse parser the refusal is the parser's error: exit status 2, the usage, the files."""
+    import argparse
+
+    kept = tmp_path / "results.json"
+    kept.write_text("{}")
+    parser = argparse.ArgumentParser(prog="bench")
+    with pytest.raises(SystemExit) as exit_:
+        check_output_files([kept], False, parser)
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("usage: bench") and "results.json: exists; pass --force to replace it" in err
+    assert kept.read_text() == "{}"

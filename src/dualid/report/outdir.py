@@ -40,14 +40,18 @@ def _manifest(directory: Path) -> list[str]:
     return files
 
 
-def check_output_files(paths, force: bool) -> list[Path]:
+def check_output_files(paths, force: bool, parser=None) -> list[Path]:
     """Files a script is about to write, checked before its work: OutputError naming those that exist unless
-    ``force``; their directories are made. The paths, as Paths."""
+    ``force`` (with an argparse ``parser``: its ``error``, exit status 2 after the usage line); their directories are
+    made. The paths, as Paths."""
     paths = [Path(p) for p in paths]
     existing = [str(p) for p in paths if p.exists()]
     if existing and not force:
-        raise OutputError(f"{', '.join(existing)}: {'exists' if len(existing) == 1 else 'exist'}; pass --force to "
-                          "replace " + ("it" if len(existing) == 1 else "them"))
+        message = (f"{', '.join(existing)}: {'exists' if len(existing) == 1 else 'exist'}; pass --force to replace "
+                   + ("it" if len(existing) == 1 else "them"))
+        if parser is not None:
+            parser.error(message)
+        raise OutputError(message)
     for p in paths:
         p.parent.mkdir(parents=True, exist_ok=True)
     return paths
