@@ -165,17 +165,12 @@ def second_start(est, problem, result) -> float | None:
     fit, each moved inside the constraints), relative to dm's: the lower of the two, (f_2 − f_dm) / f_dm, negative
     where a second start found a lower objective. None where dm kept no noise model (its objective is then WLS's,
     convex)."""
-    from dualid.estimators import noise_dm
-    from dualid.model.closure import on_closure
-    from dualid.model.consistency import feasible_set
     from dualid.estimators.noise_model import noise_model_objective
 
     if result.noise is None or result.noise.choice != "noise model":
         return None
     sensor = problem.in_sensor_chart()
-    R, _, c = noise_dm._scaled(sensor)  # the closed set dm's fit solves on (NoiseModelDM.fit)
-    cons, _ = on_closure(feasible_set(sensor.parameters, est.constrained), R.T @ R, c, sensor.parameters.names,
-                         enabled=est.constrained)
+    cons = est.closed_set(sensor)[0]  # the closed set dm's fit solves on (NoiseModelDM.fit)
     S, A = result.noise.sigma_tau, result.noise.sigma_a
     f_dm = noise_model_objective(sensor, result.theta, S, A)
     others = []

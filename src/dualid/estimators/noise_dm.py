@@ -120,10 +120,7 @@ class NoiseModelDM:
         # pilot, closure, noise levels and check: the problem in memory, or a strided subsample of streamed data
         in_memory = isinstance(sensor, IdentificationProblem)
         sample = sensor if in_memory else sensor.subset(strided_rows(sensor.N, CHECK_SAMPLES))
-        R, r, c = _scaled(sample)  # the equations whitened by the torques' second moment: closure and pilot
-        # closed over what f cannot see (model.closure: a mass in its block only grows without bound); done completes θ
-        cons, done = on_closure(feasible_set(sample.parameters, self.constrained), R.T @ R, c, sample.parameters.names,
-                                enabled=self.constrained)
+        cons, done, (R, r, c) = self.closed_set(sample)
         theta_pilot, pilot = self._pilot(sample, cons, R, r, c)
         start = self._inside(theta_pilot, cons)
         try:
@@ -167,6 +164,13 @@ class NoiseModelDM:
             run["status"] = status or run["status"]
         return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0,
                             None if why else guard, extra)
+
+    def closed_set(self, sample):
+        """(cons closed over what f cannot see (model.closure), done completing θ, the pilot's ``_scaled`` statistics)."""
+        R, r, c = _scaled(sample)
+        cons, done = on_closure(feasible_set(sample.parameters, self.constrained), R.T @ R, c, sample.parameters.names,
+                                enabled=self.constrained)
+        return cons, done, (R, r, c)
 
     def _without_noise_model(self, problem, sensor, sample, cons, done, start, theta_pilot, pilot, why, t0):
         """The pilot's estimator when no noise-model fit exists: the paper's optimum where it is the pilot, else WLS in
