@@ -76,9 +76,13 @@ def test_masses_move_toward_the_prior_and_the_region_holds(noisy_arm):
     assert region.training_rmse_hat < region.training_rmse < 1.01 * region.training_rmse_hat
 
 
-@pytest.mark.parametrize("consistent", [True, False])
-def test_the_region_choice_is_the_sdp_optimum(noisy_arm, consistent):
+@pytest.mark.parametrize("consistent,one_run", [(True, True), (False, True), (True, False)])
+def test_the_region_choice_is_the_sdp_optimum(noisy_arm, consistent, one_run, monkeypatch):
+    """Both ways of solving it: one interior point with the region as a constraint (below REGION_ROWS_MAX rows; this
+    arm's region has 36, so the limit is raised here) and the penalised sequence (this arm as it is)."""
     import cvxpy as cp
+
+    import dualid.evaluation.plausible_newton as pn
 
     from dualid.evaluation.plausible_newton import prior_divergence, prior_terms
     from dualid.model.consistency import cvxpy_constraints
@@ -89,9 +93,13 @@ def test_the_region_choice_is_the_sdp_optimum(noisy_arm, consistent):
         step = null.T @ np.linalg.lstsq(null.T, -np.eye(problem.parameters.p)[0], rcond=None)[0]
         theta_hat = theta_hat + 10 * theta_hat[0] / max(abs(step[0]), 1e-300) * step
         assert theta_hat[0] < 0 and np.allclose(unc.base.C @ theta_hat, unc.base.C @ noisy_arm[1])
+    if one_run:
+        monkeypatch.setattr(pn, "REGION_ROWS_MAX", 10**6)
     region = plausible_in_region(problem, theta_hat, prior, unc, 0.95)
-    assert region.solver_chain.startswith("interior point with the region as a constraint, " if consistent else
-                                          "no strictly feasible start in the region; "), region.solver_chain
+    expected = ("a region LMI of 36 rows: the penalised sequence; " if not one_run else
+                "interior point with the region as a constraint, " if consistent else
+                "no strictly feasible start in the region; ")
+    assert region.solver_chain.startswith(expected), region.solver_chain
     rigid, quad_idx, quad_w, _ = prior_terms(problem, prior)
     theta = cp.Variable(problem.parameters.p)
     R = 0.5 * cp.sum(cp.multiply(quad_w, cp.square(theta[quad_idx] - prior[quad_idx])))
@@ -106,7 +114,7 @@ def test_the_region_choice_is_the_sdp_optimum(noisy_arm, consistent):
     reference.solve(solver="CLARABEL")
     assert reference.status == "optimal"
     assert region.divergence == pytest.approx(prior_divergence(problem, region.theta, prior))
-    rtol = 1e-7 if consistent else 1e-5  # the penalised sequence stops with the statistic within U_TOL of c²
+    rtol = 1e-7 if consistent and one_run else 1e-5  # the penalised sequence stops with the statistic within U_TOL
     assert region.divergence <= reference.value * (1 + rtol)  # the same optimum, not a worse point
     assert reference.value <= region.divergence * (1 + 1e-6)
     assert np.allclose(region.theta, theta.value, rtol=1e-3, atol=1e-6 * np.abs(prior).max())
@@ -177,6 +185,7 @@ def test_a_region_solve_ending_on_a_heavy_body_is_checked_from_the_prior(noisy_a
     import dualid.evaluation.plausible_newton as pn
 
     problem, theta_hat, prior, unc, masses = noisy_arm
+    monkeypatch.setattr(pn, "REGION_ROWS_MAX", 10**6)  # this arm's region has 36 rows: one run with the region
     honest = plausible_in_region(problem, theta_hat, prior, unc, 0.95)
     real = pn.run_interior_point
 
