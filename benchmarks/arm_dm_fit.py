@@ -230,7 +230,8 @@ def main():
     ap.add_argument("--out", default=None)
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    check_output_files([args.out] if args.out else [], args.force, ap)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    check_output_files([args.out] if args.out else [], args.force, ap)
     cases = []
     if "noise" in args.families:
         cases += [("noise", lv) for lv in (0.0, 0.02, 0.05, 0.10)]

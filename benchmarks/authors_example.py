@@ -147,19 +147,12 @@ def header(result: dict) -> str:
     return f"Command: `{result['command']}` (dualid {prov['commit'][:10]} from `{prov['dualid']}`{where})."
 
 
-def output_paths(out: str, force: bool) -> tuple[Path, Path]:
-    """(json, md) paths of OUT; SystemExit(2) when one exists and --force is not given."""
-    from dualid.errors import OutputError
+def output_paths(out: str, force: bool, parser) -> tuple[Path, Path]:
+    """(json, md) paths of OUT; the parser's usage error (exit 2) when one exists and --force is not given."""
     from dualid.report.outdir import check_output_files
 
     json_path = Path(out)
-    md_path = json_path.with_suffix(".md")
-    try:
-        check_output_files([json_path, md_path], force)
-    except OutputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        raise SystemExit(2) from None
-    return json_path, md_path
+    return tuple(check_output_files([json_path, json_path.with_suffix(".md")], force, parser))
 
 
 def main(argv=None) -> int:
@@ -179,7 +172,7 @@ def main(argv=None) -> int:
         except DualidError as exc:
             print(f"error: --method {key}: {exc}", file=sys.stderr)
             return 2
-    json_path, md_path = output_paths(args.out, args.force)
+    json_path, md_path = output_paths(args.out, args.force, ap)
     seeds = [42] if args.quick else args.seeds
     sizes = (authors_arm.DOWN,) if args.quick else SIZES
     t0 = time.time()

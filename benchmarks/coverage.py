@@ -184,7 +184,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "coverage"))
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args(argv)
-    check_output_files([Path(args.out) / "results.json", Path(args.out) / "results.md"], args.force, ap)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    check_output_files([Path(args.out) / "results.json", Path(args.out) / "results.md"], args.force, ap)
     t0 = time.time()
     res = run(args.reps, args.seed, args.seconds, tuple(args.methods.split(",")), args.bootstrap)
     try:

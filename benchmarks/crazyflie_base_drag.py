@@ -65,7 +65,8 @@ def main():
     ap.add_argument("--out", default=None)
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    check_output_files([args.out] if args.out else [], args.force, ap)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    check_output_files([args.out] if args.out else [], args.force, ap)
     if args.swing_scale is None:
         system_of = lambda seed, size: make(seed=seed, size=size)  # noqa: E731
     else:

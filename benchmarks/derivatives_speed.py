@@ -117,7 +117,8 @@ def main() -> None:
     ap.add_argument("--no-passes", action="store_true", help="only the whole fits")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    check_output_files([args.out] if args.out else [], args.force, ap)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    check_output_files([args.out] if args.out else [], args.force, ap)
     if args.fits and args.baseline_src is None:
         raise SystemExit("--fits needs --baseline-src (the src of a checkout of the code to compare with)")
     fit_rows = fits(args) if args.fits else []

@@ -61,7 +61,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=HERE / "dfki_splits")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args(argv)
-    check_output_files([args.out / "results.json", args.out / "results.md"], args.force, ap)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    check_output_files([args.out / "results.json", args.out / "results.md"], args.force, ap)
     methods = [make(s) for s in re.split(r",(?![^{]*})", args.methods)]  # commas inside {…} belong to the JSON
     rigid = dualid.RigidBodyModel.from_urdf(DATA / "pendubot_model_2.1.urdf")
     model = dualid.with_joint_terms(rigid, viscous=True, coulomb=True, coulomb_velocity=0.01, armature=True)

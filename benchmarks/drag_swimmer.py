@@ -106,7 +106,8 @@ def main(argv=None) -> int:
     parser.add_argument("--exact", action="store_true", help="ablation: no sensor noise (exact q, v, τ)")
     parser.add_argument("--force", action="store_true", help="replace existing output files")
     args = parser.parse_args(argv)
-    check_output_files([args.out], args.force, parser)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    check_output_files([args.out], args.force, parser)
     results = []
     t0 = time.time()
     for seed in range(args.seeds):

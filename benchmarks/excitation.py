@@ -215,7 +215,8 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args(argv)
-    check_output_files([args.out / "results.json", args.out / "results.md"], args.force, ap)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    check_output_files([args.out / "results.json", args.out / "results.md"], args.force, ap)
     if args.quick:
         args.seeds, args.restarts, args.maxiter, args.draws = 1, 1, 20, 2
     common = {"period": 10.0, "harmonics": 5, "grid": 100}

@@ -70,7 +70,8 @@ def main():
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    check_output_files([args.out] if args.out else [], args.force, ap)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    check_output_files([args.out] if args.out else [], args.force, ap)
     results = {"command": "PYTHONPATH=src python -W ignore benchmarks/floating_logs.py --seeds "
                           + " ".join(map(str, args.seeds)), "seeds": {}}
     t0 = time.time()

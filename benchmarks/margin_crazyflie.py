@@ -65,7 +65,8 @@ def main():
                     help="the first simulator's ghost regime: pendulum excitation × this, instantaneous motors")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    check_output_files([args.out] if args.out else [], args.force, ap)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    check_output_files([args.out] if args.out else [], args.force, ap)
     system_of = (lambda seed, size: make(seed=seed, size=size)) if args.swing_scale is None else \
         barely_swinging(args.swing_scale)
     rows = []

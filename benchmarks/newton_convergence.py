@@ -148,7 +148,8 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    check_output_files([args.out] if args.out else [], args.force, ap)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    check_output_files([args.out] if args.out else [], args.force, ap)
     with tempfile.TemporaryDirectory() as tmp:
         dm = run_dm(Path(tmp), args.sdp_max_n)
     quad = run_quadratic()

@@ -58,7 +58,8 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("benchmarks/newton_unattained.md"))
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    check_output_files([args.out], args.force, ap)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    check_output_files([args.out], args.force, ap)
     from dualid.bench.corpus import problem as corpus_problem
 
     warnings.simplefilter("ignore")

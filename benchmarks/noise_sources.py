@@ -123,8 +123,9 @@ class HeldOut:
 
 
 def dataset(robot: str, seed: int, case: str, train_s: float = TRAIN_S, test_s: float = TEST_S):
-    """(identification problem, HeldOut, the training run's true noise levels (Σ_τ, Σ_a)) of one robot, seed and noise
-    case. The arm's joint terms depend on (robot, seed); the motion and noise on (robot, seed, case)."""
+    """(identification problem, HeldOut, the training run's true noise levels (Σ_τ, Σ_a), the training run's regressor at
+    its commanded states (``iv_reference``'s instruments)) of one robot, seed and noise case. The arm's joint terms
+    depend on (robot, seed); the motion and noise on (robot, seed, case)."""
     _, torque, encoder, bits = CASES[case]
     r = ROBOTS.index(robot) if robot in ROBOTS else len(ROBOTS)
     arm = ma.sim_arm(robot, np.random.default_rng([seed, r]))
@@ -146,7 +147,7 @@ def iv_reference(problem, Z: np.ndarray) -> np.ndarray:
     closed loop instead)."""
     A = problem.Y.reshape(-1, problem.p)
     r = problem.residual(np.linalg.lstsq(A, problem.tau.reshape(-1), rcond=None)[0])
-    w = 1.0 / np.mean(r**2, axis=0)
+    w = 1.0 / np.maximum(np.mean(r**2, axis=0), 1e-300)
     base = base_parameters(Z.reshape(-1, problem.p), problem.parameters)
     Zb, Yb = base.regressor(Z), base.regressor(problem.Y)
     beta = np.linalg.solve(np.einsum("ija,j,ijb->ab", Zb, w, Yb), np.einsum("ija,j,ij->a", Zb, w, problem.tau))
@@ -333,7 +334,7 @@ def main(argv=None) -> int:
         except DualidError as exc:
             print(f"error: --method {key}: {exc}", file=sys.stderr)
             return 2
-    json_path, md_path = output_paths(args.out, args.force)
+    json_path, md_path = output_paths(args.out, args.force, ap)
     robots, seeds, cases, train_s = args.robots, args.seeds, args.cases, args.train_seconds
     if args.quick:
         robots, seeds, train_s = ["ur5"], [0], 3.0

@@ -321,7 +321,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("benchmarks/online_payload"))
     parser.add_argument("--force", action="store_true", help="replace existing output files")
     args = parser.parse_args()
-    check_output_files([args.out.with_suffix(s) for s in (".json", ".png", ".md")], args.force, parser)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    check_output_files([args.out.with_suffix(s) for s in (".json", ".png", ".md")], args.force, parser)
     result, rows, windows, threshold = run(args)
     args.out.with_suffix(".json").write_text(json.dumps(result, indent=1, default=float) + "\n")
     figure(rows, windows, threshold, result, args.out.with_suffix(".png"))

@@ -143,7 +143,8 @@ def main() -> None:
     ap.add_argument("--out", default="benchmarks/plausible_arm.json")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    check_output_files([args.out], args.force, ap)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    check_output_files([args.out], args.force, ap)
     rows = []
     for case in ("exact", "noisy", "noisy-logdet"):
         for seed in range(args.seeds):

@@ -87,7 +87,8 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path(__file__).with_suffix(".json"))
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    check_output_files([args.out], args.force, ap)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    check_output_files([args.out], args.force, ap)
     results = []
     for seed in range(args.seeds):
         with tempfile.TemporaryDirectory() as d:

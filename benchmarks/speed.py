@@ -156,7 +156,8 @@ def main() -> None:
                     "are measured too, interleaved with this tree's")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    check_output_files([HERE / "speed.json", HERE / "speed.md"], args.force, ap)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    check_output_files([HERE / "speed.json", HERE / "speed.md"], args.force, ap)
     sources = {"now": ROOT / "src"} | ({"before": args.baseline_src.resolve()} if args.baseline_src else {})
     rows = measure(sources, args.repeat)
     if not args.no_main_job:

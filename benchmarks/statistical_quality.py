@@ -445,7 +445,10 @@ def main(argv=None) -> int:
     ap.add_argument("--render", metavar="RESULTS_JSON", help="only rewrite results.md next to an existing results.json")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args(argv)
-    check_output_files([Path(args.render).parent / "results.md"] if args.render else [Path(args.out) / "results.json", Path(args.out) / "results.md"], args.force, ap)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    targets = ([Path(args.render).parent / "results.md"] if args.render else
+               [Path(args.out) / "results.json", Path(args.out) / "results.md"])
+    check_output_files(targets, args.force, ap)
     if args.render:
         path = Path(args.render)
         (path.parent / "results.md").write_text(to_markdown(json.loads(path.read_text())))

@@ -102,7 +102,8 @@ def main() -> None:
     ap.add_argument("--case", default="", help="only the cases whose name contains this text")
     ap.add_argument("--force", action="store_true", help="replace existing output files")
     args = ap.parse_args()
-    check_output_files([args.out / "results.json", args.out / "results.md"], args.force, ap)  # before the work: an existing result is not replaced without --force
+    # before the work: an existing result is not replaced without --force
+    check_output_files([args.out / "results.json", args.out / "results.md"], args.force, ap)
     t_start, load0 = time.time(), os.getloadavg()
     rows = []
     for c in cases(large=not args.no_large):
