@@ -335,3 +335,19 @@ def test_without_acceleration_noise_dm_is_the_same_fit_in_coordinates_mixed_by_h
     a, b = NoiseModelDM().fit(problem), NoiseModelDM().fit(mixed)
     assert a.noise.choice.startswith("no acceleration noise") and b.noise.choice.startswith("no acceleration noise")
     assert rel(mixed.Y @ b.theta, mixed.Y @ a.theta) < 1e-8
+
+
+def test_linearly_dependent_torques_whiten_per_coordinate():
+    """Two coordinates logging the same torque make mean ττᵀ singular: the pilot's weight falls back to each
+    coordinate's own mean τ_j² (diagonal), and dm fits."""
+    from dualid.estimators.noise_dm import torque_scale
+
+    rng = np.random.default_rng(11)
+    problem, _ = drag_problem(rng, N=200, n=3)
+    tau = problem.tau + 0.05 * rng.standard_normal(problem.tau.shape)
+    tau[:, 2] = tau[:, 1]
+    problem = replace(problem, tau=tau)
+    T = torque_scale(problem)
+    assert np.allclose(T, np.diag(np.mean(tau**2, axis=0)), rtol=1e-12, atol=0)
+    result = NoiseModelDM().fit(problem)
+    assert result.is_consistent and np.isfinite(result.objective)

@@ -205,3 +205,30 @@ def test_a_region_solve_ending_on_a_heavy_body_is_checked_from_the_prior(noisy_a
     assert checked.statistic <= checked.radius2 * (1 + 1e-4)
     # the penalised sequence reaches the optimum the region's solve finds without the blow-up
     assert checked.divergence == pytest.approx(honest.divergence, rel=1e-4)
+
+
+def test_a_large_region_falls_back_to_one_run_when_the_sequence_does_not_succeed(noisy_arm, monkeypatch):
+    """From REGION_ROWS_MAX rows the penalised sequence goes first; where it fails, or ends outside the region, the
+    single run with the region as a constraint is tried last and kept, with the same optimum."""
+    import dualid.evaluation.plausible_newton as pn
+    from dualid.errors import SolverError
+
+    problem, theta_hat, prior, unc, _ = noisy_arm
+    monkeypatch.setattr(pn, "REGION_ROWS_MAX", 10**6)
+    one_run = plausible_in_region(problem, theta_hat, prior, unc, 0.95)
+    monkeypatch.setattr(pn, "REGION_ROWS_MAX", 32)  # this arm's region has 36 rows
+    real = pn._penalised
+
+    def failed(*args, **kwargs):
+        raise SolverError("plausible parameters: the interior point failed (injected)", status="failed")
+
+    def outside(*args, **kwargs):
+        th, mu, solves, _ = real(*args, **kwargs)
+        return th, mu, solves, "outside the region (injected)"
+
+    for injected, why in ((failed, "the penalised sequence failed"), (outside, "the sequence ended outside the region")):
+        monkeypatch.setattr(pn, "_penalised", injected)
+        kept = plausible_in_region(problem, theta_hat, prior, unc, 0.95)
+        assert kept.solver_chain.startswith("a region LMI of 36 rows: the penalised sequence")
+        assert kept.solver_chain.endswith(f"iterations: kept ({why})"), kept.solver_chain
+        assert kept.divergence == pytest.approx(one_run.divergence, rel=1e-9)

@@ -320,3 +320,18 @@ def plausible_parameters(problem: IdentificationProblem, theta_hat, theta0, solv
         consistent=P.is_consistent(theta_p, tol=1e-7), divergence=regularizer_value("logdet", P, theta_p, theta0),
         **common,
     )
+
+
+HEAVY_RATIO = 2.0  # a link heavier than this × the prior's whole moving mass: not written to a model file, and a
+# region solve ending there is checked against the penalised sequence (``solve_region``)
+
+
+def heavy_links(P, theta: np.ndarray, theta0: np.ndarray) -> list[tuple[str, float, float]]:
+    """[(block, mass, the prior's mass)] of the rigid bodies of ``theta`` heavier than HEAVY_RATIO × the total mass
+    of ``theta0``'s bodies (none when the prior has no mass: nothing to compare with)."""
+    blocks = [b for b in P.blocks if b.kind == "rigid_body"]
+    total = float(sum(max(theta0[b.indices[0]], 0.0) for b in blocks))
+    if not total > 0:
+        return []
+    return [(b.name, float(theta[b.indices[0]]), float(theta0[b.indices[0]])) for b in blocks
+            if theta[b.indices[0]] > HEAVY_RATIO * total]

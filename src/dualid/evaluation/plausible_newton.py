@@ -19,7 +19,8 @@ lower R is kept.
 From REGION_ROWS_MAX rows on (a 7-DoF arm's 64), when neither start is strictly consistent (an unconstrained θ̂), or
 when that run fails, the problem is solved as a sequence of penalised ones, θ(μ) = argmin_θ R(θ) + μ‖u(θ)‖² under
 the other constraints, from the prior: μ by regula falsi in log μ until ‖u‖ ∈ [1 − U_TOL, 1] (KKT with multiplier
-μ/c²), each solve warm-started from the previous μ's.
+μ/c²), each solve warm-started from the previous μ's. Where a large region's sequence fails or ends outside, the
+single run is tried last.
 
 The prior term R is scale-aware in every block:
 - rigid bodies: the log-det divergence of the pseudo-inertia to the prior's (invariant under units and body
@@ -42,6 +43,7 @@ import numpy as np
 import pinocchio as pin
 
 from dualid.errors import SolverError
+from dualid.evaluation.plausible import HEAVY_RATIO, heavy_links
 from dualid.estimators.newton.objective import Derivatives, NotPositiveDefinite
 from dualid.estimators.newton.interior_point import run_interior_point
 from dualid.estimators.newton.start import run_quadratic
@@ -53,9 +55,10 @@ U_TOL = 5e-6  # accept log ‖u‖ in [−U_TOL, 0]: the statistic within 1e-5 o
 MU_MAX = 1e14  # the largest penalty tried before the point is kept outside the region
 MAX_SOLVES = 40
 TOL = 1e-9  # the interior point's relative gap
-REGION_ROWS_MAX = 32  # a region LMI of this many rows or more: the penalised sequence instead of one interior point
+REGION_ROWS_MAX = 32  # a region LMI of this many rows or more: the penalised sequence first, not one interior point
 # with the region as a constraint, whose Newton term grows with its rows (simulated Panda, 64 rows: the step took
-# 0.26–0.35 s instead of 0.89–1.96 s per `dualid fit`; DFKI, 12 rows: 0.16 s for seven methods instead of 0.39 s)
+# 0.26–0.27 s instead of 0.90–1.95 s per `dualid fit`; DFKI, 12 rows: the single run 0.16 s for seven methods, the
+# sequence 0.39 s)
 MASSLESS_SHARE = 0.01  # a prior body without mass: this share of the other bodies' mean mass (rounded_prior)
 BALL_RADIUS_MIN = 0.01  # [m] the smallest radius of gyration of ball_prior's bodies
 ROUNDING = 0.1  # each prior body's inertia about its centre of mass made up to this much rounder (rounded_body)
@@ -190,21 +193,6 @@ def prior_value(rigid, quad_idx, quad_w, theta, theta0, order: int = 0):
     return f, grad, hess
 
 
-HEAVY_RATIO = 2.0  # a link heavier than this × the prior's whole moving mass: not written to a model file, and a
-# region solve ending there is checked against the penalised sequence (``solve_region``)
-
-
-def heavy_links(P, theta: np.ndarray, theta0: np.ndarray) -> list[tuple[str, float, float]]:
-    """[(block, mass, the prior's mass)] of the rigid bodies of ``theta`` heavier than HEAVY_RATIO × the total mass
-    of ``theta0``'s bodies (none when the prior has no mass: nothing to compare with)."""
-    blocks = [b for b in P.blocks if b.kind == "rigid_body"]
-    total = float(sum(max(theta0[b.indices[0]], 0.0) for b in blocks))
-    if not total > 0:
-        return []
-    return [(b.name, float(theta[b.indices[0]]), float(theta0[b.indices[0]])) for b in blocks
-            if theta[b.indices[0]] > HEAVY_RATIO * total]
-
-
 def prior_divergence(problem: IdentificationProblem, theta: np.ndarray, theta0: np.ndarray) -> float:
     """R(θ) of the module docstring (inf where a rigid body is not strictly consistent)."""
     rigid, quad_idx, quad_w, _ = prior_terms(problem, theta0)
@@ -287,46 +275,67 @@ def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: n
         return {"theta": theta, "mu": 0.0, "statistic": u_norm(theta) ** 2 * radius2, "G": G,
                 "chain": "the prior is in the region", "solves": 0, "note": ""}
     both = dataclasses.replace(cons, lmis=(*cons.lmis, _region_lmi(W, b)))
+    t = 1.0 - 0.5 / u_norm(theta)  # u(θ₀ + t(θ̂ − θ₀)) = (1 − t) u(θ₀): inside the region
+
+    def region_run() -> tuple[dict, bool] | None:
+        return _region_run(both, _region_start(both, theta, theta_hat, C, scale, t),
+                           lambda t_, order: objective(t_, order, 0.0), u_norm, radius2, G, P, theta0, chain)
+
     large = len(b) + 1 >= REGION_ROWS_MAX
-    start = None if large else _region_start(both, theta, theta_hat, C, scale, 1.0 - 0.5 / u_norm(theta))
-    one = None  # the region's solve, when it ends inside the region but with a body heavier than HEAVY_RATIO allows
-    if start is None:
-        chain.append(f"a region LMI of {len(b) + 1} rows: the penalised sequence" if large else
-                     "no strictly feasible start in the region")
-    else:  # one interior point with the region (its tolerance relative to R at the start)
-        try:
-            th, Z, _, info = run_interior_point(None, both, start, None, None, TOL * 1e-3, 200, 0, False,
-                                                objective=lambda t_, order: objective(t_, order, 0.0), f_scale=1.0)
-            # Z = μ v vᵀ with v = (−u, 1) at ‖u‖ = 1: the multiplier of μ‖u‖²
-            one = {"theta": th, "mu": float(Z[-1][-1, -1]), "statistic": u_norm(th) ** 2 * radius2, "G": G,
-                   "note": "", "solves": 1,
-                   "chain": f"interior point with the region as a constraint, {info['iterations']} iterations"}
-            heavy = heavy_links(P, th, theta0)
-            if u_norm(th) > 1.0 + 1e-7:  # (a tiny region: u = Wθ − b cancels ~1/c-sized terms in the LMI)
-                chain.append(f"interior point with the region as a constraint ended outside it (‖u‖ = {u_norm(th):.9g})")
-                one = None
-            elif not heavy:
-                return one
-            else:  # a start near θ̂'s completed masses (10¹¹ kg: not determined by the data) left the iterates 11
-                # decades apart in scale and the run stopped there; the problem is convex, so the penalised sequence
-                # from the prior solves it too, and the lower R of the two is kept
-                chain.append(f"{one['chain']} ended with the body of {heavy[0][0]} at {heavy[0][1]:.3g} kg (above "
-                             f"{HEAVY_RATIO:g} × the prior's whole moving mass)")
-        except (SolverError, ArithmeticError, np.linalg.LinAlgError) as exc:
-            chain.append(f"interior point with the region as a constraint failed ({type(exc).__name__})")
+    one = None  # the region's run as a candidate: it ended with a heavy body, or the sequence below did not succeed
+    if large:
+        chain.append(f"a region LMI of {len(b) + 1} rows: the penalised sequence")
+    else:
+        run = region_run()
+        if run is not None and not run[1]:
+            return run[0]
+        one = None if run is None else run[0]
     try:
         th, mu_best, solves, note = _penalised(solve, u_norm, theta, radius2, chain)
-    except SolverError:
+    except (SolverError, ArithmeticError, np.linalg.LinAlgError):
+        if one is None and large:  # the region's run as the last resort
+            one = (region_run() or (None,))[0]
         if one is None:
             raise
-        return {**one, "chain": "; ".join((*chain, "the penalised sequence failed: the region's solve kept"))}
+        return {**one, "chain": "; ".join((*chain, f"{one['chain']}: kept (the penalised sequence failed)"))}
+    if note and large and one is None:  # the sequence ended outside the region: the region's run as the last resort
+        one = (region_run() or (None,))[0]
     if one is not None and (note or prior_divergence(problem, one["theta"], theta0)
                             < prior_divergence(problem, th, theta0)):
-        return {**one, "chain": "; ".join((*chain, "the region's solve kept: " + (
-            "the sequence ended outside the region" if note else "its R is lower")))}
+        why = "the sequence ended outside the region" if note else "its R is lower"
+        return {**one, "solves": one["solves"] + solves, "chain": "; ".join((*chain, f"{one['chain']}: kept ({why})"))}
     chain.append(f"interior point, {solves} solves, μ {mu_best:.3g}, statistic {u_norm(th) ** 2 * radius2:.3g}")
     return {"theta": th, "mu": float(mu_best), "statistic": u_norm(th) ** 2 * radius2, "G": G,
             "chain": "; ".join(chain), "solves": solves, "note": note}
+
+
+def _region_run(both: FeasibleSet, start: np.ndarray | None, objective, u_norm, radius2: float, G: np.ndarray, P,
+                theta0: np.ndarray, chain: list[str]) -> tuple[dict, bool] | None:
+    """One interior point on R with the region as a constraint (``both``) from ``start``, its tolerance relative to
+    R there: (result, heavy) where it ends inside the region, heavy when a body is above HEAVY_RATIO × the prior's
+    whole moving mass; None where there is no start, the run fails or it ends outside (said in ``chain``)."""
+    if start is None:
+        chain.append("no strictly feasible start in the region")
+        return None
+    try:
+        th, Z, _, info = run_interior_point(None, both, start, None, None, TOL * 1e-3, 200, 0, False,
+                                            objective=objective, f_scale=1.0)
+    except (SolverError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        chain.append(f"interior point with the region as a constraint failed ({type(exc).__name__})")
+        return None
+    said = f"interior point with the region as a constraint, {info['iterations']} iterations"
+    if u_norm(th) > 1.0 + 1e-7:  # (a tiny region: u = Wθ − b cancels ~1/c-sized terms in the LMI)
+        chain.append(f"interior point with the region as a constraint ended outside it (‖u‖ = {u_norm(th):.9g})")
+        return None
+    heavy = heavy_links(P, th, theta0)
+    if heavy:  # a start near θ̂'s completed masses (10¹¹ kg: not determined by the data) left the iterates 11 decades
+        # apart in scale and the run stopped there; the problem is convex, so the penalised sequence from the prior
+        # solves it too, and the lower R of the two is kept
+        chain.append(f"{said} ended with the body of {heavy[0][0]} at {heavy[0][1]:.3g} kg (above {HEAVY_RATIO:g} × "
+                     "the prior's whole moving mass)")
+    # Z = μ v vᵀ with v = (−u, 1) at ‖u‖ = 1: the multiplier of μ‖u‖²
+    return ({"theta": th, "mu": float(Z[-1][-1, -1]), "statistic": u_norm(th) ** 2 * radius2, "G": G, "note": "",
+             "solves": 1, "chain": said}, bool(heavy))
 
 
 def _region_start(both: FeasibleSet, theta: np.ndarray, theta_hat: np.ndarray, C: np.ndarray, scale: np.ndarray,

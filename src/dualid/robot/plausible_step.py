@@ -17,8 +17,8 @@ from collections.abc import Mapping
 import numpy as np
 
 from dualid.errors import ConfigError, ModelFileWarning, PlausibleWarning
-from dualid.evaluation.plausible import PlausibleParameters, plausible_parameters
-from dualid.evaluation.plausible_newton import HEAVY_RATIO, MASSLESS_SHARE, ball_prior, heavy_links, rounded_prior
+from dualid.evaluation.plausible import HEAVY_RATIO, PlausibleParameters, heavy_links, plausible_parameters
+from dualid.evaluation.plausible_newton import MASSLESS_SHARE, ball_prior, rounded_prior
 from dualid.evaluation.plausible_region import LEVEL, check_level, plausible_in_region, training_rmse
 from dualid.evaluation.uncertainty import BaseUncertainty
 from dualid.problem import IdentificationProblem
