@@ -120,8 +120,8 @@ class NoiseModelDM:
         # pilot, closure, noise levels and check: the problem in memory, or a strided subsample of streamed data
         in_memory = isinstance(sensor, IdentificationProblem)
         sample = sensor if in_memory else sensor.subset(strided_rows(sensor.N, CHECK_SAMPLES))
-        cons, done, (R, r, c) = self.closed_set(sample)
-        theta_pilot, pilot = self._pilot(sample, cons, R, r, c)
+        cons, done, (R, r) = self.closed_set(sample)
+        theta_pilot, pilot = self._pilot(sample, cons, R, r)
         start = self._inside(theta_pilot, cons)
         try:
             budget = None if pilot == "dm-paper" else LEVELS_MAX_ITER
@@ -167,10 +167,10 @@ class NoiseModelDM:
 
     def closed_set(self, sample):
         """(cons closed over what f cannot see (model.closure), done completing θ, the pilot's ``_scaled`` statistics)."""
-        R, r, c = _scaled(sample)
-        cons, done = on_closure(feasible_set(sample.parameters, self.constrained), R.T @ R, c, sample.parameters.names,
-                                enabled=self.constrained)
-        return cons, done, (R, r, c)
+        R, r = _scaled(sample)  # ‖r‖² = Σ τw_iᵀτw_i: f(0) of the whitened least squares, the closure's scale
+        cons, done = on_closure(feasible_set(sample.parameters, self.constrained), R.T @ R, float(r @ r),
+                                sample.parameters.names, enabled=self.constrained)
+        return cons, done, (R, r)
 
     def _without_noise_model(self, problem, sensor, sample, cons, done, start, theta_pilot, pilot, why, t0):
         """The pilot's estimator when no noise-model fit exists: the paper's optimum where it is the pilot, else WLS in
@@ -243,7 +243,7 @@ class NoiseModelDM:
             warnings.simplefilter("ignore", OptimumAtInfinityWarning)
             return np.asarray(fit_dual_metric_newton(problem, constrained=self.constrained, chunk=self.chunk).theta)
 
-    def _pilot(self, sensor, cons, R, r, c) -> tuple[np.ndarray, str]:
+    def _pilot(self, sensor, cons, R, r) -> tuple[np.ndarray, str]:
         """Least squares in the weight (mean τ_i τ_iᵀ)⁻¹ (the equations whitened by the torques' second moment: the same
         fit in every constant linear chart, unlike OLS's), unconstrained; under the constraints, by the interior point, where M(θ) is not
         positive definite at every sample there. With a passive coordinate (τ_j = 0 on every sample: a floating base,
@@ -382,17 +382,17 @@ def solve_noise_model_cvxpy(problem, cons, theta0, sigma_tau, sigma_a, tol: floa
                    "cvxpy_status": statuses}
 
 
-def _scaled(problem) -> tuple[np.ndarray, np.ndarray, float]:
-    """(R, r, c) with ‖Yw θ − τw‖² = ‖R θ − r‖² + c − ‖r‖², Yw, τw the equations whitened by the torques' second moment
+def _scaled(problem) -> tuple[np.ndarray, np.ndarray]:
+    """(R, r): the triangular factor of [Yw τw], RᵀR = [Yw τw]ᵀ[Yw τw], split into its first p columns and its last, so
+    that ‖Yw θ − τw‖² = ‖R θ − r‖² (and ‖r‖² = ‖τw‖²); Yw, τw the equations whitened by the torques' second moment
     T = L Lᵀ (``torque_scale``: Yw_i = L⁻¹Y_i, τw_i = L⁻¹τ_i), stacked: the unit-free least squares of the pilot and
-    the statistics of the closure, the same in every constant linear chart, by a QR over blocks of samples of
-    [Yw τw] (the singular values of Yw, without a copy of Y)."""
+    the statistics of the closure, the same in every constant linear chart, by a QR over blocks of samples (the
+    singular values of Yw, without a copy of Y)."""
     L, p = np.linalg.cholesky(torque_scale(problem)), problem.p
     augmented = (np.linalg.solve(L, np.concatenate([block.Y[rows], block.tau[rows][:, :, None]], axis=2))
                  for block, rows, _ in sample_blocks(problem, CHUNK_QR))  # L⁻¹[Y_i τ_i]
     R = triangular_factor((A.reshape(-1, p + 1) for A in augmented), p + 1)
-    tw = np.linalg.solve(L, problem.tau.T)
-    return R[:, :p], R[:, p], float(np.sum(tw * tw))
+    return R[:, :p], R[:, p]
 
 
 __all__ = ["NoiseModelDM", "majorizer_blocks", "solve_noise_model_cvxpy"]
