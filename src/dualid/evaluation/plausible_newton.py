@@ -277,29 +277,34 @@ def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: n
     both = dataclasses.replace(cons, lmis=(*cons.lmis, _region_lmi(W, b)))
     t = 1.0 - 0.5 / u_norm(theta)  # u(θ₀ + t(θ̂ − θ₀)) = (1 − t) u(θ₀): inside the region
 
-    def region_run() -> tuple[dict, bool] | None:
+    def region_run() -> dict | None:
         return _region_run(both, _region_start(both, theta, theta_hat, C, scale, t),
-                           lambda t_, order: objective(t_, order, 0.0), u_norm, radius2, G, P, theta0, chain)
+                           lambda t_, order: objective(t_, order, 0.0), u_norm, radius2, G, chain)
 
     large = len(b) + 1 >= REGION_ROWS_MAX
     one = None  # the region's run as a candidate: it ended with a heavy body, or the sequence below did not succeed
     if large:
         chain.append(f"a region LMI of {len(b) + 1} rows: the penalised sequence")
     else:
-        run = region_run()
-        if run is not None and not run[1]:
-            return run[0]
-        one = None if run is None else run[0]
+        one = region_run()
+        heavy = [] if one is None else heavy_links(P, one["theta"], theta0)
+        if one is not None and not heavy:
+            return one
+        if heavy:  # a start near θ̂'s completed masses (10¹¹ kg: not determined by the data) left the iterates 11
+            # decades apart in scale and the run stopped there; the problem is convex, so the penalised sequence from
+            # the prior solves it too, and the lower R of the two is kept
+            chain.append(f"{one['chain']} ended with the body of {heavy[0][0]} at {heavy[0][1]:.3g} kg (above "
+                         f"{HEAVY_RATIO:g} × the prior's whole moving mass)")
     try:
         th, mu_best, solves, note = _penalised(solve, u_norm, theta, radius2, chain)
     except (SolverError, ArithmeticError, np.linalg.LinAlgError):
         if one is None and large:  # the region's run as the last resort
-            one = (region_run() or (None,))[0]
+            one = region_run()
         if one is None:
             raise
         return {**one, "chain": "; ".join((*chain, f"{one['chain']}: kept (the penalised sequence failed)"))}
     if note and large and one is None:  # the sequence ended outside the region: the region's run as the last resort
-        one = (region_run() or (None,))[0]
+        one = region_run()
     if one is not None and (note or prior_divergence(problem, one["theta"], theta0)
                             < prior_divergence(problem, th, theta0)):
         why = "the sequence ended outside the region" if note else "its R is lower"
@@ -309,11 +314,11 @@ def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: n
             "chain": "; ".join(chain), "solves": solves, "note": note}
 
 
-def _region_run(both: FeasibleSet, start: np.ndarray | None, objective, u_norm, radius2: float, G: np.ndarray, P,
-                theta0: np.ndarray, chain: list[str]) -> tuple[dict, bool] | None:
+def _region_run(both: FeasibleSet, start: np.ndarray | None, objective, u_norm, radius2: float, G: np.ndarray,
+                chain: list[str]) -> dict | None:
     """One interior point on R with the region as a constraint (``both``) from ``start``, its tolerance relative to
-    R there: (result, heavy) where it ends inside the region, heavy when a body is above HEAVY_RATIO × the prior's
-    whole moving mass; None where there is no start, the run fails or it ends outside (said in ``chain``)."""
+    R there: its result where it ends inside the region; None where there is no start, the run fails or it ends
+    outside (said in ``chain``)."""
     if start is None:
         chain.append("no strictly feasible start in the region")
         return None
@@ -323,19 +328,12 @@ def _region_run(both: FeasibleSet, start: np.ndarray | None, objective, u_norm, 
     except (SolverError, ArithmeticError, np.linalg.LinAlgError) as exc:
         chain.append(f"interior point with the region as a constraint failed ({type(exc).__name__})")
         return None
-    said = f"interior point with the region as a constraint, {info['iterations']} iterations"
     if u_norm(th) > 1.0 + 1e-7:  # (a tiny region: u = Wθ − b cancels ~1/c-sized terms in the LMI)
         chain.append(f"interior point with the region as a constraint ended outside it (‖u‖ = {u_norm(th):.9g})")
         return None
-    heavy = heavy_links(P, th, theta0)
-    if heavy:  # a start near θ̂'s completed masses (10¹¹ kg: not determined by the data) left the iterates 11 decades
-        # apart in scale and the run stopped there; the problem is convex, so the penalised sequence from the prior
-        # solves it too, and the lower R of the two is kept
-        chain.append(f"{said} ended with the body of {heavy[0][0]} at {heavy[0][1]:.3g} kg (above {HEAVY_RATIO:g} × "
-                     "the prior's whole moving mass)")
     # Z = μ v vᵀ with v = (−u, 1) at ‖u‖ = 1: the multiplier of μ‖u‖²
-    return ({"theta": th, "mu": float(Z[-1][-1, -1]), "statistic": u_norm(th) ** 2 * radius2, "G": G, "note": "",
-             "solves": 1, "chain": said}, bool(heavy))
+    return {"theta": th, "mu": float(Z[-1][-1, -1]), "statistic": u_norm(th) ** 2 * radius2, "G": G, "note": "",
+            "solves": 1, "chain": f"interior point with the region as a constraint, {info['iterations']} iterations"}
 
 
 def _region_start(both: FeasibleSet, theta: np.ndarray, theta_hat: np.ndarray, C: np.ndarray, scale: np.ndarray,
