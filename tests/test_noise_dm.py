@@ -183,32 +183,45 @@ def test_a_residual_that_is_not_noise_is_recognised_and_wls_returned():
     assert kept.noise.choice == "noise model" and abs(kept.noise.check_excess) < 0.05
 
 
-def test_a_fit_degenerate_against_its_pilot_is_not_returned(monkeypatch):
-    """A passive coordinate (the Crazyflie–pendulum with 20 samples, data set 1, low-data subset 2: the pilot is the
-    paper's optimum, and the noise model is kept): a fit the metric guard flags as degenerate against its pilot (a
-    ghost: a body made nearly massless) gives way to the pilot, the paper's constrained optimum, and dm says why."""
-    import dualid.estimators.noise_dm as noise_dm
-    from dualid.evaluation.objective_terms import derivatives
-    from dualid.metric_guard import guard_info
+def _crazyflie_low_data():
+    """(system, training problem) of the Crazyflie–pendulum with 20 samples: data set 1, low-data subset 2."""
     from dualid.paper.study import low_data_subset
     from dualid.problem import build_problem
     from dualid.systems.base import make_system
 
     system = make_system("crazyflie", seed=1)
     problem = build_problem(system.model, list(system.train))
-    train = problem.subset(low_data_subset(problem, system.low_data_samples, 2))
+    return system, problem.subset(low_data_subset(problem, system.low_data_samples, 2))
+
+
+def _flag_the_fits_guard(monkeypatch, ratio_min: float) -> None:
+    """dm's first metric guard (in its fit) says degenerate, with generalised eigenvalues down to ``ratio_min``; the
+    result's own guard is the real one."""
+    import dualid.estimators.noise_dm as noise_dm
+
+    guard, calls = noise_dm.reference_guard, []
+
+    def flagged(*args, **kwargs):
+        calls.append(1)
+        return {**guard(*args, **kwargs), "degenerate": True, "metric_ratio_min": ratio_min} if len(calls) == 1 else \
+            guard(*args, **kwargs)
+
+    monkeypatch.setattr(noise_dm, "reference_guard", flagged)
+
+
+def test_a_fit_degenerate_against_its_pilot_is_not_returned(monkeypatch):
+    """A passive coordinate (the Crazyflie–pendulum with 20 samples, data set 1, low-data subset 2: the pilot is the
+    paper's optimum, and the noise model is kept): a fit the metric guard flags as degenerate against its pilot (a
+    ghost: a body made nearly massless) gives way to the pilot, the paper's constrained optimum, and dm says why."""
+    from dualid.evaluation.objective_terms import derivatives
+    from dualid.metric_guard import guard_info
+
+    system, train = _crazyflie_low_data()
     dm = make_estimator("dm", theta0=system.theta_nominal, allow_unidentifiable=True)
     kept = dm.fit(train)
     assert kept.noise.choice == "noise model" and kept.info["start"] == "dm-paper"
     assert not guard_info(train, kept.theta, system.theta_nominal)["degenerate"]
-    guard, calls = noise_dm.reference_guard, []
-
-    def flagged(*args, **kwargs):  # the first guard (in the fit) flags; the result's own guard is the real one
-        calls.append(1)
-        return {**guard(*args, **kwargs), "degenerate": True, "metric_ratio_min": 1.5e-4} if len(calls) == 1 else \
-            guard(*args, **kwargs)
-
-    monkeypatch.setattr(noise_dm, "reference_guard", flagged)
+    _flag_the_fits_guard(monkeypatch, 1.5e-4)
     res = dm.fit(train)
     assert res.noise.choice.startswith("dm-paper: its fit is degenerate against its pilot")
     paper = make_estimator("dm-paper", allow_unidentifiable=True).fit(train)
@@ -222,20 +235,10 @@ def test_a_fit_degenerate_against_its_pilot_is_not_returned(monkeypatch):
 def test_a_degenerate_fit_without_a_passive_coordinate_falls_back_to_wls(monkeypatch):
     """Every coordinate driven (the pilot is least squares): a fit flagged degenerate against the pilot is replaced
     by the constrained WLS fit in the pilot's residual covariance, as when the check rejects the noise model."""
-    import dualid.estimators.noise_dm as noise_dm
-
     problem, _ = eiv_problem(0, N=1000, torque=0.05, regressor=0.3)
     kept = NoiseModelDM().fit(problem)
     assert kept.noise.choice == "noise model"
-    guard = noise_dm.reference_guard
-    calls = []
-
-    def flagged(*args, **kwargs):  # the first guard (in the fit) flags; the result's own guard is the real one
-        calls.append(1)
-        return {**guard(*args, **kwargs), "degenerate": True, "metric_ratio_min": 1e-3} if len(calls) == 1 else \
-            guard(*args, **kwargs)
-
-    monkeypatch.setattr(noise_dm, "reference_guard", flagged)
+    _flag_the_fits_guard(monkeypatch, 1e-3)
     res = NoiseModelDM().fit(problem)
     assert res.noise.choice.startswith("wls: its fit is degenerate against its pilot (generalised eigenvalues")
     L = np.linalg.cholesky(problem.tau.T @ problem.tau / problem.N)  # the pilot: least squares whitened by mean ττᵀ
@@ -299,17 +302,12 @@ def test_a_noise_model_fit_that_does_not_converge_gives_way_to_the_pilots_estima
     paper's optimum where that is the pilot (a passive coordinate), else WLS in the pilot's residual covariance."""
     import dualid.estimators.noise_dm as noise_dm
     from dualid.errors import SolverError
-    from dualid.paper.study import low_data_subset
-    from dualid.problem import build_problem
-    from dualid.systems.base import make_system
 
     def failing(*args, **kwargs):
         raise SolverError("dual-metric Newton: no convergence in 300 iterations", status="max_iterations")
 
     monkeypatch.setattr(noise_dm.NoiseModelDM, "_rounds", failing)
-    system = make_system("crazyflie", seed=1)
-    problem = build_problem(system.model, list(system.train))
-    train = problem.subset(low_data_subset(problem, system.low_data_samples, 2))
+    _, train = _crazyflie_low_data()
     res = make_estimator("dm", allow_unidentifiable=True).fit(train)
     assert res.noise.choice == "dm-paper: its noise-model fit did not converge (max_iterations)"
     paper = make_estimator("dm-paper", allow_unidentifiable=True).fit(train)
