@@ -4,6 +4,7 @@ AffineMetric.evaluate (with and without its symmetrisation) against M_i = Σ_b J
 import numpy as np
 import pytest
 
+import dualid.model.metric as metric_module
 from dualid.estimators.newton.objective import residual_jacobian
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.rigid_body import spatial_inertia_basis
@@ -26,23 +27,33 @@ def _metric(kind: str, N=37, n=5, p=24, seed=0):
     raise ValueError(kind)
 
 
+@pytest.mark.parametrize("dense", [False, True])
 @pytest.mark.parametrize("kind", ["shared", "per_sample_M0", "overlap"])
-def test_kernels_match_affine_metric(kind):
+def test_kernels_match_affine_metric(kind, dense, monkeypatch):
+    # both forms of the metric: the factored products, and the dense M_ik a small system keeps (``AffineMetric.dense``)
+    monkeypatch.setattr(metric_module, "DENSE_MAX_N", 5 if dense else 0)
     metric = _metric(kind)
+    assert (metric.dense is not None) == dense
     N, n = metric.shape
     p = metric.n_params
     rng = np.random.default_rng(1)
     theta, w, Y = rng.normal(size=p), rng.normal(size=(N, n)), rng.normal(size=(N, n, p))
     rows = slice(3, 30)
-    ref = np.zeros((N, n, n))  # by loops, sample by sample
+    ref, Mk = np.zeros((N, n, n)), np.zeros((N, p, n, n))  # by loops, sample by sample
     for i in range(N):
         for t in metric.terms:
             E = t.E[i] if t.per_sample else t.E
+            for j, k in enumerate(t.indices):
+                Mk[i, k] += t.J[i].T @ E[j] @ t.J[i]
             G = sum(theta[k] * E[j] for j, k in enumerate(t.indices))
             ref[i] += t.J[i].T @ G @ t.J[i]
         if metric.M0 is not None:
             ref[i] += metric.M0[i]
     ref = ref[rows]
+    P_ref = np.einsum("ikab,ib->iak", Mk[rows], w[rows])  # [M_ik w_i]_k
+    assert np.allclose(metric.apply(w[rows], rows), P_ref, rtol=1e-13, atol=1e-12 * np.abs(P_ref).max())
+    quad_ref = np.einsum("ia,iak->ik", w[rows], P_ref)
+    assert np.allclose(metric.quad(w[rows], rows), quad_ref, rtol=1e-12, atol=1e-12 * np.abs(quad_ref).max())
     M = metric.evaluate(theta, rows, symmetric=False)
     assert np.allclose(np.tril(M), np.tril(ref), rtol=1e-13, atol=1e-12 * np.abs(ref).max())
     Ms = metric.evaluate(theta, rows)

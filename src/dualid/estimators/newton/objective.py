@@ -103,6 +103,10 @@ def force_scale(problem, theta, chunk) -> float:
 def residual_jacobian(metric: AffineMetric, Y: np.ndarray, w: np.ndarray, rows) -> tuple[np.ndarray, np.ndarray]:
     """(D = Y_i − [M_ik w_i]_k (c, n, p), Σ_i w_iᵀ M_ik w_i (p,)): ``AffineMetric.apply_quad(w, rows, Y.copy())``
     without the copy of Y. Y (c, n, p) is not modified."""
+    if metric.dense is not None:  # a small system: [M_ik w_i]_k in one batched product (``AffineMetric.dense``)
+        P = metric.apply(w, rows)
+        wMw = np.einsum("ca,cak->k", w, P)
+        return np.subtract(Y, P, out=P), wMw
     c, n, p = Y.shape
     A = np.zeros((c, n, p))  # [M_ik w_i]_k; columns no term touches stay 0
     wMw = np.zeros(p)
