@@ -152,6 +152,8 @@ def output_paths(out: str, force: bool, parser) -> tuple[Path, Path]:
     from dualid.report.outdir import check_output_files
 
     json_path = Path(out)
+    if json_path.suffix != ".json":  # else the .md would be written over the .json
+        parser.error(f"--out: expected the result's .json path (its .md goes beside it), got {out}")
     return tuple(check_output_files([json_path, json_path.with_suffix(".md")], force, parser))
 
 

@@ -84,6 +84,9 @@ def test_noise_sources_truth_scores_the_floor(tmp_path):
     with pytest.raises(SystemExit) as exc:
         bench.main(["--quick", "--method", "ols", "--out", str(out)])
     assert exc.value.code == 2 and out.read_text() == "{}"
+    with pytest.raises(SystemExit) as exc:  # a .md for --out would be written over by the result's own .md
+        bench.main(["--quick", "--method", "ols", "--out", str(tmp_path / "noise.md"), "--force"])
+    assert exc.value.code == 2 and not (tmp_path / "noise.md").exists()
 
 
 def test_the_second_start_check_solves_dms_objective_again():
