@@ -15,10 +15,10 @@ the same fit; the noise levels are covariant per coordinate, so a coordinate or 
 2. the noise levels from its residuals (``noise_model.estimate_noise``: Σ_τ per joint, Σ_a = σ_a² diag(mean v²): the
    sensors are independent). When the likelihood does not support acceleration noise, ``dm`` is WLS in the pilot's
    residual covariance (step 4's fallback: one quadratic fit from its sufficient statistics, same constraints);
-3. ROUNDS times: θ by dualid's primal–dual interior point on f (gradient and Hessian of ``noise_model``)
-   under the physical-consistency constraints, from the pilot moved strictly inside them, then from the last θ
-   with the levels re-estimated at it; a solve whose θ only feeds the levels (the pilot's, the first round's) stops
-   at LEVELS_TOL;
+3. ROUNDS times: θ by dualid's primal–dual interior point on f (gradient and Hessian of ``noise_model``) under the
+   physical-consistency constraints, from the pilot moved strictly inside them, then from the last θ with the levels
+   re-estimated at it (none when step 4's check rejects the first round's θ already); a solve whose θ only feeds the
+   levels (the pilot's, the first round's) stops at LEVELS_TOL;
 4. the held-out check (``noise_model.check_noise_model``) and the metric guard against the pilot: when the residual
    is not the modelled noise, or the fit is degenerate (a ghost), ``dm`` returns WLS in the pilot's residual
    covariance (full: correlated residuals, which model error makes, are weighed as WLS weighs them), or, where the
@@ -150,7 +150,7 @@ class NoiseModelDM:
                                 f"no acceleration noise ({why}): WLS{note}", t0,
                                 extra={"covariance_matrix": np.asarray(noise.sigma_tau).tolist()})
         f, choice = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk), "noise model"
-        check = self._check(sample, theta, noise)
+        check = run.pop("check", None) or self._check(sample, theta, noise)
         guard, why = reference_guard(sensor, done(theta, {})[0], theta_pilot, f"pilot ({pilot})"), None
         if check is not None and check.rejected:
             why = (f"the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's beyond the noise "
@@ -216,8 +216,10 @@ class NoiseModelDM:
                     break
             last = fixed or k == ROUNDS - 1
             theta, info = self._solve(sensor, cons, theta, noise, *((None, None) if last else (LEVELS_TOL, budget)))
-            run.update(iterations=run["iterations"] + info["iterations"], rounds=run["rounds"] + 1,
-                       status=_status(info))
+            run.update(iterations=run["iterations"] + info["iterations"], rounds=run["rounds"] + 1, status=_status(info))
+            if not last and (check := self._check(sample, theta, noise)) is not None and check.rejected:
+                run["check"] = check  # the residual is not the modelled noise already: ``fit`` falls back
+                break
         return theta, noise, run
 
     def _result(self, problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0, guard=None,
