@@ -30,10 +30,11 @@ def _metric(kind: str, N=37, n=5, p=24, seed=0):
 @pytest.mark.parametrize("dense", [False, True])
 @pytest.mark.parametrize("kind", ["shared", "per_sample_M0", "overlap"])
 def test_kernels_match_affine_metric(kind, dense, monkeypatch):
-    # both forms of the metric: the factored products, and the dense M_ik a small system keeps (``AffineMetric.dense``)
+    # both forms of the metric: the factored products, and the dense M_ik a small system keeps (``dense_rows``)
     monkeypatch.setattr(metric_module, "DENSE_MAX_N", 5 if dense else 0)
+    monkeypatch.setattr(metric_module, "DENSE_AFTER", 0)
     metric = _metric(kind)
-    assert (metric.dense is not None) == dense
+    assert (metric.dense_rows(slice(None)) is not None) == dense
     N, n = metric.shape
     p = metric.n_params
     rng = np.random.default_rng(1)
@@ -65,3 +66,26 @@ def test_kernels_match_affine_metric(kind, dense, monkeypatch):
     assert np.array_equal(Y[rows], Y_before)  # Y is not modified
     assert np.allclose(D, D_ref, rtol=1e-13, atol=1e-12 * np.abs(D_ref).max())
     assert np.allclose(wMw, wMw_ref, rtol=1e-12, atol=1e-12 * np.abs(wMw_ref).max())
+
+
+def test_the_dense_form_is_built_only_for_a_metric_used_again(monkeypatch):
+    """A metric used for one pass (a streamed block) keeps its factored products; one that has served DENSE_AFTER
+    passes builds the dense form, and a subset taken from it keeps it. Both forms give the same M_i(θ)."""
+    monkeypatch.setattr(metric_module, "DENSE_MAX_N", 5)
+    metric = _metric("shared")
+    N = metric.shape[0]
+    theta = np.random.default_rng(2).normal(size=metric.n_params)
+    first = metric.evaluate(theta)
+    assert metric.dense is None
+    for _ in range(metric_module.DENSE_AFTER - 1):  # passes in blocks of 10 samples
+        for start in range(0, N, 10):
+            metric.evaluate(theta, slice(start, start + 10))
+    assert metric.dense is not None
+    assert np.allclose(metric.evaluate(theta), first, rtol=1e-13, atol=1e-12 * np.abs(first).max())
+    rows = np.array([3, 0, 7])
+    assert np.array_equal(metric.take(rows).dense, metric.dense[rows])
+    monkeypatch.setattr(metric_module, "DENSE_MAX_N", 4)  # n = 5: too many coordinates, never dense
+    large = _metric("shared")
+    for _ in range(2 * metric_module.DENSE_AFTER):
+        large.evaluate(theta)
+    assert large.dense is None

@@ -9,23 +9,23 @@ metric is a sum of *terms*, each
 and the dense N·p·n² tensor M_ik is not materialised for large systems (``basis()`` builds it for the SDP).
 E may be shared by all samples (k, d, d) or per sample (N, k, d, d) (the generic dense case).
 
-For a few coordinates (n ≤ DENSE_MAX_N) and at most DENSE_MAX_FLOATS numbers the metric keeps M_ik dense after
-first use (``dense``): M_i(θ) is then one matrix–vector product and [M_ik w_i]_k one batched product instead of
-several small products per term, 6–14× faster for n = 2…4; at n = 6 the gain varies from run to run (1.3–3×) while
+For a few coordinates (n ≤ DENSE_MAX_N) and at most DENSE_MAX_FLOATS numbers the metric keeps M_ik dense once it
+has served a few passes (``dense_rows``): M_i(θ) is then one matrix–vector product and [M_ik w_i]_k one batched
+product instead of several small products per term, 6–14× faster for n = 2…4; at n = 6 the gain varies from run to run (1.3–3×) while
 the build passes 60 ms per 4,000 samples, and from n = 7 there is none (benchmarks/metric_dense.md).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 
 from dualid.errors import ModelError
 
 DENSE_MAX_N = 4  # coordinates: up to this many the dense M_ik replaces the factored products (module doc)
-DENSE_MAX_FLOATS = 4_000_000  # … while N·n²·p stays below this (32 MB)
+DENSE_MAX_FLOATS = 4_000_000  # … while N·n²·p stays below this (32 MB) …
+DENSE_AFTER = 4  # … once the metric has served this many times its samples (two derivative passes; ``dense_rows``)
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -111,10 +111,10 @@ class AffineMetric:
         """M_i(θ) for the selected samples, (N', n, n); symmetric=False skips the final symmetrisation (M_i is then
         symmetric up to rounding: a caller that reads only its lower triangle, e.g. a Cholesky factorisation)."""
         theta = np.asarray(theta, dtype=float)
-        K = self.dense
+        K = self.dense_rows(rows)
         if K is not None:
-            c = K[rows].shape[0]
-            M = (K[rows].reshape(-1, self.n_params) @ theta).reshape(c, *K.shape[1:3])
+            c = K.shape[0]
+            M = (K.reshape(-1, self.n_params) @ theta).reshape(c, *K.shape[1:3])
             if self.M0 is not None:
                 M += self.M0[rows]
             return 0.5 * (M + np.swapaxes(M, 1, 2)) if symmetric else M
@@ -138,8 +138,9 @@ class AffineMetric:
 
     def quad(self, w: np.ndarray, rows: slice | np.ndarray = slice(None)) -> np.ndarray:
         """(N', p): w_iᵀ M_ik w_i for w (N', n)."""
-        if self.dense is not None:
-            return np.einsum("ca,cak->ck", w, self.apply(w, rows))
+        K = self.dense_rows(rows)
+        if K is not None:
+            return np.einsum("ca,cak->ck", w, dense_apply(K, w))
         out = np.zeros((w.shape[0], self.n_params))
         for t, u, Eu in self.factors(w, rows):
             out[:, _as_slice(t.indices)] += np.einsum("ckd,cd->ck", Eu, u)
@@ -147,11 +148,9 @@ class AffineMetric:
 
     def apply(self, w: np.ndarray, rows: slice | np.ndarray = slice(None)) -> np.ndarray:
         """(N', n, p): the columns M_ik w_i for w (N', n)."""
-        K = self.dense
-        if K is not None:  # Σ_b (M_ik)_ba w_ib: (1 × n)(n × n·p) per sample (M_ik symmetric)
-            K = K[rows]
-            c, n = w.shape
-            return np.matmul(w[:, None, :], K.reshape(c, n, -1))[:, 0].reshape(c, n, self.n_params)
+        K = self.dense_rows(rows)
+        if K is not None:
+            return dense_apply(K, w)
         out = np.zeros((w.shape[0], w.shape[1], self.n_params))
         for t, _, Eu in self.factors(w, rows):
             out[:, :, _as_slice(t.indices)] += np.matmul(np.swapaxes(t.J[rows], 1, 2), np.swapaxes(Eu, 1, 2))
@@ -163,8 +162,9 @@ class AffineMetric:
         two share (u_i = J_i w_i and E_k u_i); ``out`` (N', n, p) is updated in place (zeros if None).
         The dual-metric gradient and Hessian need exactly this pair."""
         out = np.zeros((w.shape[0], w.shape[1], self.n_params)) if out is None else out
-        if self.dense is not None:
-            P = self.apply(w, rows)
+        K = self.dense_rows(rows)
+        if K is not None:
+            P = dense_apply(K, w)
             out -= P
             return out, np.einsum("ca,cak->k", w, P)
         wMw = np.zeros(self.n_params)
@@ -187,16 +187,28 @@ class AffineMetric:
                 Eu = (u @ t.E.transpose(2, 0, 1).reshape(d, k * d)).reshape(c, k, d)  # E_k symmetric
             yield t, u, Eu
 
-    @cached_property
+    @property
     def dense(self) -> np.ndarray | None:
-        """K (N, n, n, p), K[i, a, b, k] = (M_ik)_ab (symmetric up to rounding), for a small system (module doc); else
-        None."""
-        N, n = self.shape
-        if n > DENSE_MAX_N or N * n * n * self.n_params > DENSE_MAX_FLOATS:
-            return None
-        K = self._basis(slice(None))
-        K.setflags(write=False)
-        return K
+        """K (N, n, n, p), K[i, a, b, k] = (M_ik)_ab (symmetric up to rounding), once built (``dense_rows``); else None."""
+        return self.__dict__.get("_dense")
+
+    def dense_rows(self, rows) -> np.ndarray | None:
+        """K[rows] of the dense form for a small system (module doc), built once this metric has served DENSE_AFTER × N
+        samples (each call counts its rows): a metric used for one pass, such as a block of streamed data, never pays
+        for it. None otherwise: the factored products."""
+        K = self.dense
+        if K is None:
+            N, n = self.shape
+            if n > DENSE_MAX_N or N * n * n * self.n_params > DENSE_MAX_FLOATS:
+                return None
+            served = self.__dict__.get("_served", 0) + (len(range(N)[rows]) if isinstance(rows, slice) else len(rows))
+            self.__dict__["_served"] = served
+            if served < DENSE_AFTER * N:
+                return None
+            K = self._basis(slice(None))
+            K.setflags(write=False)
+            self.__dict__["_dense"] = K
+        return K[rows]
 
     def basis(self, rows: slice | np.ndarray = slice(None)) -> tuple[np.ndarray, np.ndarray]:
         """Dense (M_0 (N', n, n), M_k (N', p, n, n)); costs N'·p·n² memory: the SDP's form."""
@@ -228,11 +240,10 @@ class AffineMetric:
             tuple(t.take(idx) for t in self.terms),
             None if self.M0 is None else self.M0[idx],
         )
-        K = self.__dict__.get("dense")
-        if K is not None:
-            K = K[idx]
+        if self.dense is not None:
+            K = self.dense[idx]
             K.setflags(write=False)
-            taken.__dict__["dense"] = K
+            taken.__dict__["_dense"] = K
         return taken
 
     def pullback(self, B: np.ndarray) -> "AffineMetric":
@@ -295,6 +306,12 @@ class AffineMetric:
             raise ModelError("AffineMetric.concatenate: some metrics have M0 and some do not")
         M0 = None if first.M0 is None else np.concatenate([m.M0 for m in metrics])
         return AffineMetric(first.n_params, tuple(terms), M0)
+
+
+def dense_apply(K: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """[M_ik w_i]_k (c, n, p) from the dense K (c, n, n, p): Σ_b (M_ik)_ba w_ib, a (1 × n)(n × n·p) product per sample."""
+    c, n, _, p = K.shape
+    return np.matmul(w[:, None, :], K.reshape(c, n, n * p))[:, 0].reshape(c, n, p)
 
 
 def _as_slice(indices: tuple[int, ...]):

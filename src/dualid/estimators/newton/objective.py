@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualid.linalg import NotPositiveDefinite, cholesky_batch, forward_substitute, tri_inverse
-from dualid.model.metric import AffineMetric
+from dualid.model.metric import AffineMetric, dense_apply
 from dualid.problem import IdentificationProblem, additive, sample_blocks
 
 CHUNK = 1024  # samples per block of a pass: the per-chunk temporaries (c·n·p floats each) stay in cache
@@ -103,8 +103,9 @@ def force_scale(problem, theta, chunk) -> float:
 def residual_jacobian(metric: AffineMetric, Y: np.ndarray, w: np.ndarray, rows) -> tuple[np.ndarray, np.ndarray]:
     """(D = Y_i − [M_ik w_i]_k (c, n, p), Σ_i w_iᵀ M_ik w_i (p,)): ``AffineMetric.apply_quad(w, rows, Y.copy())``
     without the copy of Y. Y (c, n, p) is not modified."""
-    if metric.dense is not None:  # a small system: [M_ik w_i]_k in one batched product (``AffineMetric.dense``)
-        P = metric.apply(w, rows)
+    K = metric.dense_rows(rows)
+    if K is not None:  # a small system: [M_ik w_i]_k in one batched product (``AffineMetric.dense_rows``)
+        P = dense_apply(K, w)
         wMw = np.einsum("ca,cak->k", w, P)
         return np.subtract(Y, P, out=P), wMw
     c, n, p = Y.shape
