@@ -141,7 +141,10 @@ def test_every_step_decreases_f(rigid_arm):
     theta, info = solve_noise_model_cvxpy(problem, cons, start, S, A)
     f = np.array(info["history"])
     assert info["status"].startswith("converged") and len(f) == info["iterations"] + 1 >= 4
-    assert np.all(np.diff(f) <= 1e-8 * f[1:])  # Clarabel stops at relative gaps near 1e-8 here (optimal_inaccurate)
+    steps = np.diff(f)
+    if info["status"] == "converged: no decrease":  # the last step was rejected: f did not fall there
+        steps = steps[:-1]
+    assert np.all(steps <= 1e-8 * f[1:len(steps) + 1])  # Clarabel stops at relative gaps near 1e-8 here
     assert f[1] < 0.5 * f[0] and f[2] < f[1] * (1 - 1e-6)
     assert info["objective"] == pytest.approx(min(f), rel=1e-9)
     assert cons.margin(theta) > 0

@@ -1,11 +1,14 @@
 """The chunk kernels (dualid.estimators.newton.objective) against AffineMetric.apply_quad, and
 AffineMetric.evaluate (with and without its symmetrisation) against M_i = Σ_b J_bᵀ (Σ_k θ_k E_k) J_b + M0_i by loops."""
 
+import pickle
+
 import numpy as np
 import pytest
 
 import dualid.model.metric as metric_module
 from dualid.estimators.newton.objective import residual_jacobian
+from dualid.errors import ModelError
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.rigid_body import spatial_inertia_basis
 
@@ -84,8 +87,19 @@ def test_the_dense_form_is_built_only_for_a_metric_used_again(monkeypatch):
     assert np.allclose(metric.evaluate(theta), first, rtol=1e-13, atol=1e-12 * np.abs(first).max())
     rows = np.array([3, 0, 7])
     assert np.array_equal(metric.take(rows).dense, metric.dense[rows])
+    unused = theta.copy()
+    unused[10] = np.nan  # a parameter no term uses (the terms use 0–9 and 12–21): the dense product must not read it
+    assert np.allclose(metric.evaluate(unused), first, rtol=1e-13, atol=1e-12 * np.abs(first).max())
+    assert pickle.loads(pickle.dumps(metric)).dense is None  # not shipped to a worker
+    monkeypatch.setattr(metric_module, "DENSE_MAX_FLOATS", 2 * metric.dense.size)
+    assert metric.take(np.tile(np.arange(N), 3)).dense is None  # a subset larger than the limit: factored
     monkeypatch.setattr(metric_module, "DENSE_MAX_N", 4)  # n = 5: too many coordinates, never dense
     large = _metric("shared")
     for _ in range(2 * metric_module.DENSE_AFTER):
         large.evaluate(theta)
     assert large.dense is None
+
+
+def test_a_term_with_a_repeated_parameter_is_refused():
+    with pytest.raises(ModelError, match="distinct"):
+        MetricTerm((4, 4), np.ones((2, 1, 1)), np.ones((3, 1, 2)))

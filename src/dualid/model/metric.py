@@ -11,8 +11,9 @@ E may be shared by all samples (k, d, d) or per sample (N, k, d, d) (the generic
 
 For a few coordinates (n ≤ DENSE_MAX_N) and at most DENSE_MAX_FLOATS numbers the metric keeps M_ik dense once it
 has served a few passes (``dense_rows``): M_i(θ) is then one matrix–vector product and [M_ik w_i]_k one batched
-product instead of several small products per term, 6–14× faster for n = 2…4; at n = 6 the gain varies from run to run (1.3–3×) while
-the build passes 60 ms per 4,000 samples, and from n = 7 there is none (benchmarks/metric_dense.md).
+product instead of several small products per term, 6–19× faster for n = 2…4; at n = 6 the gain varies from run to
+run (1.3–3×) while the build passes 60 ms per 4,000 samples, and from n = 7 the dense M_i(θ) is slower and
+[M_ik w_i]_k at most 1.2× faster (benchmarks/metric_dense.md).
 """
 
 from __future__ import annotations
@@ -25,7 +26,8 @@ from dualid.errors import ModelError
 
 DENSE_MAX_N = 4  # coordinates: up to this many the dense M_ik replaces the factored products (module doc)
 DENSE_MAX_FLOATS = 4_000_000  # … while N·n²·p stays below this (32 MB) …
-DENSE_AFTER = 4  # … once the metric has served this many times its samples (two derivative passes; ``dense_rows``)
+DENSE_AFTER = 4  # … once it has served this many times its samples (two passes of the dual-metric derivatives, 1.3 of
+# dm's noise-model derivatives; ``dense_rows``)
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -58,6 +60,8 @@ class MetricTerm:
         if not np.allclose(E, np.swapaxes(E, -1, -2)):
             raise ModelError("MetricTerm: every E_k must be symmetric")
         object.__setattr__(self, "indices", tuple(int(i) for i in self.indices))
+        if len(set(self.indices)) != len(self.indices):
+            raise ModelError(f"MetricTerm: parameter indices must be distinct, got {self.indices}")
         object.__setattr__(self, "E", _readonly(E))
         object.__setattr__(self, "J", _readonly(J) if J.strides[0] != 0 else J)
 
@@ -114,7 +118,7 @@ class AffineMetric:
         K = self.dense_rows(rows)
         if K is not None:
             c = K.shape[0]
-            M = (K.reshape(-1, self.n_params) @ theta).reshape(c, *K.shape[1:3])
+            M = (K.reshape(-1, self.n_params) @ self._used(theta)).reshape(c, *K.shape[1:3])
             if self.M0 is not None:
                 M += self.M0[rows]
             return 0.5 * (M + np.swapaxes(M, 1, 2)) if symmetric else M
@@ -199,9 +203,11 @@ class AffineMetric:
         K = self.dense
         if K is None:
             N, n = self.shape
-            if n > DENSE_MAX_N or N * n * n * self.n_params > DENSE_MAX_FLOATS:
+            if not self.terms or n > DENSE_MAX_N or N * n * n * self.n_params > DENSE_MAX_FLOATS:
                 return None
-            served = self.__dict__.get("_served", 0) + (len(range(N)[rows]) if isinstance(rows, slice) else len(rows))
+            rows_ = np.asarray(rows) if not isinstance(rows, slice) else None
+            served = self.__dict__.get("_served", 0) + (len(range(N)[rows]) if rows_ is None else
+                                                        int(np.count_nonzero(rows_)) if rows_.dtype == bool else rows_.size)
             self.__dict__["_served"] = served
             if served < DENSE_AFTER * N:
                 return None
@@ -209,6 +215,18 @@ class AffineMetric:
             K.setflags(write=False)
             self.__dict__["_dense"] = K
         return K[rows]
+
+    def _used(self, theta: np.ndarray) -> np.ndarray:
+        """θ with the entries no term uses set to 0 (the dense product reads every entry; 0·NaN would be NaN)."""
+        used = self.__dict__.get("_used_mask")
+        if used is None:
+            used = np.zeros(self.n_params, dtype=bool)
+            used[[i for t in self.terms for i in t.indices]] = True
+            self.__dict__["_used_mask"] = used
+        return np.where(used, theta, 0.0)
+
+    def __getstate__(self) -> dict:  # pickled (e.g. to a Dask worker) without the dense form, rebuilt there if used
+        return {k: v for k, v in self.__dict__.items() if k not in ("_dense", "_served")}
 
     def basis(self, rows: slice | np.ndarray = slice(None)) -> tuple[np.ndarray, np.ndarray]:
         """Dense (M_0 (N', n, n), M_k (N', p, n, n)); costs N'·p·n² memory: the SDP's form."""
@@ -240,8 +258,8 @@ class AffineMetric:
             tuple(t.take(idx) for t in self.terms),
             None if self.M0 is None else self.M0[idx],
         )
-        if self.dense is not None:
-            K = self.dense[idx]
+        if self.dense is not None and taken.shape[0] * self.dense[0].size <= DENSE_MAX_FLOATS:
+            K = np.array(self.dense[idx])  # a copy: the subset does not keep the whole form alive
             K.setflags(write=False)
             taken.__dict__["_dense"] = K
         return taken
