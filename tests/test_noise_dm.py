@@ -184,6 +184,15 @@ def test_a_residual_that_is_not_noise_is_recognised_and_wls_returned():
     assert kept.noise.choice == "noise model" and abs(kept.noise.check_excess) < 0.05 and kept.noise.rounds == 2
 
 
+def test_a_first_round_rejected_by_a_narrow_margin_gets_its_second_round():
+    """The first round's check rejects by 2.2 standard errors (excess 0.051, se 0.023): not decisive, so the second
+    round runs, and its check keeps the noise model."""
+    problem, _ = eiv_problem(0, N=200, torque=0.15, regressor=0.05)
+    drag = replace(problem, tau=problem.tau + 0.5 * problem.v * np.abs(problem.v) * np.array([1.0, 2.0, 0.5]))
+    res = NoiseModelDM().fit(drag)
+    assert res.noise.rounds == 2 and res.noise.choice == "noise model"
+
+
 def _crazyflie_low_data():
     """(system, training problem) of the Crazyflie–pendulum with 20 samples: data set 1, low-data subset 2."""
     from dualid.paper.study import low_data_subset

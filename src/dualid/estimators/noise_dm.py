@@ -17,8 +17,8 @@ the same fit; the noise levels are covariant per coordinate, so a coordinate or 
    residual covariance (step 4's fallback: one quadratic fit from its sufficient statistics, same constraints);
 3. ROUNDS times: θ by dualid's primal–dual interior point on f (gradient and Hessian of ``noise_model``) under the
    physical-consistency constraints, from the pilot moved strictly inside them, then from the last θ with the levels
-   re-estimated at it (none when step 4's check rejects the first round's θ already); a solve whose θ only feeds the
-   levels (the pilot's, the first round's) stops at LEVELS_TOL;
+   re-estimated at it (none when step 4's check rejects the first round's θ by Z_DECISIVE standard errors); a solve
+   whose θ only feeds the levels (the pilot's, the first round's) stops at LEVELS_TOL;
 4. the held-out check (``noise_model.check_noise_model``) and the metric guard against the pilot: when the residual
    is not the modelled noise, or the fit is degenerate (a ghost), ``dm`` returns WLS in the pilot's residual
    covariance (full: correlated residuals, which model error makes, are weighed as WLS weighs them), or, where the
@@ -217,8 +217,8 @@ class NoiseModelDM:
             last = fixed or k == ROUNDS - 1
             theta, info = self._solve(sensor, cons, theta, noise, *((None, None) if last else (LEVELS_TOL, budget)))
             run.update(iterations=run["iterations"] + info["iterations"], rounds=run["rounds"] + 1, status=_status(info))
-            if not last and (check := self._check(sample, theta, noise)) is not None and check.rejected:
-                run["check"] = check  # the residual is not the modelled noise already: ``fit`` falls back
+            if not last and (check := self._check(sample, theta, noise)) is not None and check.decisive:
+                run["check"] = check  # clearly not the modelled noise already: ``fit`` falls back
                 break
         return theta, noise, run
 

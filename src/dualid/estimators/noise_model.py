@@ -266,6 +266,8 @@ def _scoring(r, a, owner, psi, weight, x) -> tuple[np.ndarray, float]:
 
 EXCESS_TOL = 0.01  # the noise model is rejected when dm's held-out loss exceeds its prediction by > 1 % of WLS's …
 Z_REJECT = 2.0  # … and by more than this many standard errors of that excess (a significant and a relevant excess)
+Z_DECISIVE = 3.0  # a rejection by this many: ``dm`` makes no second round (on 556 two-round fits none of its first
+# round's rejections beyond 3 standard errors was accepted after the second; one beyond 2.2 was)
 NEWTON_STEPS = 2  # damped Newton steps of each half's dm fit from the full-data fit
 BLOCKS = 20  # contiguous blocks of held-out samples for the standard error
 
@@ -277,6 +279,11 @@ class NoiseCheck:
     measured_gap: float  # (dm − WLS held-out loss) / WLS held-out loss
     predicted_gap: float  # the same, as the noise model predicts it
     rejected: bool  # excess > max(EXCESS_TOL, Z_REJECT × standard_error)
+
+    @property
+    def decisive(self) -> bool:
+        """Rejected by more than Z_DECISIVE standard errors."""
+        return self.excess > max(EXCESS_TOL, Z_DECISIVE * self.standard_error)
 
 
 def _loss(problem, theta, W) -> np.ndarray:
