@@ -12,8 +12,8 @@ E may be shared by all samples (k, d, d) or per sample (N, k, d, d) (the generic
 For a few coordinates (n ≤ DENSE_MAX_N) and at most DENSE_MAX_FLOATS numbers the metric keeps M_ik dense once it
 has served a few passes (``dense_rows``): M_i(θ) is then one matrix–vector product and [M_ik w_i]_k one batched
 product instead of several small products per term, 6–19× faster for n = 2…4; at n = 6 the gain varies from run to
-run (1.3–3×) while the build passes 60 ms per 4,000 samples, and from n = 7 the dense M_i(θ) is slower and
-[M_ik w_i]_k at most 1.2× faster (benchmarks/metric_dense.md).
+run (1.3–3×) while the build passes 60 ms per 4,000 samples, and from n = 7 the dense form gains at most 1.3× (at
+n = 8 its M_i(θ) is 1.8× slower; benchmarks/metric_dense.md).
 """
 
 from __future__ import annotations
