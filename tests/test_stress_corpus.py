@@ -31,11 +31,8 @@ KNOWN = {
 }
 # Where the outcome is Clarabel's to decide, by release: the row is good, or it is not labelled optimal.
 SOLVER_DECIDES = {
-    # the SDP itself on those unattained infima: Clarabel 0.11 ends optimal_inaccurate, 0.10 optimal; on the point-mass
-    # link the rounding of the per-sample bases M_ik decides (einsum: optimal; the GEMM of AffineMetric._basis, equal to
-    # 2e-16: optimal_inaccurate)
+    # the SDP itself on that unattained infimum: Clarabel 0.11 ends optimal_inaccurate, 0.10 optimal
     ("rank-deficient 4 dof, N = 12", "dm-paper", "", "sdp_clarabel"): "Clarabel's stop on the ray",
-    ("point-mass link, 3 dof, 5 %", "dm-paper", "", "sdp_clarabel"): "Clarabel's stop on the ray",
 }
 
 
