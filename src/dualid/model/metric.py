@@ -205,13 +205,14 @@ class AffineMetric:
             N, n = self.shape
             if not self.terms or n > DENSE_MAX_N or N * n * n * self.n_params > DENSE_MAX_FLOATS:
                 return None
-            rows_ = np.asarray(rows) if not isinstance(rows, slice) else None
-            served = self.__dict__.get("_served", 0) + (len(range(N)[rows]) if rows_ is None else
-                                                        int(np.count_nonzero(rows_)) if rows_.dtype == bool else rows_.size)
-            self.__dict__["_served"] = served
-            if served < DENSE_AFTER * N:
+            if isinstance(rows, slice):
+                count = len(range(N)[rows])
+            else:  # indices, or a boolean mask: the rows it selects
+                count = int(np.count_nonzero(rows)) if np.asarray(rows).dtype == bool else len(rows)
+            self.__dict__["_served"] = self.__dict__.get("_served", 0) + count
+            if self.__dict__["_served"] < DENSE_AFTER * N:
                 return None
-            K = self._basis(slice(None))
+            K = self._dense_basis()
             K.setflags(write=False)
             self.__dict__["_dense"] = K
         return K[rows]
@@ -229,33 +230,32 @@ class AffineMetric:
         return {k: v for k, v in self.__dict__.items() if k not in ("_dense", "_served")}
 
     def basis(self, rows: slice | np.ndarray = slice(None)) -> tuple[np.ndarray, np.ndarray]:
-        """Dense (M_0 (N', n, n), M_k (N', p, n, n)); costs N'·p·n² memory: the SDP's form."""
-        return self._basis(rows, sdp=True)
-
-    def _basis(self, rows, sdp: bool = False):
-        """K (N', n, n, p), K[i, a, b, k] = (M_ik)_ab, by one GEMM per term; sdp=True: ``basis``'s (M_0, M_k) by the
-        einsum the SDP was validated with (its conic solver's status on degenerate problems, f* = 0 or an infimum not
-        attained, moves with the input's rounding: 5 of 15 corpus references changed status with the GEMM's)."""
+        """Dense (M_0 (N', n, n), M_k (N', p, n, n)); costs N'·p·n² memory: the SDP's form (by the einsum the SDP was
+        validated with: its conic solver's status on degenerate problems, f* = 0 or an infimum not attained, moves with
+        the input's rounding, as on 5 of 15 corpus references with the dense form's GEMM)."""
         N, n = self.shape
-        c = len(np.arange(N)[rows])
-        if sdp:
-            Mk = np.zeros((c, self.n_params, n, n))
-            for t in self.terms:
-                J = t.J[rows]
-                E = t.E[rows] if t.per_sample else t.E[None]
-                Mk[:, list(t.indices)] += np.einsum("ndi,nkde,nej->nkij", J, E, J)
-            return (self.M0[rows] if self.M0 is not None else np.zeros((c, n, n))), Mk
-        K = np.zeros((c, n, n, self.n_params))
+        idx = np.arange(N)[rows]
+        Mk = np.zeros((len(idx), self.n_params, n, n))
         for t in self.terms:
             J = t.J[rows]
+            E = t.E[rows] if t.per_sample else t.E[None]
+            Mk[:, list(t.indices)] += np.einsum("ndi,nkde,nej->nkij", J, E, J)
+        M0 = self.M0[rows] if self.M0 is not None else np.zeros((len(idx), n, n))
+        return M0, Mk
+
+    def _dense_basis(self) -> np.ndarray:
+        """K (N, n, n, p), K[i, a, b, k] = (M_ik)_ab, by one GEMM per term of shared E."""
+        N, n = self.shape
+        K = np.zeros((N, n, n, self.n_params))
+        for t in self.terms:
             if t.per_sample:
-                K[..., list(t.indices)] += np.einsum("ndi,nkde,nej->nijk", J, t.E[rows], J)
+                K[..., list(t.indices)] += np.einsum("ndi,nkde,nej->nijk", t.J, t.E, t.J)
                 continue
-            d, k = J.shape[1], len(t.indices)  # J_iᵀ (E_k J_i): E_k J_i for every i and k as one GEMM, …
-            Jt = np.swapaxes(J, 1, 2)  # (c, n, d)
-            EJ = (Jt.reshape(c * n, d) @ t.E.transpose(2, 1, 0).reshape(d, d * k)).reshape(c, n, d, k)
-            EJ = np.ascontiguousarray(np.swapaxes(EJ, 1, 2)).reshape(c, d, n * k)  # (E_k J_i)_db at [i, d, (b, k)]
-            K[..., _as_slice(t.indices)] += np.matmul(Jt, EJ).reshape(c, n, n, k)  # … then J_iᵀ · per sample
+            d, k = t.J.shape[1], len(t.indices)  # J_iᵀ (E_k J_i): E_k J_i for every i and k as one GEMM, …
+            Jt = np.swapaxes(t.J, 1, 2)  # (N, n, d)
+            EJ = (Jt.reshape(N * n, d) @ t.E.transpose(2, 1, 0).reshape(d, d * k)).reshape(N, n, d, k)
+            EJ = np.ascontiguousarray(np.swapaxes(EJ, 1, 2)).reshape(N, d, n * k)  # (E_k J_i)_db at [i, d, (b, k)]
+            K[..., _as_slice(t.indices)] += np.matmul(Jt, EJ).reshape(N, n, n, k)  # … then J_iᵀ · per sample
         return K
 
     # --- transformations --------------------------------------------------------------------
