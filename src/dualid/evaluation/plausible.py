@@ -326,12 +326,16 @@ HEAVY_RATIO = 2.0  # a link heavier than this × the prior's whole moving mass: 
 # region solve ending there is checked against the penalised sequence (``solve_region``)
 
 
+def moving_mass(P, theta0: np.ndarray) -> float:
+    """The total mass of ``theta0``'s rigid bodies (negative masses counted as 0)."""
+    return float(sum(max(theta0[b.indices[0]], 0.0) for b in P.blocks if b.kind == "rigid_body"))
+
+
 def heavy_links(P, theta: np.ndarray, theta0: np.ndarray) -> list[tuple[str, float, float]]:
-    """[(block, mass, the prior's mass)] of the rigid bodies of ``theta`` heavier than HEAVY_RATIO × the total mass
-    of ``theta0``'s bodies (none when the prior has no mass: nothing to compare with)."""
-    blocks = [b for b in P.blocks if b.kind == "rigid_body"]
-    total = float(sum(max(theta0[b.indices[0]], 0.0) for b in blocks))
+    """[(block, mass, the prior's mass)] of the rigid bodies of ``theta`` heavier than HEAVY_RATIO × ``moving_mass`` of
+    ``theta0`` (none when the prior has no mass: nothing to compare with)."""
+    total = moving_mass(P, theta0)
     if not total > 0:
         return []
-    return [(b.name, float(theta[b.indices[0]]), float(theta0[b.indices[0]])) for b in blocks
-            if theta[b.indices[0]] > HEAVY_RATIO * total]
+    return [(b.name, float(theta[b.indices[0]]), float(theta0[b.indices[0]])) for b in P.blocks
+            if b.kind == "rigid_body" and theta[b.indices[0]] > HEAVY_RATIO * total]

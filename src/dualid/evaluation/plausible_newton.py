@@ -44,7 +44,7 @@ import pinocchio as pin
 
 from dualid.errors import SolverError
 from dualid.evaluation.plausible import HEAVY_RATIO, heavy_links
-from dualid.estimators.newton.objective import Derivatives, NotPositiveDefinite
+from dualid.estimators.newton.objective import Derivatives, NotPositiveDefinite, value_or_inf
 from dualid.estimators.newton.interior_point import run_interior_point
 from dualid.estimators.newton.start import run_quadratic
 from dualid.model.consistency import LMI, FeasibleSet, feasible_set, pullback_metric
@@ -305,8 +305,10 @@ def solve_region(problem: IdentificationProblem, theta0: np.ndarray, beta_hat: n
         return {**one, "chain": "; ".join((*chain, f"{one['chain']}: kept (the penalised sequence failed)"))}
     if note and large and one is None:  # the sequence ended outside the region: the region's run as the last resort
         one = region_run()
-    if one is not None and (note or prior_divergence(problem, one["theta"], theta0)
-                            < prior_divergence(problem, th, theta0)):
+    def divergence(th_: np.ndarray) -> float:  # R (``prior_divergence``) from the terms built above
+        return value_or_inf(lambda t_, order: objective(t_, order, 0.0), th_)
+
+    if one is not None and (note or divergence(one["theta"]) < divergence(th)):
         why = "the sequence ended outside the region" if note else "its R is lower"
         return {**one, "solves": one["solves"] + solves, "chain": "; ".join((*chain, f"{one['chain']}: kept ({why})"))}
     chain.append(f"interior point, {solves} solves, μ {mu_best:.3g}, statistic {u_norm(th) ** 2 * radius2:.3g}")

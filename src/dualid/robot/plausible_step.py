@@ -17,7 +17,8 @@ from collections.abc import Mapping
 import numpy as np
 
 from dualid.errors import ConfigError, ModelFileWarning, PlausibleWarning
-from dualid.evaluation.plausible import HEAVY_RATIO, PlausibleParameters, heavy_links, plausible_parameters
+from dualid.evaluation.plausible import (HEAVY_RATIO, PlausibleParameters, heavy_links, moving_mass,
+                                         plausible_parameters)
 from dualid.evaluation.plausible_newton import MASSLESS_SHARE, ball_prior, rounded_prior
 from dualid.evaluation.plausible_region import LEVEL, check_level, plausible_in_region, training_rmse
 from dualid.evaluation.uncertainty import BaseUncertainty
@@ -89,7 +90,7 @@ def refused_files(method: str, P, theta: np.ndarray, theta0: np.ndarray, which: 
     heavy = heavy_links(P, theta, theta0)
     if not heavy:
         return ""
-    total = sum(max(theta0[b.indices[0]], 0.0) for b in P.blocks if b.kind == "rigid_body")
+    total = moving_mass(P, theta0)
     named = ", ".join(f"link {links.get(j, j)!r} {m:.4g} kg (prior {m0:.4g} kg)" for j, m, m0 in heavy)
     hint = ("" if which != "raw" else "; the plausible step failed (its error says why)" if step_on else
             "; keep prior.plausible on (the default) to draw what the data leave free toward the prior")
