@@ -1,4 +1,4 @@
-"""dm's conic reference (``NoiseModelDM(solver="cvxpy")``, estimators.noise_dm.solve_noise_model_cvxpy): majorize–
+"""dm's conic reference (``NoiseModelDM(solver="cvxpy")``, estimators.noise_cvxpy.solve_noise_model_cvxpy): majorize–
 minimize, each step a batched SDP for the convex majorizer g_k of f(θ) = Σ r_iᵀ (Σ_τ + M_i Σ_a M_i)⁻¹ r_i.
 
 Specifications: (1) g_k ≥ f everywhere, g_k = f at θ_k, and ∇g_k = ∇f there (so a fixed point is a stationary point
@@ -27,7 +27,8 @@ from dualid.bench.arms import excitation, random_arm
 from dualid.data.trajectory import Trajectory
 from dualid.estimators.methods import make_estimator
 from dualid.estimators.noise_model import noise_model_covariance, noise_model_derivatives, noise_model_objective
-from dualid.estimators.noise_dm import NoiseModelDM, majorizer_blocks, solve_noise_model_cvxpy
+from dualid.estimators.noise_cvxpy import majorizer_blocks, solve_noise_model_cvxpy
+from dualid.estimators.noise_dm import NoiseModelDM
 from dualid.model.closure import on_closure
 from dualid.model.consistency import central_point, cvxpy_feasible_set, feasible_set
 from dualid.problem import build_problem
