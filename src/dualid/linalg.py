@@ -89,6 +89,12 @@ def tri_inverse(L: np.ndarray) -> np.ndarray:
     return np.moveaxis(X, -1, 0)
 
 
+def cholesky_inverse(L: np.ndarray) -> np.ndarray:
+    """(L Lᵀ)⁻¹ (c, n, n) from the Cholesky factor L: L⁻ᵀ L⁻¹ (LAPACK's batched inverse is ~10× slower for n ≤ 8)."""
+    Li = tri_inverse(L)
+    return np.swapaxes(Li, 1, 2) @ Li
+
+
 def forward_substitute(L: np.ndarray, r: np.ndarray) -> np.ndarray:
     """L⁻¹ r for r (c, n)."""
     z = np.empty_like(r)

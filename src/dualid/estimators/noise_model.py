@@ -46,7 +46,7 @@ import numpy as np
 
 from dualid.errors import MetricError
 from dualid.estimators.newton.objective import CHUNK, Derivatives, value_or_inf
-from dualid.linalg import NotPositiveDefinite, cholesky_batch, forward_substitute, tri_inverse
+from dualid.linalg import NotPositiveDefinite, cholesky_batch, cholesky_inverse, forward_substitute, tri_inverse
 from dualid.problem import IdentificationProblem, additive, sample_blocks, strided_rows
 
 def noise_model_covariance(M: np.ndarray, sigma_tau: np.ndarray, sigma_a: np.ndarray) -> np.ndarray:
@@ -157,7 +157,7 @@ class NoiseLevels:
 def _shares(M, S, A) -> tuple[float, float]:
     n = S.shape[0]
     MAM = M @ A @ M
-    Ci = np.linalg.inv(S + MAM)
+    Ci = cholesky_inverse(cholesky_batch(noise_model_covariance(M, S, A)))
     t = float(np.mean(np.einsum("cab,ba->c", Ci, S))) / n
     a = float(np.mean(np.einsum("cab,cba->c", Ci, MAM))) / n
     return t, a
@@ -181,8 +181,8 @@ def estimate_noise(problem, theta: np.ndarray, start: NoiseLevels | None = None,
     M = sub.metric.evaluate(theta)
     N, n = r.shape
     try:
-        np.linalg.cholesky(M)
-    except np.linalg.LinAlgError:
+        Mi = cholesky_inverse(cholesky_batch(M))
+    except NotPositiveDefinite:
         raise MetricError("noise levels: M_i(θ) is not positive definite at some sample") from None
     s = np.mean(r * r, axis=0)
     D = np.mean(sub.v**2, axis=0)  # the shape of Σ_a: each coordinate's mean squared velocity
@@ -196,7 +196,6 @@ def estimate_noise(problem, theta: np.ndarray, start: NoiseLevels | None = None,
                               np.swapaxes(M, 1, 2) * np.sqrt(D)[None, :, None]], axis=1)
     owner = np.concatenate([np.arange(n), np.full(n, n)])
     # ψ: the all-torque levels s and the all-acceleration level of σ_a², mean_j (mean_i M_i⁻¹ diag(s) M_i⁻¹)_jj / D_j
-    Mi = np.linalg.inv(M)
     all_a = float(np.mean(np.einsum("cjk,k,cjk->j", Mi, s, Mi) / N / np.where(D > 0, D, np.inf)))
     psi = PRIOR_SHARE * np.concatenate([s, [all_a]])
     if start is not None and start.acceleration_share > 0:
@@ -226,10 +225,10 @@ def _scoring(r, a, owner, psi, weight, x) -> tuple[np.ndarray, float]:
         v = np.exp(x)
         C = np.matmul(np.swapaxes(a, 1, 2), a * v[owner][None, :, None])
         try:
-            Lc = np.linalg.cholesky(C)
-        except np.linalg.LinAlgError:
+            Lc = cholesky_batch(C)
+        except NotPositiveDefinite:
             return np.inf, np.inf, None, None
-        Ci = np.linalg.inv(C)
+        Ci = cholesky_inverse(Lc)
         w = np.einsum("cab,cb->ca", Ci, r)
         data = (2 * np.sum(np.log(np.diagonal(Lc, axis1=1, axis2=2))) + np.sum(w * r)) / N
         val = data + weight * float(np.sum(psi / v))
@@ -350,10 +349,9 @@ def check_noise_model(problem: IdentificationProblem, theta: np.ndarray, S: np.n
     half = problem.N // 2
     if half * problem.n < 2 * problem.p:
         return None
-    folds = (np.arange(half), np.arange(half, problem.N))
+    halves = (problem.subset(np.arange(half)), problem.subset(np.arange(half, problem.N)))
     measured, predicted, base = [], [], 0.0
-    for train_rows, test_rows in (folds, folds[::-1]):
-        train, test = problem.subset(train_rows), problem.subset(test_rows)
+    for train, test in (halves, halves[::-1]):
         th_w, th_d = _wls_step(train, theta, W), _refit(train, theta, S, A, chunk)
         lw = _loss(test, th_w, W)
         measured.append(_loss(test, th_d, W) - lw)
