@@ -47,6 +47,7 @@ from dualid.estimators.noise_cvxpy import solve_noise_model_cvxpy
 from dualid.estimators.noise_model import (NoiseCheck, NoiseLevels, check_noise_model, estimate_noise, given_levels,
                                            noise_model_derivatives, noise_model_objective, noise_model_scale)
 from dualid.estimators.newton.start import run_quadratic, toward_start
+from dualid.estimators.quadratic_fit import fit_weighted
 from dualid.estimators.quadratic_newton import quadratic_objective
 from dualid.estimators.result import IdentificationResult, NoiseRecord
 from dualid.identifiability import check_identifiable
@@ -191,11 +192,21 @@ class NoiseModelDM:
 
     def _wls(self, sensor, cons, start, theta_pilot):
         """WLS in the pilot's residual covariance (the pilot: the same in every unit, where OLS is not), under the
-        constraints from ``start``: (θ, f, status, a note of the exact-data floor if used, Σ̂)."""
+        constraints from ``start`` (or, where those steps stall, from WLS's own start): (θ, f, status, a note of the
+        exact-data floor or the other start if used, Σ̂)."""
         S, fallback = residual_covariance(sensor, theta_pilot)
-        theta, info = self._solve(sensor, cons, start, NoiseLevels(S, np.zeros_like(S), 1.0, 0.0, 0))
+        note, levels = "" if fallback is None else f"; {fallback}", NoiseLevels(S, np.zeros_like(S), 1.0, 0.0, 0)
+        try:
+            theta, info = self._solve(sensor, cons, start, levels, convex_only=True)
+            status = _status(info)
+        except SolverError as exc:  # its steps from a start barely inside a block stalled (5 of the 10 xArm7 data sets
+            # with 1 mrad of encoder noise; the general path then failed after 300 iterations): WLS's fit from its own start
+            fit = fit_weighted(sensor, S, "wls", {"constrained": self.constrained, "solver": "newton",
+                                                  "solver_options": {}, "allow_unidentifiable": True}, {})
+            theta, status = np.asarray(fit.theta), fit.status
+            note += f"; fitted from WLS's own start (from dm's: {exc.status})"
         f = noise_model_objective(sensor, theta, S, np.zeros_like(S), self.chunk)
-        return theta, f, _status(info), "" if fallback is None else f"; {fallback}", S
+        return theta, f, status, note, S
 
     def _inside(self, theta, cons):  # θ, or (constrained, θ not strictly inside cons) its central point: a start
         return central_point(theta, cons) if self.constrained and not cons.margin(theta) > 0 else theta
@@ -269,10 +280,12 @@ class NoiseModelDM:
         except (MetricError, NotPositiveDefinite, np.linalg.LinAlgError):
             return None
 
-    def _solve(self, problem, cons, theta, noise: NoiseLevels, tol: float | None = None, max_iter: int | None = None):
+    def _solve(self, problem, cons, theta, noise: NoiseLevels, tol: float | None = None, max_iter: int | None = None,
+               convex_only: bool = False):
         """θ minimising f with the levels fixed, from θ, on the closed set ``cons``, to ``tol`` in at most ``max_iter``
         iterations (None: the estimator's): with Σ_a = 0 WLS's quadratic in Σ_τ⁻¹ from its sufficient statistics (one
-        pass); else f is not convex: the interior point's non-convex mode."""
+        pass; where its steps stall, the general path, or with convex_only the SolverError); else f is not convex:
+        the interior point's non-convex mode."""
         S, A = noise.sigma_tau, noise.sigma_a
         tol = self.tol if tol is None else max(tol, self.tol)
         max_iter = self.max_iter if max_iter is None else min(max_iter, self.max_iter)
@@ -286,7 +299,8 @@ class NoiseModelDM:
                                           stopping_scale(stats.c - stats.g @ theta_ls, stats.c))
                 return toward_start(fit, theta, stats.H, cons, lambda th: value_or_inf(objective, th)), info
             except SolverError:  # the convex-mode steps stalled (arms near a block's boundary): the general path
-                pass
+                if convex_only:
+                    raise
 
         def objective(th, order):
             return noise_model_derivatives(problem, th, S, A, order, self.chunk)
