@@ -17,8 +17,9 @@ the same fit; the noise levels are covariant per coordinate, so a coordinate or 
    residual covariance (step 4's fallback: one quadratic fit from its sufficient statistics, same constraints);
 3. ROUNDS times: θ by dualid's primal–dual interior point on f (gradient and Hessian of ``noise_model``) under the
    physical-consistency constraints, from the pilot moved strictly inside them, then from the last θ with the levels
-   re-estimated at it (none when step 4's check rejects the first round's θ by Z_DECISIVE standard errors); a solve
-   whose θ only feeds the levels (the pilot's, the first round's) stops at LEVELS_TOL;
+   re-estimated at it; before the first, step 4's check at CHECK_STEPS damped Newton steps from the pilot (none of
+   the rounds when it rejects by Z_DECISIVE standard errors: the fallback does not depend on them); a solve whose θ
+   only feeds the levels (the pilot's, the first round's) stops at LEVELS_TOL;
 4. the held-out check (``noise_model.check_noise_model``) and the metric guard against the pilot: when the residual
    is not the modelled noise, or the fit is degenerate (a ghost), ``dm`` returns WLS in the pilot's residual
    covariance (full: correlated residuals, which model error makes, are weighed as WLS weighs them), or, where the
@@ -45,7 +46,8 @@ from dualid.estimators.newton.interior_point import run_interior_point
 from dualid.estimators.newton.objective import CHUNK, objective_value, statistics, stopping_scale, value_or_inf
 from dualid.estimators.noise_cvxpy import solve_noise_model_cvxpy
 from dualid.estimators.noise_model import (NoiseCheck, NoiseLevels, check_noise_model, estimate_noise, given_levels,
-                                           noise_model_derivatives, noise_model_objective, noise_model_scale)
+                                           newton_refit, noise_model_derivatives, noise_model_objective,
+                                           noise_model_scale)
 from dualid.estimators.newton.start import run_quadratic, toward_start
 from dualid.estimators.quadratic_fit import fit_weighted
 from dualid.estimators.quadratic_newton import quadratic_objective
@@ -64,6 +66,8 @@ ROUNDS = 2  # noise levels at the pilot, θ; the levels at that θ, θ again (un
 LEVELS_TOL = 1e-6  # gap of the solves whose θ only feeds the levels (pilot, first round; saves 5–20 %). θ̂ follows the
 # levels: 4 re-charted fits moved (clean error / f) ≤ 5e-6 / 1e-4 at 1e-4, ≤ 2e-7 / 5e-6 at 1e-6, ≤ 1e-5 / 2e-6 at 1e-9
 SINGULAR_TORQUES = 1e-10  # mean ττᵀ as a correlation matrix with an eigenvalue below this: singular (``torque_scale``)
+CHECK_STEPS = 4  # damped Newton steps from the pilot give the first round's check its θ (DFKI: 2e-6 from the
+# constrained solve's in predictions, the same check to 4 digits); a decisive rejection there skips that solve
 LEVELS_MAX_ITER = 100  # first round's budget from a least-squares pilot, then from the paper's optimum: such solves
 # converged in 9–40 iterations or not in 300 (11 of 12 xArm7 noise-benchmark fits, 7 s each; statistical benchmark ≤ 32)
 
@@ -225,11 +229,13 @@ class NoiseModelDM:
                 if not noise.acceleration_share > 0:  # no acceleration noise: ``fit`` returns WLS
                     break
             last = fixed or k == ROUNDS - 1
+            if not last:  # the first round's check, at Newton steps from the pilot (before its constrained solve)
+                early = newton_refit(sample, theta_pilot, noise.sigma_tau, noise.sigma_a, self.chunk, CHECK_STEPS)
+                if (check := self._check(sample, early, noise)) is not None and check.decisive:
+                    run.update(check=check, rounds=1)  # clearly not the modelled noise already: ``fit`` falls back
+                    return theta, noise, run  # (the start: inside the constraints, where ``early`` need not be)
             theta, info = self._solve(sensor, cons, theta, noise, *((None, None) if last else (LEVELS_TOL, budget)))
             run.update(iterations=run["iterations"] + info["iterations"], rounds=run["rounds"] + 1, status=_status(info))
-            if not last and (check := self._check(sample, theta, noise)) is not None and check.decisive:
-                run["check"] = check  # clearly not the modelled noise already: ``fit`` falls back
-                break
         return theta, noise, run
 
     def _result(self, problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0, guard=None,

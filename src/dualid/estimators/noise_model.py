@@ -315,7 +315,7 @@ def _newton_step(theta: np.ndarray, grad: np.ndarray, hess: np.ndarray) -> np.nd
     return np.asarray(theta) - step
 
 
-def _refit(problem, theta, S, A, chunk, steps: int = NEWTON_STEPS) -> np.ndarray:
+def newton_refit(problem, theta, S, A, chunk: int = CHUNK, steps: int = NEWTON_STEPS) -> np.ndarray:
     """dm's fit of problem at fixed noise levels: damped Newton steps from θ (unconstrained)."""
     der = noise_model_derivatives(problem, theta, S, A, 2, chunk)
     for _ in range(steps):
@@ -352,7 +352,7 @@ def check_noise_model(problem: IdentificationProblem, theta: np.ndarray, S: np.n
     halves = (problem.subset(np.arange(half)), problem.subset(np.arange(half, problem.N)))
     measured, predicted, base = [], [], 0.0
     for train, test in (halves, halves[::-1]):
-        th_w, th_d = _wls_step(train, theta, W), _refit(train, theta, S, A, chunk)
+        th_w, th_d = _wls_step(train, theta, W), newton_refit(train, theta, S, A, chunk)
         lw = _loss(test, th_w, W)
         measured.append(_loss(test, th_d, W) - lw)
         predicted.append(_predicted(test, th_d, theta, W, S, A, train.N) - _predicted(test, th_w, theta, W, S, A))
