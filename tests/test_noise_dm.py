@@ -289,6 +289,16 @@ def test_a_stalled_wls_fit_is_refitted_from_wls_own_start(monkeypatch):
     assert rel(problem.Y @ refitted.theta, problem.Y @ quick.theta) < 1e-7
 
 
+def test_given_levels_that_leave_a_covariance_singular_are_a_typed_error():
+    """Σ_τ = 0 and Σ_a singular: C_i = M_i Σ_a M_i is singular at every sample; a MetricError (a DualidError, which
+    ``dualid fit`` records per method), not a bare linear-algebra exception."""
+    from dualid.errors import MetricError
+
+    problem, _ = eiv_problem(0, N=200)
+    with pytest.raises(MetricError, match="not positive definite"):
+        NoiseModelDM(sigma_tau=np.zeros((3, 3)), sigma_a=np.diag([1.0, 1.0, 0.0])).fit(problem)
+
+
 def test_without_velocities_the_acceleration_noise_has_no_shape_and_dm_says_so():
     problem, _ = eiv_problem(7, N=300, torque=0.05, regressor=0.0)
     res = NoiseModelDM().fit(replace(problem, v=np.zeros_like(problem.v)))  # e.g. logs of Y and τ only
@@ -368,9 +378,11 @@ def test_a_decisive_early_check_on_real_data_returns_wls_without_a_constrained_s
     """The DFKI pendubot (four logs, 4,000 samples): the check at Newton steps from the pilot rejects the noise model by
     3.5 standard errors, so ``dm`` returns WLS in the pilot's covariance after no interior-point solve at all (the
     Newton θ lies outside the consistency constraints: the result is not built from it)."""
+    import re
     from pathlib import Path
 
     import dualid
+    from dualid.estimators.noise_model import Z_DECISIVE
 
     data = Path(__file__).resolve().parents[1] / "examples" / "dfki" / "data"
     columns = {"time": "time", "joints": {
@@ -385,7 +397,8 @@ def test_a_decisive_early_check_on_real_data_returns_wls_without_a_constrained_s
     problem = dualid.build_problem(model, logs)
     res = NoiseModelDM(allow_unidentifiable=True).fit(problem)
     assert res.noise.choice.startswith("wls: the residual is not the modelled noise")
-    assert res.noise.rounds == 1 and res.iterations == 0 and res.noise.check_excess > 3 * 0.05
+    se = float(re.search(r"standard error ([0-9.e+-]+)\)", res.noise.choice).group(1))
+    assert res.noise.rounds == 1 and res.iterations == 0 and res.noise.check_excess > Z_DECISIVE * se
     wls = WLS(covariance=np.asarray(res.info["covariance_matrix"]), allow_unidentifiable=True).fit(
         problem.in_sensor_chart())
     assert rel(problem.Y @ res.theta, problem.Y @ wls.theta) < 1e-6

@@ -135,8 +135,8 @@ class NoiseModelDM:
             try:  # instead, unless the fit started there (the same solve would fail the same way)
                 if pilot == "dm-paper" and in_memory:
                     raise first
-                paper = self._inside(self._paper_optimum(sensor), cons)
-                theta, noise, run = self._rounds(sensor, sample, cons, paper, theta_pilot)
+                paper = self._inside(self._paper_optimum(sensor), cons)  # (the early check would repeat itself)
+                theta, noise, run = self._rounds(sensor, sample, cons, paper, theta_pilot, early=False)
                 run.update(start=f"dm-paper (the fit from the {pilot} pilot failed)", pilot=pilot)
             except SolverError as exc:  # no noise-model fit: the pilot's estimator, as when the check rejects it
                 return self._without_noise_model(problem, sensor, sample, cons, done, start, theta_pilot, pilot,
@@ -153,19 +153,19 @@ class NoiseModelDM:
             return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, None,
                                 f"no acceleration noise ({why}): WLS{note}", t0,
                                 extra={"covariance_matrix": np.asarray(noise.sigma_tau).tolist()})
-        f, choice = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk), "noise model"
-        check = run.pop("check", None) or self._check(sample, theta, noise)
-        guard, why = reference_guard(sensor, done(theta, {})[0], theta_pilot, f"pilot ({pilot})"), None
+        check, guard, why, choice = run.pop("check", None) or self._check(sample, theta, noise), {}, None, "noise model"
         if check is not None and check.rejected:
             why = (f"the residual is not the modelled noise (held-out loss {check.excess:.3g} of WLS's beyond the noise "
                    f"model's prediction, standard error {check.standard_error:.2g})")
-        elif guard.get("degenerate"):  # a ghost: a body made (nearly) massless or vastly heavier than the pilot's
-            why = (f"its fit is degenerate against its pilot (generalised eigenvalues of M(θ̂) against M(pilot) "
+        elif (guard := reference_guard(sensor, done(theta, {})[0], theta_pilot, f"pilot ({pilot})")).get("degenerate"):
+            why = (f"its fit is degenerate against its pilot (generalised eigenvalues of M(θ̂) against M(pilot) "  # a ghost
                    f"{guard.get('metric_ratio_min', np.nan):.2g}…{guard.get('metric_ratio_max', np.nan):.3g})")
         extra = {}
         if why:
             theta, f, status, choice, extra = self._pilots_estimator(sensor, cons, start, theta_pilot, pilot, why)
             run["status"] = status or run["status"]
+        else:
+            f = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk)
         return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, check, choice, t0,
                             None if why else guard, extra)
 
@@ -205,20 +205,25 @@ class NoiseModelDM:
             status = _status(info)
         except SolverError as exc:  # its steps from a start barely inside a block stalled (5 of the 10 xArm7 data sets
             # with 1 mrad of encoder noise; the general path then failed after 300 iterations): WLS's fit from its own start
-            fit = fit_weighted(sensor, S, "wls", {"constrained": self.constrained, "solver": "newton",
-                                                  "solver_options": {}, "allow_unidentifiable": True}, {})
+            if self.solver != "newton":  # the conic reference's own failure is its caller's to see
+                raise
+            fit = fit_weighted(sensor, S, "wls", {"constrained": self.constrained, "solver": "newton", "solver_options":
+                                                  {"tol": self.tol, "max_iter": self.max_iter, "chunk": self.chunk},
+                                                  "allow_unidentifiable": True}, {})
             theta, status = np.asarray(fit.theta), fit.status
             note += f"; fitted from WLS's own start (from dm's: {exc.status})"
+            note += f"; {fit.info['solver_fallback']}" if fit.info.get("solver_fallback") else ""
         f = noise_model_objective(sensor, theta, S, np.zeros_like(S), self.chunk)
         return theta, f, status, note, S
 
     def _inside(self, theta, cons):  # θ, or (constrained, θ not strictly inside cons) its central point: a start
         return central_point(theta, cons) if self.constrained and not cons.margin(theta) > 0 else theta
 
-    def _rounds(self, sensor, sample, cons, theta, theta_pilot, budget=None):
+    def _rounds(self, sensor, sample, cons, theta, theta_pilot, budget=None, early: bool = True):
         """The levels / θ alternations from θ (module doc, step 3): (θ, levels, {iterations, rounds, status: ``_status``
         of the last solve}); the levels from ``sample`` (the problem in memory, a subsample of streamed data);
-        ``budget``: the levels-only solves' iteration limit (None: max_iter)."""
+        ``budget``: the levels-only solves' iteration limit (None: max_iter). ``early``: first the check at Newton steps
+        from the pilot; when it rejects decisively, (θ as given, its levels, {…, check}) without a solve."""
         noise, run = None, {"iterations": 0, "rounds": 0, "status": "optimal"}
         fixed = self.sigma_tau is not None
         if fixed:
@@ -229,11 +234,10 @@ class NoiseModelDM:
                 if not noise.acceleration_share > 0:  # no acceleration noise: ``fit`` returns WLS
                     break
             last = fixed or k == ROUNDS - 1
-            if not last:  # the first round's check, at Newton steps from the pilot (before its constrained solve)
-                early = newton_refit(sample, theta_pilot, noise.sigma_tau, noise.sigma_a, self.chunk, CHECK_STEPS)
-                if (check := self._check(sample, early, noise)) is not None and check.decisive:
-                    run.update(check=check, rounds=1)  # clearly not the modelled noise already: ``fit`` falls back
-                    return theta, noise, run  # (the start: inside the constraints, where ``early`` need not be)
+            if early and not last and (check := self._early_check(sample, theta_pilot, noise)) is not None \
+                    and check.decisive:
+                run.update(check=check, rounds=1)  # clearly not the modelled noise already: ``fit`` falls back
+                return theta, noise, run  # (the start: inside the constraints, where the Newton θ need not be)
             theta, info = self._solve(sensor, cons, theta, noise, *((None, None) if last else (LEVELS_TOL, budget)))
             run.update(iterations=run["iterations"] + info["iterations"], rounds=run["rounds"] + 1, status=_status(info))
         return theta, noise, run
@@ -277,6 +281,14 @@ class NoiseModelDM:
         weights = NoiseLevels(torque_scale(sensor), np.zeros((sensor.n, sensor.n)), 1.0, 0.0, 0)
         return self._solve(sensor, cons, central_point(theta, cons) if self.constrained else theta, weights,
                            LEVELS_TOL)[0], "unit-free least squares"
+
+    def _early_check(self, sample, theta_pilot, noise) -> NoiseCheck | None:
+        """The check at CHECK_STEPS damped Newton steps of f from the pilot (unconstrained); None where they fail."""
+        try:
+            theta = newton_refit(sample, theta_pilot, noise.sigma_tau, noise.sigma_a, self.chunk, CHECK_STEPS)
+        except (NotPositiveDefinite, np.linalg.LinAlgError):
+            return None
+        return self._check(sample, theta, noise)
 
     def _check(self, sensor, theta, noise) -> NoiseCheck | None:
         r = sensor.residual(theta)

@@ -157,7 +157,10 @@ class NoiseLevels:
 def _shares(M, S, A) -> tuple[float, float]:
     n = S.shape[0]
     MAM = M @ A @ M
-    Ci = cholesky_inverse(cholesky_batch(noise_model_covariance(M, S, A)))
+    try:
+        Ci = cholesky_inverse(cholesky_batch(noise_model_covariance(M, S, A)))
+    except NotPositiveDefinite:  # given levels with Σ_τ singular where M_i Σ_a M_i is
+        raise MetricError("noise levels: Σ_τ + M_i Σ_a M_i is not positive definite at some sample") from None
     t = float(np.mean(np.einsum("cab,ba->c", Ci, S))) / n
     a = float(np.mean(np.einsum("cab,cba->c", Ci, MAM))) / n
     return t, a
@@ -265,8 +268,9 @@ def _scoring(r, a, owner, psi, weight, x) -> tuple[np.ndarray, float]:
 
 EXCESS_TOL = 0.01  # the noise model is rejected when dm's held-out loss exceeds its prediction by > 1 % of WLS's …
 Z_REJECT = 2.0  # … and by more than this many standard errors of that excess (a significant and a relevant excess)
-Z_DECISIVE = 3.0  # a rejection by this many: ``dm`` makes no second round (on 556 two-round fits none of its first
-# round's rejections beyond 3 standard errors was accepted after the second; one beyond 2.2 was)
+Z_DECISIVE = 3.0  # a rejection by this many, at Newton steps from the pilot: ``dm`` makes no constrained solve (on 556
+# two-round fits no first-round rejection beyond 3 standard errors was accepted after the second, one beyond 2.2 was;
+# on 934 fits every early rejection beyond 3 was one after the first round too)
 NEWTON_STEPS = 2  # damped Newton steps of each half's dm fit from the full-data fit
 BLOCKS = 20  # contiguous blocks of held-out samples for the standard error
 
