@@ -161,3 +161,27 @@ def test_streamed_regularized_fit_equals_the_in_memory_fit(data, key):
     a, b = est.fit(whole), est.fit(_chunked(data))
     assert a.status == b.status == "optimal"
     assert abs(b.objective - a.objective) <= 1e-8 * abs(a.objective)
+
+
+def test_streamed_dm_falls_back_to_the_whole_datas_paper_optimum(data, monkeypatch):
+    """A passive coordinate makes dm's pilot the paper's optimum; on streamed data the pilot, levels and check come
+    from a strided subsample. When dm falls back (its check forced to reject here), it returns the paper's optimum of
+    all the samples, as the in-memory fit does, not the subsample's."""
+    import dualid.estimators.noise_dm as noise_dm
+    from dualid.estimators.noise_model import NoiseCheck
+
+    model, (q, v, a, tau), whole = data
+    tau = tau.copy()
+    tau[:, 2] = 0.0  # a passive joint
+    passive = IdentificationProblem(whole.Y, tau, whole.metric, whole.v, whole.parameters,
+                                    coordinates=whole.coordinates)
+    chunked = ChunkedProblem(model, ArraySource(q, v, a, tau, chunk=128))
+    monkeypatch.setattr(noise_dm, "CHECK_SAMPLES", 200)  # the subsample: every fourth sample
+    monkeypatch.setattr(noise_dm.NoiseModelDM, "_check",
+                        lambda self, sensor, theta, noise: NoiseCheck(1.0, 0.01, 1.0, 0.0, True))
+    est = make_estimator("dm", allow_unidentifiable=True)
+    streamed, in_memory = est.fit(chunked), est.fit(passive)
+    paper = make_estimator("dm-paper", allow_unidentifiable=True).fit(passive)
+    assert streamed.noise.choice.startswith("dm-paper: the residual is not the modelled noise")
+    assert np.max(np.abs(passive.residual(streamed.theta) - passive.residual(paper.theta))) <= 1e-6 * np.abs(tau).max()
+    assert np.max(np.abs(passive.residual(in_memory.theta) - passive.residual(paper.theta))) <= 1e-6 * np.abs(tau).max()

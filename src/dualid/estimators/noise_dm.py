@@ -189,8 +189,9 @@ class NoiseModelDM:
     def _pilots_estimator(self, sensor, cons, start, theta_pilot, pilot, why):
         """dm's fallback, the pilot's estimator: the paper's constrained optimum where that is the pilot, else WLS in
         the pilot's residual covariance. (θ, f, status (None: the pilot's own), choice, extra info: WLS's weight)."""
-        if pilot == "dm-paper":
-            return theta_pilot, objective_value(sensor, theta_pilot, self.chunk), None, f"dm-paper: {why}", {}
+        if pilot == "dm-paper":  # streamed data: the pilot is the subsample's optimum, the fallback the whole data's
+            theta = theta_pilot if isinstance(sensor, IdentificationProblem) else self._paper_optimum(sensor)
+            return theta, objective_value(sensor, theta, self.chunk), None, f"dm-paper: {why}", {}
         theta, f, status, note, S = self._wls(sensor, cons, start, theta_pilot)
         return theta, f, status, f"wls: {why}{note}", {"covariance_matrix": S.tolist()}  # its weight (sensor chart)
 
