@@ -375,26 +375,22 @@ def test_linearly_dependent_torques_whiten_per_coordinate():
 
 
 def test_a_decisive_early_check_on_real_data_returns_wls_without_a_constrained_solve():
-    """The DFKI pendubot (four logs, 4,000 samples): the check at Newton steps from the pilot rejects the noise model by
-    3.5 standard errors, so ``dm`` returns WLS in the pilot's covariance after no interior-point solve at all (the
-    Newton θ lies outside the consistency constraints: the result is not built from it)."""
+    """The DFKI example's training data (examples/dfki/fit.yaml: four logs, 4,000 samples): the check at Newton steps
+    from the pilot rejects the noise model by 3.5 standard errors, so ``dm`` returns WLS in the pilot's covariance
+    after no interior-point solve at all."""
     import re
     from pathlib import Path
 
-    import dualid
     from dualid.estimators.noise_model import Z_DECISIVE
+    from dualid.problem import build_problem
+    from dualid.robot.config import FitConfig
+    from dualid.robot.fit import build_model, column_map, load_runs
 
-    data = Path(__file__).resolve().parents[1] / "examples" / "dfki" / "data"
-    columns = {"time": "time", "joints": {
-        "Joint1": {"position": "pos_meas1", "velocity": "vel_meas1", "effort": "tau_meas1"},
-        "Joint2": {"position": "pos_meas2", "velocity": "vel_meas2", "effort": "tau_meas2"}}}
-    steps = [{"resample": {"rate": 500}}, {"differentiate": {"method": "savgol", "window": 0.1, "velocity": True}},
-             {"filter_lowpass": {"cutoff": 10, "fields": ["tau"]}}, {"downsample": {"factor": 5}}]
-    rigid = dualid.RigidBodyModel.from_urdf(data / "pendubot_model_2.1.urdf")
-    model = dualid.with_joint_terms(rigid, viscous=True, coulomb=True, coulomb_velocity=0.01, armature=True)
-    logs = [dualid.preprocess(dualid.load_log(data / f"trajectory_0{k}.csv", columns, tuple(rigid.coordinates)), steps)
-            for k in range(4)]
-    problem = dualid.build_problem(model, logs)
+    config = FitConfig.from_yaml(Path(__file__).resolve().parents[1] / "examples" / "dfki" / "fit.yaml")
+    rigid, model = build_model(config)
+    joints = tuple(rigid.coordinates)
+    cmap = column_map(config.columns, joints, config.train[0])
+    problem = build_problem(model, load_runs(config.train, cmap, joints, config.preprocessing, rigid))
     res = NoiseModelDM(allow_unidentifiable=True).fit(problem)
     assert res.noise.choice.startswith("wls: the residual is not the modelled noise")
     se = float(re.search(r"standard error ([0-9.e+-]+)\)", res.noise.choice).group(1))
