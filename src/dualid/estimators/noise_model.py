@@ -157,8 +157,8 @@ class NoiseLevels:
 def _shares(M, S, A) -> tuple[float, float]:
     n = S.shape[0]
     MAM = M @ A @ M
-    try:
-        Ci = cholesky_inverse(cholesky_batch(noise_model_covariance(M, S, A)))
+    try:  # C_i = Σ_τ + M_i Σ_a M_i from MAM (the Cholesky factor reads its lower triangle)
+        Ci = cholesky_inverse(cholesky_batch(S + MAM))
     except NotPositiveDefinite:  # given levels with Σ_τ singular where M_i Σ_a M_i is
         raise MetricError("noise levels: Σ_τ + M_i Σ_a M_i is not positive definite at some sample") from None
     t = float(np.mean(np.einsum("cab,ba->c", Ci, S))) / n
