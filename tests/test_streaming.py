@@ -1,5 +1,7 @@
 """Chunked statistics and streamed fits: the same numbers as the materialised problem."""
 
+from dataclasses import replace
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -173,8 +175,7 @@ def test_streamed_dm_falls_back_to_the_whole_datas_paper_optimum(data, monkeypat
     model, (q, v, a, tau), whole = data
     tau = tau.copy()
     tau[:, 2] = 0.0  # a passive joint
-    passive = IdentificationProblem(whole.Y, tau, whole.metric, whole.v, whole.parameters,
-                                    coordinates=whole.coordinates)
+    passive = replace(whole, tau=tau)
     chunked = ChunkedProblem(model, ArraySource(q, v, a, tau, chunk=128))
     monkeypatch.setattr(noise_dm, "CHECK_SAMPLES", 200)  # the subsample: every fourth sample
     monkeypatch.setattr(noise_dm.NoiseModelDM, "_check",
