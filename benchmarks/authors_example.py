@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import shlex
 import subprocess
 import sys
 import time
@@ -184,7 +185,7 @@ def main(argv=None) -> int:
             rows += run_seed(seed, case, methods, sizes)
             print(f"[{time.time() - t0:5.0f} s] {case} seed {seed}: " + ", ".join(
                 f"{r['method']}@{r['N']} {fmt(r.get('geodesic'))}" for r in rows[-len(methods) * len(sizes):]), flush=True)
-    cmd = "python benchmarks/authors_example.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    cmd = "python benchmarks/authors_example.py " + shlex.join(sys.argv[1:] if argv is None else argv)
     result = {"command": cmd, "methods": methods, "seeds": seeds, "cases": args.cases,
               "truth": authors_arm.true_parameters(), "wall_time_s": time.time() - t0, "provenance": provenance(),
               "summary": summarise(rows, methods), "rows": rows}

@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -348,7 +349,7 @@ def main(argv=None) -> int:
                 done = rows[-len(methods):]
                 print(f"[{time.time() - t0:5.0f} s] {case} {robot} seed {seed}: " + ", ".join(
                     f"{r['method']} {fmt(r.get('floor_ratio'))} ({r['cpu_s']:.1f} s)" for r in done), flush=True)
-    cmd = "python benchmarks/noise_sources.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    cmd = "python benchmarks/noise_sources.py " + shlex.join(sys.argv[1:] if argv is None else argv)
     result = {"command": cmd, "methods": methods, "robots": robots, "seeds": seeds, "cases": cases,
               "config": {"fs_hz": FS, "train_s": train_s, "test_s": TEST_S, "savgol_window_s": WINDOW,
                          "encoder_bits": BITS, "floor_noise": FLOOR_NOISE, "cases": {c: CASES[c] for c in cases}},
