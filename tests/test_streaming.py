@@ -186,3 +186,33 @@ def test_streamed_dm_falls_back_to_the_whole_datas_paper_optimum(data, monkeypat
     assert streamed.noise.choice.startswith("dm-paper: the residual is not the modelled noise")
     assert np.max(np.abs(passive.residual(streamed.theta) - passive.residual(paper.theta))) <= 1e-6 * np.abs(tau).max()
     assert np.max(np.abs(passive.residual(in_memory.theta) - passive.residual(paper.theta))) <= 1e-6 * np.abs(tau).max()
+
+
+def test_large_in_memory_dm_takes_its_levels_and_first_round_from_the_streamed_subsample(data, monkeypatch):
+    """Above 4 × CHECK_SAMPLES samples in memory, dm's pilot, noise levels, check and first round come from the same
+    strided subsample as on streamed data (the last round from every sample): the two fits are the same."""
+    import dualid.estimators.noise_dm as noise_dm
+
+    model, (q, v, a, tau), _ = data
+    rng = np.random.default_rng(5)
+    a_measured = a + 0.3 * rng.normal(size=a.shape)  # acceleration noise inside the regressor: dm keeps its model
+    noisy = IdentificationProblem(model.regressor(q, v, a_measured), tau, model.metric(q), v, model.parameters,
+                                  coordinates=model.coordinates)
+    monkeypatch.setattr(noise_dm, "CHECK_SAMPLES", 100)  # every seventh of the 700 samples
+    solves, solve = [], noise_dm.NoiseModelDM._solve
+
+    def recorded(self, problem, cons, theta, noise, *args, **kwargs):  # the samples each noise-model solve sees
+        if np.any(noise.sigma_a):
+            solves.append(problem.N)
+        return solve(self, problem, cons, theta, noise, *args, **kwargs)
+
+    monkeypatch.setattr(noise_dm.NoiseModelDM, "_solve", recorded)
+    est = make_estimator("dm", allow_unidentifiable=True)
+    in_memory = est.fit(noisy)
+    assert solves == [100, 700]  # the first round's θ only feeds the levels: from the subsample
+    streamed = est.fit(ChunkedProblem(model, ArraySource(q, v, a_measured, tau, chunk=128)))
+    assert in_memory.noise.choice == streamed.noise.choice == "noise model"
+    assert np.allclose(in_memory.noise.sigma_a, streamed.noise.sigma_a, rtol=1e-10, atol=0)
+    assert abs(in_memory.objective - streamed.objective) <= 1e-9 * abs(streamed.objective)
+    assert np.max(np.abs(noisy.residual(in_memory.theta) - noisy.residual(streamed.theta))) <= 1e-7 * np.abs(tau).max()
+
