@@ -216,3 +216,32 @@ def test_large_in_memory_dm_takes_its_levels_and_first_round_from_the_streamed_s
     assert abs(in_memory.objective - streamed.objective) <= 1e-9 * abs(streamed.objective)
     assert np.max(np.abs(noisy.residual(in_memory.theta) - noisy.residual(streamed.theta))) <= 1e-7 * np.abs(tau).max()
 
+
+def test_streamed_dm_whose_rounds_fail_fits_the_whole_datas_paper_optimum_once(data, monkeypatch):
+    """A passive coordinate on streamed data: when the noise-model rounds fail from the pilot and again from the paper's
+    optimum of all samples, dm falls back to that optimum, fitted once (each is a streamed ``dm-paper`` fit)."""
+    import dualid.estimators.noise_dm as noise_dm
+    from dualid.errors import SolverError
+
+    model, (q, v, a, tau), whole = data
+    tau = tau.copy()
+    tau[:, 2] = 0.0  # a passive joint: the pilot is the paper's optimum of the subsample
+    passive = replace(whole, tau=tau)
+    monkeypatch.setattr(noise_dm, "CHECK_SAMPLES", 200)
+    fits, paper_optimum = [], noise_dm.NoiseModelDM._paper_optimum
+
+    def counted(self, problem):
+        fits.append(problem.N)
+        return paper_optimum(self, problem)
+
+    def failing(self, *args, **kwargs):
+        raise SolverError("no convergence", status="max_iterations")
+
+    monkeypatch.setattr(noise_dm.NoiseModelDM, "_paper_optimum", counted)
+    monkeypatch.setattr(noise_dm.NoiseModelDM, "_rounds", failing)
+    result = make_estimator("dm", allow_unidentifiable=True).fit(
+        ChunkedProblem(model, ArraySource(q, v, a, tau, chunk=128)))
+    paper = make_estimator("dm-paper", allow_unidentifiable=True).fit(passive)
+    assert fits == [175, 700]  # the subsample's pilot, then every sample's optimum: not fitted again for the fallback
+    assert result.noise.choice.startswith("dm-paper: its noise-model fit did not converge (max_iterations)")
+    assert np.max(np.abs(passive.residual(result.theta) - passive.residual(paper.theta))) <= 1e-6 * np.abs(tau).max()

@@ -139,15 +139,17 @@ class NoiseModelDM:
             theta, noise, run = self._rounds(sensor, sample, cons, start, theta_pilot, budget)
             run.update(start=pilot, pilot=pilot)
         except SolverError as first:  # unseen parameters drifting outward, or over the budget: from the paper's optimum
+            paper = None  # … of every sample, kept for the fallback
             try:  # instead, unless the fit started there (the same solve would fail the same way)
                 if pilot == "dm-paper" and whole:
                     raise first
-                paper = self._inside(self._paper_optimum(sensor), cons)  # (the early check would repeat itself)
-                theta, noise, run = self._rounds(sensor, sample, cons, paper, theta_pilot, early=False)
+                paper = self._paper_optimum(sensor)  # (the early check would repeat itself)
+                theta, noise, run = self._rounds(sensor, sample, cons, self._inside(paper, cons), theta_pilot,
+                                                 early=False)
                 run.update(start=f"dm-paper (the fit from the {pilot} pilot failed)", pilot=pilot)
             except SolverError as exc:  # no noise-model fit: the pilot's estimator, as when the check rejects it
                 return self._without_noise_model(problem, sensor, sample, cons, done, start, theta_pilot, pilot,
-                                                 f"its noise-model fit did not converge ({exc.status})", t0)
+                                                 f"its noise-model fit did not converge ({exc.status})", t0, paper)
         if not noise.acceleration_share > 0:  # torque noise alone: WLS (the given Σ_τ, or the pilot's residuals')
             why = ("given" if self.sigma_tau is not None else f"2 log-likelihood ratio {noise.likelihood_ratio:.3g}"
                    if np.isfinite(noise.likelihood_ratio) else "the velocities are 0: Σ_a has no shape")
@@ -183,21 +185,23 @@ class NoiseModelDM:
                                 sample.parameters.names, enabled=self.constrained)
         return cons, done, (R, r)
 
-    def _without_noise_model(self, problem, sensor, sample, cons, done, start, theta_pilot, pilot, why, t0):
-        """The pilot's estimator when no noise-model fit exists: the paper's optimum where it is the pilot, else WLS in
-        the pilot's residual covariance; the result records the levels at the pilot and why."""
+    def _without_noise_model(self, problem, sensor, sample, cons, done, start, theta_pilot, pilot, why, t0, paper):
+        """The pilot's estimator when no noise-model fit exists: the paper's optimum where it is the pilot (``paper``:
+        that of every sample, if made), else WLS in the pilot's residual covariance; the result records the levels at
+        the pilot and why."""
         run = {"iterations": 0, "rounds": 0, "status": "optimal", "start": pilot, "pilot": pilot}
         noise = (estimate_noise(sample, theta_pilot) if self.sigma_tau is None else
                  given_levels(sample, theta_pilot, np.asarray(self.sigma_tau), np.asarray(self.sigma_a)))
-        theta, f, status, choice, extra = self._pilots_estimator(sensor, sample, cons, start, theta_pilot, pilot, why)
+        theta, f, status, choice, extra = self._pilots_estimator(sensor, sample, cons, start, theta_pilot, pilot, why,
+                                                                 paper)
         run["status"] = status or run["status"]
         return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, None, choice, t0, extra=extra)
 
-    def _pilots_estimator(self, sensor, sample, cons, start, theta_pilot, pilot, why):
+    def _pilots_estimator(self, sensor, sample, cons, start, theta_pilot, pilot, why, paper=None):
         """dm's fallback, the pilot's estimator: the paper's constrained optimum where that is the pilot, else WLS in
         the pilot's residual covariance. (θ, f, status (None: the pilot's own), choice, extra info: WLS's weight)."""
         if pilot == "dm-paper":  # a pilot from a subsample (``fit``) is the subsample's optimum, the fallback the whole data's
-            theta = theta_pilot if sample is sensor else self._paper_optimum(sensor)
+            theta = theta_pilot if sample is sensor else self._paper_optimum(sensor) if paper is None else paper
             return theta, objective_value(sensor, theta, self.chunk), None, f"dm-paper: {why}", {}
         theta, f, status, note, S = self._wls(sensor, cons, start, theta_pilot)
         return theta, f, status, f"wls: {why}{note}", {"covariance_matrix": S.tolist()}  # its weight (sensor chart)
