@@ -165,10 +165,11 @@ def test_streamed_regularized_fit_equals_the_in_memory_fit(data, key):
     assert abs(b.objective - a.objective) <= 1e-8 * abs(a.objective)
 
 
-def test_streamed_dm_falls_back_to_the_whole_datas_paper_optimum(data, monkeypatch):
-    """A passive coordinate makes dm's pilot the paper's optimum; on streamed data the pilot, levels and check come
-    from a strided subsample. When dm falls back (its check forced to reject here), it returns the paper's optimum of
-    all the samples, as the in-memory fit does, not the subsample's."""
+@pytest.mark.parametrize("check_samples", [200, 100])  # 700 samples in memory: all of them; a subsample of 100
+def test_streamed_dm_falls_back_to_the_whole_datas_paper_optimum(data, monkeypatch, check_samples):
+    """A passive coordinate makes dm's pilot the paper's optimum; on streamed data (and in memory above 4 ×
+    CHECK_SAMPLES) the pilot, levels and check come from a strided subsample. When dm falls back (its check forced to
+    reject here), it returns the paper's optimum of all the samples, not the subsample's."""
     import dualid.estimators.noise_dm as noise_dm
     from dualid.estimators.noise_model import NoiseCheck
 
@@ -177,15 +178,15 @@ def test_streamed_dm_falls_back_to_the_whole_datas_paper_optimum(data, monkeypat
     tau[:, 2] = 0.0  # a passive joint
     passive = replace(whole, tau=tau)
     chunked = ChunkedProblem(model, ArraySource(q, v, a, tau, chunk=128))
-    monkeypatch.setattr(noise_dm, "CHECK_SAMPLES", 200)  # the subsample: every fourth sample
+    monkeypatch.setattr(noise_dm, "CHECK_SAMPLES", check_samples)
     monkeypatch.setattr(noise_dm.NoiseModelDM, "_check",
                         lambda self, sensor, theta, noise: NoiseCheck(1.0, 0.01, 1.0, 0.0, True))
     est = make_estimator("dm", allow_unidentifiable=True)
     streamed, in_memory = est.fit(chunked), est.fit(passive)
     paper = make_estimator("dm-paper", allow_unidentifiable=True).fit(passive)
-    assert streamed.noise.choice.startswith("dm-paper: the residual is not the modelled noise")
-    assert np.max(np.abs(passive.residual(streamed.theta) - passive.residual(paper.theta))) <= 1e-6 * np.abs(tau).max()
-    assert np.max(np.abs(passive.residual(in_memory.theta) - passive.residual(paper.theta))) <= 1e-6 * np.abs(tau).max()
+    for fit in (streamed, in_memory):
+        assert fit.noise.choice.startswith("dm-paper: the residual is not the modelled noise")
+        assert np.max(np.abs(passive.residual(fit.theta) - passive.residual(paper.theta))) <= 1e-6 * np.abs(tau).max()
 
 
 def test_large_in_memory_dm_takes_its_levels_and_first_round_from_the_streamed_subsample(data, monkeypatch):
@@ -210,38 +211,50 @@ def test_large_in_memory_dm_takes_its_levels_and_first_round_from_the_streamed_s
     est = make_estimator("dm", allow_unidentifiable=True)
     in_memory = est.fit(noisy)
     assert solves == [100, 700]  # the first round's θ only feeds the levels: from the subsample
+    solves.clear()
     streamed = est.fit(ChunkedProblem(model, ArraySource(q, v, a_measured, tau, chunk=128)))
+    assert solves == [100, 700]
     assert in_memory.noise.choice == streamed.noise.choice == "noise model"
     assert np.allclose(in_memory.noise.sigma_a, streamed.noise.sigma_a, rtol=1e-10, atol=0)
     assert abs(in_memory.objective - streamed.objective) <= 1e-9 * abs(streamed.objective)
     assert np.max(np.abs(noisy.residual(in_memory.theta) - noisy.residual(streamed.theta))) <= 1e-7 * np.abs(tau).max()
 
 
-def test_streamed_dm_whose_rounds_fail_fits_the_whole_datas_paper_optimum_once(data, monkeypatch):
-    """A passive coordinate on streamed data: when the noise-model rounds fail from the pilot and again from the paper's
-    optimum of all samples, dm falls back to that optimum, fitted once (each is a streamed ``dm-paper`` fit)."""
+@pytest.mark.parametrize("retry", ["fails", "is rejected"])
+def test_streamed_dm_fits_the_whole_datas_paper_optimum_once(data, monkeypatch, retry):
+    """A passive coordinate on streamed data: when the noise-model rounds fail from the pilot, dm starts again from the
+    paper's optimum of all samples; when that fails too, or its fit is rejected by the check, dm falls back to that
+    optimum, fitted once (each is a streamed ``dm-paper`` fit)."""
     import dualid.estimators.noise_dm as noise_dm
     from dualid.errors import SolverError
+    from dualid.estimators.noise_model import NoiseCheck
 
     model, (q, v, a, tau), whole = data
     tau = tau.copy()
     tau[:, 2] = 0.0  # a passive joint: the pilot is the paper's optimum of the subsample
     passive = replace(whole, tau=tau)
     monkeypatch.setattr(noise_dm, "CHECK_SAMPLES", 200)
-    fits, paper_optimum = [], noise_dm.NoiseModelDM._paper_optimum
+    fits, rounds, paper_optimum, own_rounds = [], [], noise_dm.NoiseModelDM._paper_optimum, noise_dm.NoiseModelDM._rounds
 
     def counted(self, problem):
         fits.append(problem.N)
         return paper_optimum(self, problem)
 
-    def failing(self, *args, **kwargs):
-        raise SolverError("no convergence", status="max_iterations")
+    def failing(self, *args, **kwargs):  # the first call (from the pilot) fails; the retry as ``retry`` says
+        rounds.append(1)
+        if len(rounds) == 1 or retry == "fails":
+            raise SolverError("no convergence", status="max_iterations")
+        return own_rounds(self, *args, **kwargs)
 
     monkeypatch.setattr(noise_dm.NoiseModelDM, "_paper_optimum", counted)
     monkeypatch.setattr(noise_dm.NoiseModelDM, "_rounds", failing)
+    monkeypatch.setattr(noise_dm.NoiseModelDM, "_check",
+                        lambda self, sensor, theta, noise: NoiseCheck(1.0, 0.01, 1.0, 0.0, True))
     result = make_estimator("dm", allow_unidentifiable=True).fit(
         ChunkedProblem(model, ArraySource(q, v, a, tau, chunk=128)))
     paper = make_estimator("dm-paper", allow_unidentifiable=True).fit(passive)
     assert fits == [175, 700]  # the subsample's pilot, then every sample's optimum: not fitted again for the fallback
-    assert result.noise.choice.startswith("dm-paper: its noise-model fit did not converge (max_iterations)")
+    why = "its noise-model fit did not converge (max_iterations)" if retry == "fails" else \
+        "the residual is not the modelled noise"
+    assert result.noise.choice.startswith(f"dm-paper: {why}")
     assert np.max(np.abs(passive.residual(result.theta) - passive.residual(paper.theta))) <= 1e-6 * np.abs(tau).max()

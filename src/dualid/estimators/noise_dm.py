@@ -26,10 +26,11 @@ the same fit; the noise levels are covariant per coordinate, so a coordinate or 
    pilot is the paper's optimum, that optimum;
 5. the result records the noise levels (sensor chart), their residual shares and the rounds in ``result.noise``.
 
-On streamed data, and in memory above 4 × CHECK_SAMPLES samples, steps 1–2, the check and the first round (whose θ only
-feeds the levels: a few numbers, which 20,000 samples determine) use an evenly strided subsample of CHECK_SAMPLES; the
-last round and the fallback use every sample. So both give the same fit, and a large fit pays one round's
-interior point over all samples instead of two.
+On streamed data, and in memory above 4 × CHECK_SAMPLES samples, steps 1–2 (the closure over unseen parameters
+included), the check and the first round (whose θ only feeds the levels: a few numbers, which 20,000 samples
+determine) use an evenly strided subsample of CHECK_SAMPLES; the last round and the fallback use every sample. So
+above 4 × CHECK_SAMPLES (and up to CHECK_SAMPLES) a problem in memory and the same one streamed give the same fit, and
+a large fit pays one round's interior point over all samples instead of two.
 
 solver="cvxpy" makes step 3's θ-solves by majorize–minimize instead, each step one conic problem (a batched SDP):
 the reference the interior point is checked against (``noise_cvxpy.solve_noise_model_cvxpy``; tests/test_dm_cvxpy.py).
@@ -133,13 +134,12 @@ class NoiseModelDM:
         sample = sensor if whole else sensor.subset(strided_rows(sensor.N, CHECK_SAMPLES))
         cons, done, (R, r) = self.closed_set(sample)
         theta_pilot, pilot = self._pilot(sample, cons, R, r)
-        start = self._inside(theta_pilot, cons)
+        start, paper = self._inside(theta_pilot, cons), None  # paper: the paper's optimum of every sample, once made
         try:
             budget = None if pilot == "dm-paper" else LEVELS_MAX_ITER
             theta, noise, run = self._rounds(sensor, sample, cons, start, theta_pilot, budget)
             run.update(start=pilot, pilot=pilot)
         except SolverError as first:  # unseen parameters drifting outward, or over the budget: from the paper's optimum
-            paper = None  # … of every sample, kept for the fallback
             try:  # instead, unless the fit started there (the same solve would fail the same way)
                 if pilot == "dm-paper" and whole:
                     raise first
@@ -171,7 +171,8 @@ class NoiseModelDM:
                    f"{guard.get('metric_ratio_min', np.nan):.2g}…{guard.get('metric_ratio_max', np.nan):.3g})")
         extra = {}
         if why:
-            theta, f, status, choice, extra = self._pilots_estimator(sensor, sample, cons, start, theta_pilot, pilot, why)
+            theta, f, status, choice, extra = self._pilots_estimator(sensor, sample, cons, start, theta_pilot, pilot, why,
+                                                                     paper)
             run["status"] = status or run["status"]
         else:
             f = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk)
