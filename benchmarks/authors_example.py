@@ -129,10 +129,16 @@ def to_markdown(result: dict) -> str:
 
 
 def provenance() -> dict:
+    """dualid's source directory and commit ("+ uncommitted changes" when its sources differ from that commit's)."""
     src = Path(dualid.__file__).resolve().parent
+
+    def git(*args):
+        return subprocess.run(["git", "-C", str(src), *args], capture_output=True, text=True, check=False).stdout.strip()
+
     try:
-        commit = subprocess.run(["git", "-C", str(src), "rev-parse", "HEAD"], capture_output=True, text=True,
-                                check=False).stdout.strip()
+        commit = git("rev-parse", "HEAD")
+        if commit and git("status", "--porcelain", "--", "."):
+            commit += " + uncommitted changes"
     except OSError:
         commit = ""
     return {"dualid": str(src), "commit": commit or "unknown", "python": platform.python_version(), "machine": machine()}
@@ -145,7 +151,7 @@ def header(result: dict) -> str:
     if "machine" in prov:
         m = prov["machine"]
         where = f", {m['cpu']}, {m['cores']} cores, load average {m['load_average_at_start'][0]:.1f} at start"
-    return f"Command: `{result['command']}` (dualid {prov['commit'][:10]} from `{prov['dualid']}`{where})."
+    return f"Command: `{result['command']}` (dualid {prov['commit'][:10] + prov['commit'][40:]} from `{prov['dualid']}`{where})."
 
 
 def output_paths(out: str, force: bool, parser) -> tuple[Path, Path]:
