@@ -75,8 +75,8 @@ LEVELS_TOL = 1e-6  # gap of the solves whose θ only feeds the levels (pilot, fi
 SINGULAR_TORQUES = 1e-10  # mean ττᵀ as a correlation matrix with an eigenvalue below this: singular (``torque_scale``)
 CHECK_STEPS = 4  # damped Newton steps from the pilot give the first round's check its θ (DFKI: 2e-6 from the
 # constrained solve's in predictions, the same check to 4 digits); a decisive rejection there skips that solve
-LEVELS_MAX_ITER = 100  # first round's budget from a least-squares pilot, then from the paper's optimum: such solves
-# converged in 9–40 iterations or not in 300 (11 of 12 xArm7 noise-benchmark fits, 7 s each; statistical benchmark ≤ 32)
+LEVELS_MAX_ITER = 60  # first round's budget from a least-squares pilot, then from the paper's optimum: on the noise
+# benchmark such solves converged in 15–50 iterations (46) or not in 300 (14, all xArm7); statistical benchmark ≤ 32
 
 
 def torque_scale(problem) -> np.ndarray:
