@@ -27,7 +27,6 @@ import argparse
 import os
 import platform
 import shlex
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -44,6 +43,7 @@ from dualid.errors import DualidError  # noqa: E402
 from dualid.estimators.methods import make_estimator  # noqa: E402
 from dualid.evaluation.parameter_error import geodesic_distance  # noqa: E402
 from dualid.report.io import markdown_table, write_json  # noqa: E402
+from dualid.report.metadata import git_commit  # noqa: E402
 
 CASES = {"both": (True, True), "torque": (True, False), "encoder": (False, True)}
 SEEDS = (42, 0, 1, 2, 3)
@@ -129,19 +129,10 @@ def to_markdown(result: dict) -> str:
 
 
 def provenance() -> dict:
-    """dualid's source directory and commit ("+ uncommitted changes" when its sources differ from that commit's)."""
+    """dualid's source directory and commit (``report.metadata.git_commit``: "-dirty" with uncommitted changes)."""
     src = Path(dualid.__file__).resolve().parent
-
-    def git(*args):
-        return subprocess.run(["git", "-C", str(src), *args], capture_output=True, text=True, check=False).stdout.strip()
-
-    try:
-        commit = git("rev-parse", "HEAD")
-        if commit and git("status", "--porcelain", "--", "."):
-            commit += " + uncommitted changes"
-    except OSError:
-        commit = ""
-    return {"dualid": str(src), "commit": commit or "unknown", "python": platform.python_version(), "machine": machine()}
+    return {"dualid": str(src), "commit": git_commit(src) or "unknown", "python": platform.python_version(),
+            "machine": machine()}
 
 
 def header(result: dict) -> str:
