@@ -9,28 +9,27 @@ torque noise; this objective is consistent under both when the noise levels are 
 
 The fit, in the problem's sensor chart (so every chart the problem records, configuration-dependent ones too, gives
 the same fit; the noise levels are covariant per coordinate, so a coordinate or the forces in other units by hand too):
-1. pilot: least squares in the weight (mean τ_i τ_iᵀ)⁻¹ (unconstrained; constrained where M(θ) is not positive
-   definite);
-   with a passive coordinate (τ_j ≡ 0), the paper's dual-metric optimum;
-2. the noise levels from its residuals (``noise_model.estimate_noise``: Σ_τ per joint, Σ_a = σ_a² diag(mean v²): the
-   sensors are independent). When the likelihood does not support acceleration noise, ``dm`` is WLS in the pilot's
-   residual covariance (step 4's fallback: one quadratic fit from its sufficient statistics, same constraints);
+1. two pilots, least squares unconstrained (constrained where M(θ) is not positive definite): on each coordinate's
+   own force scale (the start, the levels, the check's and the guard's reference), and whitened by mean τ_i τ_iᵀ (its
+   residual covariance is the fallback's weight: the same in every constant linear chart); with a passive coordinate
+   (τ_j ≡ 0), both the paper's dual-metric optimum;
+2. the noise levels from the pilot's residuals (``noise_model.estimate_noise``: Σ_τ per joint, Σ_a = σ_a² diag(mean
+   v²): the sensors are independent); where the likelihood does not support acceleration noise, step 4's fallback;
 3. ROUNDS times: θ by dualid's primal–dual interior point on f (gradient and Hessian of ``noise_model``) under the
    physical-consistency constraints, from the pilot moved strictly inside them, then from the last θ with the levels
    re-estimated at it; before the first, step 4's check at CHECK_STEPS damped Newton steps from the pilot (none of
    the rounds when it rejects by Z_DECISIVE standard errors: the fallback does not depend on them); a solve whose θ
    only feeds the levels (the pilot's, the first round's) stops at LEVELS_TOL;
 4. the held-out check (``noise_model.check_noise_model``) and the metric guard against the pilot: when the residual
-   is not the modelled noise, or the fit is degenerate (a ghost), ``dm`` returns WLS in the pilot's residual
-   covariance (full: correlated residuals, which model error makes, are weighed as WLS weighs them), or, where the
-   pilot is the paper's optimum, that optimum;
+   is not the modelled noise, or the fit is degenerate (a ghost), ``dm`` returns WLS in the whitened pilot's residual
+   covariance (full: correlated residuals, which model error makes, are weighed as WLS weighs them; one quadratic fit
+   from its sufficient statistics, same constraints), or, where the pilot is the paper's optimum, that optimum;
 5. the result records the noise levels (sensor chart), their residual shares and the rounds in ``result.noise``.
 
-On streamed data, and in memory above 4 × CHECK_SAMPLES samples, steps 1–2 (the closure over unseen parameters
-included), the check and the first round (whose θ only feeds the levels: a few numbers, which 20,000 samples
-determine) use an evenly strided subsample of CHECK_SAMPLES; the last round and the fallback use every sample. So
-above 4 × CHECK_SAMPLES (and up to CHECK_SAMPLES) a problem in memory and the same one streamed give the same fit, and
-a large fit pays one round's interior point over all samples instead of two.
+On streamed data, and in memory above 4 × CHECK_SAMPLES samples, steps 1–2 (the closure included), the check and the
+first round (whose θ only feeds the levels: a few numbers) use an evenly strided subsample of CHECK_SAMPLES; the last
+round and the fallback use every sample. So there (and up to CHECK_SAMPLES) a problem in memory and the same one
+streamed give the same fit, and a large fit pays one round's interior point over all samples instead of two.
 
 solver="cvxpy" makes step 3's θ-solves by majorize–minimize instead, each step one conic problem (a batched SDP):
 the reference the interior point is checked against (``noise_cvxpy.solve_noise_model_cvxpy``; tests/test_dm_cvxpy.py).
@@ -133,7 +132,7 @@ class NoiseModelDM:
         whole = isinstance(sensor, IdentificationProblem) and sensor.N <= 4 * CHECK_SAMPLES
         sample = sensor if whole else sensor.subset(strided_rows(sensor.N, CHECK_SAMPLES))
         cons, done, (R, r) = self.closed_set(sample)
-        theta_pilot, pilot = self._pilot(sample, cons, R, r)
+        theta_pilot, pilot, weighing = self._pilot(sample, cons, R, r)
         start, paper = self._inside(theta_pilot, cons), None  # paper: the paper's optimum of every sample, once made
         try:
             budget = None if pilot == "dm-paper" else LEVELS_MAX_ITER
@@ -148,14 +147,15 @@ class NoiseModelDM:
                                                  early=False)
                 run.update(start=f"dm-paper (the fit from the {pilot} pilot failed)", pilot=pilot)
             except SolverError as exc:  # no noise-model fit: the pilot's estimator, as when the check rejects it
-                return self._without_noise_model(problem, sensor, sample, cons, done, start, theta_pilot, pilot,
-                                                 f"its noise-model fit did not converge ({exc.status})", t0, paper)
+                return self._without_noise_model(problem, sensor, sample, cons, done, start, (theta_pilot, weighing),
+                                                 pilot, f"its noise-model fit did not converge ({exc.status})", t0,
+                                                 paper)
         if not noise.acceleration_share > 0:  # torque noise alone: WLS (the given Σ_τ, or the pilot's residuals')
             why = ("given" if self.sigma_tau is not None else f"2 log-likelihood ratio {noise.likelihood_ratio:.3g}"
                    if np.isfinite(noise.likelihood_ratio) else "the velocities are 0: Σ_a has no shape")
             note = ""
             if self.sigma_tau is None:  # recorded: the covariance the fit used
-                theta, f, run["status"], note, S = self._wls(sensor, cons, start, theta_pilot)
+                theta, f, run["status"], note, S = self._wls(sensor, cons, start, weighing)
                 noise = replace(noise, sigma_tau=S)
             else:
                 f = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk)
@@ -171,8 +171,8 @@ class NoiseModelDM:
                    f"{guard.get('metric_ratio_min', np.nan):.2g}…{guard.get('metric_ratio_max', np.nan):.3g})")
         extra = {}
         if why:
-            theta, f, status, choice, extra = self._pilots_estimator(sensor, sample, cons, start, theta_pilot, pilot, why,
-                                                                     paper)
+            theta, f, status, choice, extra = self._pilots_estimator(sensor, sample, cons, start,
+                                                                     (theta_pilot, weighing), pilot, why, paper)
             run["status"] = status or run["status"]
         else:
             f = noise_model_objective(sensor, theta, noise.sigma_tau, noise.sigma_a, self.chunk)
@@ -186,32 +186,30 @@ class NoiseModelDM:
                                 sample.parameters.names, enabled=self.constrained)
         return cons, done, (R, r)
 
-    def _without_noise_model(self, problem, sensor, sample, cons, done, start, theta_pilot, pilot, why, t0, paper):
-        """The pilot's estimator when no noise-model fit exists: the paper's optimum where it is the pilot (``paper``:
-        that of every sample, if made), else WLS in the pilot's residual covariance; the result records the levels at
-        the pilot and why."""
-        run = {"iterations": 0, "rounds": 0, "status": "optimal", "start": pilot, "pilot": pilot}
+    def _without_noise_model(self, problem, sensor, sample, cons, done, start, pilots, pilot, why, t0, paper):
+        """``_pilots_estimator`` when no noise-model fit exists (``paper``: the paper's optimum of every sample, if made);
+        the result records the levels at the pilot and why."""
+        theta_pilot, run = pilots[0], {"iterations": 0, "rounds": 0, "status": "optimal", "start": pilot, "pilot": pilot}
         noise = (estimate_noise(sample, theta_pilot) if self.sigma_tau is None else
                  given_levels(sample, theta_pilot, np.asarray(self.sigma_tau), np.asarray(self.sigma_a)))
-        theta, f, status, choice, extra = self._pilots_estimator(sensor, sample, cons, start, theta_pilot, pilot, why,
-                                                                 paper)
+        theta, f, status, choice, extra = self._pilots_estimator(sensor, sample, cons, start, pilots, pilot, why, paper)
         run["status"] = status or run["status"]
         return self._result(problem, sensor, done, theta, f, noise, run, theta_pilot, None, choice, t0, extra=extra)
 
-    def _pilots_estimator(self, sensor, sample, cons, start, theta_pilot, pilot, why, paper=None):
-        """dm's fallback, the pilot's estimator: the paper's constrained optimum where that is the pilot, else WLS in
-        the pilot's residual covariance. (θ, f, status (None: the pilot's own), choice, extra info: WLS's weight)."""
+    def _pilots_estimator(self, sensor, sample, cons, start, pilots, pilot, why, paper=None):
+        """dm's fallback: the paper's optimum where that is the pilot, else WLS in the whitened pilot's residual covariance
+        (``pilots``: the pilot's θ, the whitened pilot's). (θ, f, status (None: the pilot's), choice, extra: its weight)."""
+        theta_pilot, weighing = pilots
         if pilot == "dm-paper":  # a pilot from a subsample (``fit``) is the subsample's optimum, the fallback the whole data's
             theta = theta_pilot if sample is sensor else self._paper_optimum(sensor) if paper is None else paper
             return theta, objective_value(sensor, theta, self.chunk), None, f"dm-paper: {why}", {}
-        theta, f, status, note, S = self._wls(sensor, cons, start, theta_pilot)
+        theta, f, status, note, S = self._wls(sensor, cons, start, weighing)
         return theta, f, status, f"wls: {why}{note}", {"covariance_matrix": S.tolist()}  # its weight (sensor chart)
 
-    def _wls(self, sensor, cons, start, theta_pilot):
-        """WLS in the pilot's residual covariance (the pilot: the same in every unit, where OLS is not), under the
-        constraints from ``start`` (or, where those steps stall, from WLS's own start): (θ, f, status, a note of the
-        exact-data floor or the other start if used, Σ̂)."""
-        S, fallback = residual_covariance(sensor, theta_pilot)
+    def _wls(self, sensor, cons, start, weighing):
+        """WLS in the residual covariance at ``weighing`` (the whitened pilot), constrained, from ``start`` (or where those
+        steps stall from WLS's own): (θ, f, status, a note of the exact-data floor or the other start if used, Σ̂)."""
+        S, fallback = residual_covariance(sensor, weighing)
         note, levels = "" if fallback is None else f"; {fallback}", NoiseLevels(S, np.zeros_like(S), 1.0, 0.0, 0)
         try:
             theta, info = self._solve(sensor, cons, start, levels, convex_only=True)
@@ -235,8 +233,8 @@ class NoiseModelDM:
     def _rounds(self, sensor, sample, cons, theta, theta_pilot, budget=None, early: bool = True):
         """The levels / θ alternations from θ (module doc, step 3): (θ, levels, {iterations, rounds, status: ``_status``
         of the last solve}); the levels and the first round's θ from ``sample`` (``fit``: the problem, or a strided subsample);
-        ``budget``: the levels-only solves' iteration limit (None: max_iter). ``early``: first the check at Newton steps
-        from the pilot; when it rejects decisively, (θ as given, its levels, {…, check}) without a solve."""
+        ``budget``: the levels-only solves' iteration limit (None: max_iter). ``early``: the check at Newton steps from
+        the pilot first; a decisive rejection returns (θ as given, its levels, {…, check}) without a solve."""
         noise, run = None, {"iterations": 0, "rounds": 0, "status": "optimal"}
         fixed = self.sigma_tau is not None
         if fixed:
@@ -280,22 +278,27 @@ class NoiseModelDM:
             warnings.simplefilter("ignore", OptimumAtInfinityWarning)
             return np.asarray(fit_dual_metric_newton(problem, constrained=self.constrained, chunk=self.chunk).theta)
 
-    def _pilot(self, sensor, cons, R, r) -> tuple[np.ndarray, str]:
-        """Least squares in the weight (mean τ_i τ_iᵀ)⁻¹ (the equations whitened by the torques' second moment: the same
-        fit in every constant linear chart, unlike OLS's), unconstrained; under the constraints, by the interior point, where M(θ) is not
-        positive definite at every sample there. With a passive coordinate (τ_j = 0 on every sample: a floating base,
-        the Crazyflie's pendulum joints, a swimmer's body) the paper's dual-metric optimum instead: there the passive
-        equations are near-cancellations that least squares barely weighs, f has several basins, and the least-squares
-        start led to one whose model cannot predict the pendulum (Crazyflie, 20 samples, 6 subsets: shape NCC −0.37 /
-        −0.11 against 0.93 / 0.91 from the paper's optimum; WLS 0.91 / 0.83)."""
+    def _pilot(self, sensor, cons, R, r) -> tuple[np.ndarray, str, np.ndarray]:
+        """(θ, its name, the whitened pilot's θ): least squares on each coordinate's own force scale, and in the weight
+        (mean τ_i τ_iᵀ)⁻¹ (R, r), whose residual covariance only weighs the fallback. Whitening amplifies combinations in
+        which the torques nearly cancel and the regressor is mostly velocity noise, where least squares attenuates
+        (LandSalp's lateral wheel directions: lateral drags 1–20 % of the truth, ``dm`` 0.07 behind WLS from there).
+        With a passive coordinate (τ_j ≡ 0) the paper's optimum for both: there f has several basins, and from least
+        squares the Crazyflie's fit could not predict its pendulum."""
         if np.any(np.all(sensor.tau == 0, axis=0)):
-            return self._paper_optimum(sensor), "dm-paper"
+            return (paper := self._paper_optimum(sensor)), "dm-paper", paper
+        T = torque_scale(sensor)
+        own = np.diag(np.diag(T))  # each coordinate's own mean τ_j²
+        return (self._least_squares(sensor, cons, *_scaled(sensor, own), own), "unit-free least squares",
+                self._least_squares(sensor, cons, R, r, T))
+
+    def _least_squares(self, sensor, cons, R, r, weight) -> np.ndarray:
+        """argmin ‖Rθ − r‖ (the equations whitened by ``weight``), or where some M_i(θ) is not ≻ 0 that fit constrained."""
         theta = np.linalg.lstsq(R, r, rcond=np.finfo(float).eps * max(sensor.N * sensor.n, sensor.p))[0]
-        if np.isfinite(objective_value(sensor, theta, self.chunk)):  # M_i(θ) positive definite at every sample
-            return theta, "unit-free least squares"
-        weights = NoiseLevels(torque_scale(sensor), np.zeros((sensor.n, sensor.n)), 1.0, 0.0, 0)
-        return self._solve(sensor, cons, central_point(theta, cons) if self.constrained else theta, weights,
-                           LEVELS_TOL)[0], "unit-free least squares"
+        if np.isfinite(objective_value(sensor, theta, self.chunk)):
+            return theta
+        return self._solve(sensor, cons, central_point(theta, cons) if self.constrained else theta,
+                           NoiseLevels(weight, np.zeros_like(weight), 1.0, 0.0, 0), LEVELS_TOL)[0]
 
     def _early_check(self, sample, theta_pilot, noise) -> NoiseCheck | None:
         """The check at CHECK_STEPS damped Newton steps of f from the pilot (unconstrained); None where they fail."""
@@ -352,13 +355,12 @@ def _status(info: dict) -> str:  # "optimal_inaccurate": the interior point stop
     return "optimal_inaccurate" if info.get("status") == "optimal_inaccurate" else "optimal"
 
 
-def _scaled(problem) -> tuple[np.ndarray, np.ndarray]:
+def _scaled(problem, weight=None) -> tuple[np.ndarray, np.ndarray]:
     """(R, r): the triangular factor of [Yw τw], RᵀR = [Yw τw]ᵀ[Yw τw], split into its first p columns and its last, so
-    that ‖Yw θ − τw‖² = ‖R θ − r‖² (and ‖r‖² = ‖τw‖²); Yw, τw the equations whitened by the torques' second moment
-    T = L Lᵀ (``torque_scale``: Yw_i = L⁻¹Y_i, τw_i = L⁻¹τ_i), stacked: the unit-free least squares of the pilot and
-    the statistics of the closure, the same in every constant linear chart, by a QR over blocks of samples (the
-    singular values of Yw, without a copy of Y)."""
-    L, p = np.linalg.cholesky(torque_scale(problem)), problem.p
+    that ‖Yw θ − τw‖² = ‖R θ − r‖² (and ‖r‖² = ‖τw‖²); Yw, τw the equations whitened by ``weight`` = L Lᵀ (default: the
+    torques' second moment, ``torque_scale``: Yw_i = L⁻¹Y_i, τw_i = L⁻¹τ_i), stacked: the pilots' least squares and
+    the closure's statistics, by a QR over blocks of samples (the singular values of Yw, without a copy of Y)."""
+    L, p = np.linalg.cholesky(torque_scale(problem) if weight is None else weight), problem.p
     augmented = (np.linalg.solve(L, np.concatenate([block.Y[rows], block.tau[rows][:, :, None]], axis=2))
                  for block, rows, _ in sample_blocks(problem, CHUNK_QR))  # L⁻¹[Y_i τ_i]
     R = triangular_factor((A.reshape(-1, p + 1) for A in augmented), p + 1)
