@@ -316,6 +316,27 @@ def test_the_git_commit_is_dualids_own_or_none(tmp_path):
     assert git_commit(tmp_path) is None  # not a repository at all
 
 
+def test_the_git_commit_is_dirty_only_when_the_package_changed(tmp_path):
+    """A benchmark rewriting its result file beside the sources leaves the commit clean; a changed source does not."""
+    import subprocess
+
+    from dualid.report.metadata import git_commit
+
+    pkg = tmp_path / "src" / "dualid"
+    pkg.mkdir(parents=True)
+    (pkg / "x.py").write_text("a = 1\n")
+    (tmp_path / "result.md").write_text("old\n")
+    git = ["git", "-C", str(tmp_path), "-c", "user.name=t", "-c", "user.email=t@t"]
+    subprocess.run([*git, "init", "-q"], check=True)
+    subprocess.run([*git, "add", "."], check=True)
+    subprocess.run([*git, "commit", "-q", "-m", "x"], check=True)
+    head = subprocess.run([*git, "rev-parse", "HEAD"], check=True, capture_output=True, text=True).stdout.strip()
+    (tmp_path / "result.md").write_text("new\n")
+    assert git_commit(pkg) == head
+    (pkg / "x.py").write_text("a = 2\n")
+    assert git_commit(pkg) == head + "-dirty"
+
+
 def test_floating_base_translations_are_labelled_in_newtons_and_metres():
     from dualid.report.signals import unit_of
 

@@ -28,7 +28,8 @@ def dualid_version() -> str:
 
 def git_commit(where: Path = PACKAGE_DIR) -> str | None:
     """The commit of the dualid checkout that ``where`` (the package folder) is the ``src/dualid`` of, with
-    "-dirty" when it has uncommitted changes to tracked files; None when dualid is not run from its own
+    "-dirty" when the package's own tracked files have uncommitted changes (results and docs rewritten beside it do
+    not change what ran); None when dualid is not run from its own
     checkout (e.g. installed into a virtual environment that lies inside another project's repository,
     whose commit says nothing about dualid) or git is missing."""
     where = Path(where).resolve()
@@ -40,7 +41,7 @@ def git_commit(where: Path = PACKAGE_DIR) -> str | None:
         if Path(git("rev-parse", "--show-toplevel")).resolve() / "src" / "dualid" != where:
             return None
         commit = git("rev-parse", "HEAD")
-        dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
+        dirty = bool(git("status", "--porcelain", "--untracked-files=no", "--", "."))
     except (OSError, subprocess.SubprocessError):
         return None
     return commit + ("-dirty" if dirty else "") if commit else None
