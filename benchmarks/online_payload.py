@@ -157,7 +157,8 @@ def dm_gap(model: RigidBodyModel, log: dict, start: int, stop: int) -> dict:
                                   coordinates=model.coordinates)
     sub = restrict(whole, fit.idx, fit.theta0)
     S_tau, S_a = SIGMA_TAU ** 2 * np.eye(model.nv), SIGMA_A ** 2 * np.eye(model.nv)
-    batch = NoiseModelDM(sigma_tau=S_tau, sigma_a=S_a, check=False).fit(sub).theta
+    batch_fit = NoiseModelDM(sigma_tau=S_tau, sigma_a=S_a).fit(sub)  # its held-out check keeps the noise model here
+    batch = batch_fit.theta
     online = fit.consistent[fit.idx]
     ols = track(model, log, start, stop, detect=False, time_constant=None)["fit"]
     ols.project()
@@ -168,7 +169,7 @@ def dm_gap(model: RigidBodyModel, log: dict, start: int, stop: int) -> dict:
             "ols_objective_gap": (f["ols"] - f["batch"]) / f["batch"],
             "theta_gap": float(np.linalg.norm(online - batch) / np.linalg.norm(batch)),
             "mass_online": float(online[0]), "mass_batch": float(batch[0]), "mass_ols": float(ols.consistent[ols.idx][0]),
-            "mass_true": float(truth[0])}
+            "mass_true": float(truth[0]), "batch_choice": batch_fit.noise.choice}
 
 
 def measure(model: RigidBodyModel, log: dict, quiet_log: dict, weight: str, quiet_seconds: float) -> tuple:
