@@ -282,7 +282,7 @@ class NoiseModelDM:
         """(θ, its name, the whitened pilot's θ): least squares on each coordinate's own force scale, and in the weight
         (mean τ_i τ_iᵀ)⁻¹ (R, r), whose residual covariance only weighs the fallback. Whitening amplifies combinations in
         which the torques nearly cancel and the regressor is mostly velocity noise, where least squares attenuates
-        (LandSalp's lateral wheel directions: lateral drags 1–20 % of the truth, ``dm`` 0.07 behind WLS from there).
+        (LandSalp's lateral wheel directions: lateral drags 0–30 % of the truth, ``dm`` 0.07 behind WLS from there).
         With a passive coordinate (τ_j ≡ 0) the paper's optimum for both: there f has several basins, and from least
         squares the Crazyflie's fit could not predict its pendulum."""
         if np.any(np.all(sensor.tau == 0, axis=0)):
