@@ -79,9 +79,8 @@ LEVELS_MAX_ITER = 60  # first round's budget from a least-squares pilot, then fr
 
 
 def torque_scale(problem) -> np.ndarray:
-    """(n, n) the torques' second moment mean τ_i τ_iᵀ (covariant under any constant linear change of coordinates);
-    where it is singular (a passive coordinate, τ_j ≡ 0, or torques linearly dependent) its diagonal, with each
-    passive coordinate's entry the mean squared norm of its regressor rows, which transforms alike."""
+    """(n, n) mean τ_i τ_iᵀ (covariant under constant linear charts); where singular (a passive coordinate, torques
+    linearly dependent) its diagonal, a passive coordinate's entry its regressor rows' mean square (alike covariant)."""
     T = problem.tau.T @ problem.tau / problem.N
     if np.all(np.linalg.eigvalsh(T / np.sqrt(np.outer(np.diag(T), np.diag(T)) + 1e-300)) > SINGULAR_TORQUES):
         return T
@@ -127,8 +126,7 @@ class NoiseModelDM:
         if not self.allow_unidentifiable:
             check_identifiable(problem)
         sensor = problem.in_sensor_chart()
-        # pilot, closure, noise levels, check and first round: the problem in memory, or a strided subsample of
-        # CHECK_SAMPLES of streamed data or of data in memory it is at most a quarter of
+        # pilot, closure, levels, check and first round: a strided subsample of streamed or large data (module doc)
         whole = isinstance(sensor, IdentificationProblem) and sensor.N <= 4 * CHECK_SAMPLES
         sample = sensor if whole else sensor.subset(strided_rows(sensor.N, CHECK_SAMPLES))
         cons, done, (R, r) = self.closed_set(sample)
@@ -302,11 +300,11 @@ class NoiseModelDM:
 
     def _early_check(self, sample, theta_pilot, noise) -> NoiseCheck | None:
         """The check at CHECK_STEPS damped Newton steps of f from the pilot (unconstrained); None where they fail."""
-        try:
-            theta = newton_refit(sample, theta_pilot, noise.sigma_tau, noise.sigma_a, self.chunk, CHECK_STEPS)
+        try:  # (``_check`` catches its own failures)
+            return self._check(sample, newton_refit(sample, theta_pilot, noise.sigma_tau, noise.sigma_a, self.chunk,
+                                                    CHECK_STEPS), noise)
         except (NotPositiveDefinite, np.linalg.LinAlgError):
             return None
-        return self._check(sample, theta, noise)
 
     def _check(self, sensor, theta, noise) -> NoiseCheck | None:
         r = sensor.residual(theta)
