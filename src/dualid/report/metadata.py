@@ -28,8 +28,8 @@ def dualid_version() -> str:
 
 def git_commit(where: Path = PACKAGE_DIR) -> str | None:
     """The commit of the dualid checkout that ``where`` (the package folder) is the ``src/dualid`` of, with
-    "-dirty" when the package's own tracked files have uncommitted changes (results and docs rewritten beside it do
-    not change what ran); None when dualid is not run from its own
+    "-dirty" when the package's own tracked files have uncommitted changes (files outside it, such as results, docs
+    and benchmark scripts, are not looked at; untracked files are not either); None when dualid is not run from its own
     checkout (e.g. installed into a virtual environment that lies inside another project's repository,
     whose commit says nothing about dualid) or git is missing."""
     where = Path(where).resolve()
