@@ -127,8 +127,8 @@ class NoiseModelDM:
             check_identifiable(problem)
         sensor = problem.in_sensor_chart()
         # pilot, closure, levels, check and first round: a strided subsample of streamed or large data (module doc)
-        whole = isinstance(sensor, IdentificationProblem) and sensor.N <= 4 * CHECK_SAMPLES
-        sample = sensor if whole else sensor.subset(strided_rows(sensor.N, CHECK_SAMPLES))
+        sample = (sensor if isinstance(sensor, IdentificationProblem) and sensor.N <= 4 * CHECK_SAMPLES else
+                  sensor.subset(strided_rows(sensor.N, CHECK_SAMPLES)))
         cons, done, (R, r) = self.closed_set(sample)
         theta_pilot, pilot, weighing = self._pilot(sample, cons, R, r)
         start, paper = self._inside(theta_pilot, cons), None  # paper: the paper's optimum of every sample, once made
@@ -138,7 +138,7 @@ class NoiseModelDM:
             run.update(start=pilot, pilot=pilot)
         except SolverError as first:  # unseen parameters drifting outward, or over the budget: from the paper's optimum
             try:  # instead, unless the fit started there (the same solve would fail the same way)
-                if pilot == "dm-paper" and whole:
+                if pilot == "dm-paper" and sample is sensor:
                     raise first
                 paper = self._paper_optimum(sensor)  # (the early check would repeat itself)
                 theta, noise, run = self._rounds(sensor, sample, cons, self._inside(paper, cons), theta_pilot,
