@@ -165,22 +165,27 @@ def test_streamed_regularized_fit_equals_the_in_memory_fit(data, key):
     assert abs(b.objective - a.objective) <= 1e-8 * abs(a.objective)
 
 
-@pytest.mark.parametrize("check_samples", [200, 100])  # 700 samples in memory: all of them; a subsample of 100
-def test_streamed_dm_falls_back_to_the_whole_datas_paper_optimum(data, monkeypatch, check_samples):
-    """A passive coordinate makes dm's pilot the paper's optimum; on streamed data (and in memory above 4 ×
-    CHECK_SAMPLES) the pilot, levels and check come from a strided subsample. When dm falls back (its check forced to
-    reject here), it returns the paper's optimum of all the samples, not the subsample's."""
+def _passive_and_rejected(data, monkeypatch, check_samples):
+    """(the data with joint 2 passive, in memory and streamed, and its τ), with dm's CHECK_SAMPLES set and its held-out
+    check forced to reject: the pilot is the paper's optimum, and dm falls back to it."""
     import dualid.estimators.noise_dm as noise_dm
     from dualid.estimators.noise_model import NoiseCheck
 
     model, (q, v, a, tau), whole = data
     tau = tau.copy()
     tau[:, 2] = 0.0  # a passive joint
-    passive = replace(whole, tau=tau)
-    chunked = ChunkedProblem(model, ArraySource(q, v, a, tau, chunk=128))
     monkeypatch.setattr(noise_dm, "CHECK_SAMPLES", check_samples)
     monkeypatch.setattr(noise_dm.NoiseModelDM, "_check",
                         lambda self, sensor, theta, noise: NoiseCheck(1.0, 0.01, 1.0, 0.0, True))
+    return replace(whole, tau=tau), ChunkedProblem(model, ArraySource(q, v, a, tau, chunk=128)), tau
+
+
+@pytest.mark.parametrize("check_samples", [200, 100])  # 700 samples in memory: all of them; a subsample of 100
+def test_streamed_dm_falls_back_to_the_whole_datas_paper_optimum(data, monkeypatch, check_samples):
+    """A passive coordinate makes dm's pilot the paper's optimum; on streamed data (and in memory above 4 ×
+    CHECK_SAMPLES) the pilot, levels and check come from a strided subsample. When dm falls back (its check forced to
+    reject here), it returns the paper's optimum of all the samples, not the subsample's."""
+    passive, chunked, tau = _passive_and_rejected(data, monkeypatch, check_samples)
     est = make_estimator("dm", allow_unidentifiable=True)
     streamed, in_memory = est.fit(chunked), est.fit(passive)
     paper = make_estimator("dm-paper", allow_unidentifiable=True).fit(passive)
@@ -227,13 +232,8 @@ def test_streamed_dm_fits_the_whole_datas_paper_optimum_once(data, monkeypatch, 
     optimum, fitted once (each is a streamed ``dm-paper`` fit)."""
     import dualid.estimators.noise_dm as noise_dm
     from dualid.errors import SolverError
-    from dualid.estimators.noise_model import NoiseCheck
 
-    model, (q, v, a, tau), whole = data
-    tau = tau.copy()
-    tau[:, 2] = 0.0  # a passive joint: the pilot is the paper's optimum of the subsample
-    passive = replace(whole, tau=tau)
-    monkeypatch.setattr(noise_dm, "CHECK_SAMPLES", 200)
+    passive, chunked, tau = _passive_and_rejected(data, monkeypatch, 200)  # the pilot: the subsample's paper optimum
     fits, rounds, paper_optimum, own_rounds = [], [], noise_dm.NoiseModelDM._paper_optimum, noise_dm.NoiseModelDM._rounds
 
     def counted(self, problem):
@@ -248,10 +248,7 @@ def test_streamed_dm_fits_the_whole_datas_paper_optimum_once(data, monkeypatch, 
 
     monkeypatch.setattr(noise_dm.NoiseModelDM, "_paper_optimum", counted)
     monkeypatch.setattr(noise_dm.NoiseModelDM, "_rounds", failing)
-    monkeypatch.setattr(noise_dm.NoiseModelDM, "_check",
-                        lambda self, sensor, theta, noise: NoiseCheck(1.0, 0.01, 1.0, 0.0, True))
-    result = make_estimator("dm", allow_unidentifiable=True).fit(
-        ChunkedProblem(model, ArraySource(q, v, a, tau, chunk=128)))
+    result = make_estimator("dm", allow_unidentifiable=True).fit(chunked)
     paper = make_estimator("dm-paper", allow_unidentifiable=True).fit(passive)
     assert fits == [175, 700]  # the subsample's pilot, then every sample's optimum: not fitted again for the fallback
     why = "its noise-model fit did not converge (max_iterations)" if retry == "fails" else \
