@@ -24,6 +24,13 @@ def eiv_problem(seed: int, N: int = 300, torque: float = 0.05, regressor: float 
     return replace(problem, Y=problem.metric.apply(v_meas), tau=tau, v=v_meas), theta
 
 
+def whitened_least_squares(problem):
+    """numpy's least squares of the equations whitened by mean ττᵀ = L Lᵀ (L⁻¹Y_i θ ≈ L⁻¹τ_i): dm's fallback weight."""
+    L = np.linalg.cholesky(problem.tau.T @ problem.tau / problem.N)
+    return np.linalg.lstsq(np.linalg.solve(L, problem.Y).reshape(-1, problem.p),
+                           np.linalg.solve(L, problem.tau.T).T.reshape(-1), rcond=None)[0]
+
+
 def rel(a, b):
     return float(np.linalg.norm(np.asarray(a) - np.asarray(b)) / max(np.linalg.norm(b), 1e-300))
 
@@ -251,9 +258,7 @@ def test_a_degenerate_fit_without_a_passive_coordinate_falls_back_to_wls(monkeyp
     _flag_the_fits_guard(monkeypatch, 1e-3)
     res = NoiseModelDM().fit(problem)
     assert res.noise.choice.startswith("wls: its fit is degenerate against its pilot (generalised eigenvalues")
-    L = np.linalg.cholesky(problem.tau.T @ problem.tau / problem.N)  # the pilot: least squares whitened by mean ττᵀ
-    pilot = np.linalg.lstsq(np.linalg.solve(L, problem.Y).reshape(-1, problem.p),
-                            np.linalg.solve(L, problem.tau.T).T.reshape(-1), rcond=None)[0]
+    pilot = whitened_least_squares(problem)  # the whitened pilot
     r = problem.residual(pilot)
     S = r.T @ r / problem.N  # the pilot's residual covariance
     wls = WLS(covariance=S).fit(problem)
@@ -339,10 +344,7 @@ def test_a_noise_model_fit_that_does_not_converge_gives_way_to_the_pilots_estima
     driven, _ = eiv_problem(0, N=1000, torque=0.05, regressor=0.3)
     res = NoiseModelDM().fit(driven)
     assert res.noise.choice == "wls: its noise-model fit did not converge (max_iterations)"
-    L = np.linalg.cholesky(driven.tau.T @ driven.tau / driven.N)
-    whitened = np.linalg.lstsq(np.linalg.solve(L, driven.Y).reshape(-1, driven.p),
-                               np.linalg.solve(L, driven.tau.T).T.reshape(-1), rcond=None)[0]
-    r = driven.residual(whitened)
+    r = driven.residual(whitened_least_squares(driven))
     assert np.allclose(res.info["covariance_matrix"], r.T @ r / driven.N, rtol=1e-8, atol=0)
     wls = WLS(covariance=r.T @ r / driven.N).fit(driven)
     assert res.is_consistent and rel(driven.Y @ res.theta, driven.Y @ wls.theta) < 1e-5
@@ -412,9 +414,7 @@ def test_the_pilot_is_least_squares_per_coordinate_and_the_fallback_weight_is_wh
     problem, _ = eiv_problem(5, N=200)
     s = np.sqrt(np.mean(problem.tau**2, axis=0))
     own = np.linalg.lstsq((problem.Y / s[:, None]).reshape(-1, problem.p), (problem.tau / s).reshape(-1), rcond=None)[0]
-    L = np.linalg.cholesky(problem.tau.T @ problem.tau / problem.N)
-    whitened = np.linalg.lstsq(np.linalg.solve(L, problem.Y).reshape(-1, problem.p),
-                               np.linalg.solve(L, problem.tau.T).T.reshape(-1), rcond=None)[0]
+    whitened = whitened_least_squares(problem)
     assert rel(own, whitened) > 1e-3  # the two weights differ on these data
     dm = NoiseModelDM()
     cons, _, (R, r) = dm.closed_set(problem)
