@@ -296,9 +296,17 @@ def test_the_svg_names_each_curve_with_its_joint_rmse_and_keeps_the_measurement_
         assert TOP + ROW * j <= y.min() and y.max() <= ROW * (j + 1)  # the axes follow the measured signal
 
 
-def test_the_git_commit_is_dualids_own_or_none(tmp_path):
+def _commit_all(path) -> str:
+    """Make ``path`` a git repository (if it is not one) with everything in it committed; its HEAD."""
     import subprocess
 
+    git = ["git", "-C", str(path), "-c", "user.name=t", "-c", "user.email=t@t"]
+    for args in (["init", "-q"], ["add", "."], ["commit", "-q", "-m", "x"]):
+        subprocess.run([*git, *args], check=True)
+    return subprocess.run([*git, "rev-parse", "HEAD"], check=True, capture_output=True, text=True).stdout.strip()
+
+
+def test_the_git_commit_is_dualids_own_or_none(tmp_path):
     from dualid.report.metadata import PACKAGE_DIR, git_commit
 
     commit = git_commit()
@@ -308,29 +316,20 @@ def test_the_git_commit_is_dualids_own_or_none(tmp_path):
     pkg = tmp_path / "project" / ".venv" / "lib" / "dualid"
     pkg.mkdir(parents=True)
     (pkg / "x.py").write_text("")
-    git = ["git", "-C", str(tmp_path / "project"), "-c", "user.name=t", "-c", "user.email=t@t"]
-    subprocess.run([*git, "init", "-q"], check=True)
-    subprocess.run([*git, "add", "."], check=True)
-    subprocess.run([*git, "commit", "-q", "-m", "x"], check=True)
+    _commit_all(tmp_path / "project")
     assert git_commit(pkg) is None
     assert git_commit(tmp_path) is None  # not a repository at all
 
 
 def test_the_git_commit_is_dirty_only_when_the_package_changed(tmp_path):
     """A benchmark rewriting its result file beside the sources leaves the commit clean; a changed source does not."""
-    import subprocess
-
     from dualid.report.metadata import git_commit
 
     pkg = tmp_path / "src" / "dualid"
     pkg.mkdir(parents=True)
     (pkg / "x.py").write_text("a = 1\n")
     (tmp_path / "result.md").write_text("old\n")
-    git = ["git", "-C", str(tmp_path), "-c", "user.name=t", "-c", "user.email=t@t"]
-    subprocess.run([*git, "init", "-q"], check=True)
-    subprocess.run([*git, "add", "."], check=True)
-    subprocess.run([*git, "commit", "-q", "-m", "x"], check=True)
-    head = subprocess.run([*git, "rev-parse", "HEAD"], check=True, capture_output=True, text=True).stdout.strip()
+    head = _commit_all(tmp_path)
     (tmp_path / "result.md").write_text("new\n")
     assert git_commit(pkg) == head
     (pkg / "x.py").write_text("a = 2\n")
@@ -358,9 +357,7 @@ def test_the_data_commit_is_the_input_files_repository(tmp_path):
     git = ["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t"]
     subprocess.run([*git, "init", "-q"], check=True)
     assert data_commit([log]) is None  # no commit yet
-    subprocess.run([*git, "add", "."], check=True)
-    subprocess.run([*git, "commit", "-q", "-m", "x"], check=True)
-    head = subprocess.run([*git, "rev-parse", "HEAD"], capture_output=True, text=True, check=True).stdout.strip()
+    head = _commit_all(repo)
     assert data_commit([tmp_path / "missing.csv", log]) == {"commit": head, "repository": str(repo.resolve())}
     (repo / "other.txt").write_text("not an input")
     assert data_commit([log])["commit"] == head  # only the input files decide "-dirty"
