@@ -30,7 +30,6 @@ import dataclasses
 import json
 import os
 import platform
-import subprocess
 import sys
 import time
 import traceback
@@ -45,6 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from dualid.report.outdir import check_output_files  # noqa: E402
+from dualid.report.metadata import git_commit  # noqa: E402
 from dualid.bench import arms  # noqa: E402
 from dualid.data.trajectory import Trajectory  # noqa: E402
 from dualid.estimators.methods import make_estimator  # noqa: E402
@@ -188,11 +188,7 @@ def main(argv=None) -> int:
     check_output_files([Path(args.out) / "results.json", Path(args.out) / "results.md"], args.force, ap)
     t0 = time.time()
     res = run(args.reps, args.seed, args.seconds, tuple(args.methods.split(",")), args.bootstrap)
-    try:
-        commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                                text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        commit = "unknown"
+    commit = git_commit() or "unknown"
     res.update(command=" ".join(["python benchmarks/coverage.py", *(argv if argv is not None else sys.argv[1:])]),
                commit=commit, machine=f"{platform.machine()}, {os.cpu_count()} cores", wall_s=time.time() - t0)
     out = Path(args.out)

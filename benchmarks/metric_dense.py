@@ -23,6 +23,7 @@ import dualid.model.metric as metric_module
 from dualid.model.metric import AffineMetric, MetricTerm
 from dualid.model.rigid_body import spatial_inertia_basis
 from dualid.report.outdir import check_output_files
+from dualid.report.metadata import git_commit
 
 HERE = Path(__file__).resolve().parent
 
@@ -103,7 +104,7 @@ def main(argv=None) -> int:
     for _ in range(args.rounds):
         fits["dense"].append(dfki_fit(shipped, 5))
         fits["factored"].append(dfki_fit(0, 5))
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    commit = git_commit()
     lines = ["# The dense M_ik against the factored products", "",
              f"Command: `OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python benchmarks/metric_dense.py --repeat {args.repeat} "
              f"--rounds {args.rounds}` (dualid {commit or 'unknown'}; minimum over the repeats; DENSE_MAX_N = {shipped}).", "",

@@ -13,12 +13,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import tempfile
 import time
 from pathlib import Path
 
 from dualid.bench.runner import BASE_SAMPLES, machine, run_in_subprocess
+from dualid.report.metadata import git_commit
 
 
 def _load() -> float:
@@ -51,7 +51,7 @@ def main() -> None:
     command = "OPENBLAS_NUM_THREADS=1 python benchmarks/newton_vs_sdp.py " + " ".join(
         f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items() if k not in ("out", "force"))
     out_json.write_text(json.dumps({"command": command, "machine": machine(), "rows": rows}, indent=1))
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    commit = git_commit()
     m = machine()
     lines = ["# The paper's DM: dualid's Newton against the Clarabel SDP", "",
              f"Command: `{command}` (dualid {commit or 'unknown'}, {m['cpu']}, {m['cores']} cores; one process per run, "

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -34,6 +33,7 @@ import pinocchio as pin
 from scipy.stats import chi2
 
 from dualid.report.outdir import check_output_files
+from dualid.report.metadata import git_commit
 from dualid.bench.runner import machine
 from dualid.bench.urdf_arm import arm_urdf, example_robot_urdf, joint_ranges
 from dualid.estimators.noise_dm import NoiseModelDM
@@ -206,7 +206,7 @@ def run(args) -> tuple:
     _, rows, windows, detector = by_weight[WEIGHTS[0]]
     change = log["change"]
     result = {
-        "command": " ".join(["python"] + sys.argv), "commit": _commit(), "machine": machine(),
+        "command": " ".join(["python"] + sys.argv), "commit": git_commit() or "unknown", "machine": machine(),
         "settings": {**SETTINGS, "batch": BATCH, "fs_hz": FS, "sigma_tau": SIGMA_TAU, "sigma_a": SIGMA_A,
                      "payload_kg": PAYLOAD, "pickup_s": args.pickup, "seconds": args.seconds, "seed": args.seed},
         "mass_change_true": float(log["after"][0] - log["before"][0]),
@@ -215,11 +215,6 @@ def run(args) -> tuple:
         "dm_gap": [dm_gap(model, log, 0, change), dm_gap(model, log, change, change + int(10 * FS))],
     }
     return result, rows, windows, detector.threshold
-
-
-def _commit() -> str:
-    here = Path(__file__).resolve().parent
-    return subprocess.run(["git", "-C", str(here), "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()
 
 
 def figure(rows, windows, threshold, result, path: Path) -> None:

@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 from dualid.report.outdir import check_output_files
+from dualid.report.metadata import git_commit
 
 ROOT = Path(__file__).resolve().parents[1]
 HERE = Path(__file__).resolve().parent
@@ -119,12 +120,6 @@ def machine() -> str:
             f"{platform.python_version()}, numpy {numpy.__version__}")
 
 
-def commit() -> str:
-    out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True)
-    dirty = subprocess.run(["git", "status", "--porcelain", "--", "src"], cwd=ROOT, capture_output=True, text=True)
-    return out.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "") if out.returncode == 0 else "(no git)"
-
-
 def markdown(record: dict) -> str:
     before = any("before" in r for r in record["rows"])
     lines = ["# Where a user waits", "", f"Command: `{record['command']}`", "",
@@ -162,7 +157,7 @@ def main() -> None:
     rows = measure(sources, args.repeat)
     if not args.no_main_job:
         rows.append(main_job())
-    record = {"command": shlex.join(["python", "benchmarks/speed.py", *sys.argv[1:]]), "commit": commit(),
+    record = {"command": shlex.join(["python", "benchmarks/speed.py", *sys.argv[1:]]), "commit": git_commit(ROOT / "src" / "dualid") or "(no git)",
               "baseline": str(args.baseline_src) if args.baseline_src else None, "machine": machine(),
               "load_average": os.getloadavg(), "time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
               "rows": rows}

@@ -283,8 +283,7 @@ def to_markdown(result: dict) -> str:
         f"Command: `{result['command']}`  ",
         f"Wall time {result['wall_time_s'] / 60:.1f} min with {result['workers']} worker(s) on {m['cpu']} "
         f"({m['cores']} cores, shared), numpy {m['numpy']}, Python {m['python']}.  ",
-        f"dualid package: {result['provenance']['dualid_package']} at commit {result['provenance']['commit'].split()[0][:10]}"
-        + (f" with uncommitted changes to {', '.join(result['provenance']['uncommitted'])}" if result['provenance']['uncommitted'] else "")
+        f"dualid package: {result['provenance']['dualid_package']} at commit {result['provenance']['commit']}"
         + f"; data module {result['provenance']['data_module']}."
         + (f" Note: {result['provenance']['note']}." if result["provenance"].get("note") else ""),
         "",
@@ -422,14 +421,11 @@ def to_markdown(result: dict) -> str:
 
 def _provenance() -> dict:
     """Which dualid tree and commit run (taken at the start, before any fit)."""
-    import subprocess
-
     import dualid
+    from dualid.report.metadata import git_commit
 
-    src = Path(dualid.__file__).resolve().parents[1]
-    git = lambda *a: subprocess.run(["git", "-C", str(src), *a], capture_output=True, text=True).stdout.strip()
-    return {"dualid_package": str(Path(dualid.__file__).resolve().parent), "commit": git("rev-parse", "HEAD"),
-            "uncommitted": git("status", "--short", "--", ".").splitlines(),  # relative to src/ (-C)
+    package = Path(dualid.__file__).resolve().parent
+    return {"dualid_package": str(package), "commit": git_commit(package) or "unknown",
             "data_module": str(Path(sb.__file__).resolve())}
 
 
