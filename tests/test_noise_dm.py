@@ -417,8 +417,8 @@ def test_the_pilot_is_least_squares_per_coordinate_and_the_fallback_weight_is_wh
     whitened = whitened_least_squares(problem)
     assert rel(own, whitened) > 1e-3  # the two weights differ on these data
     dm = NoiseModelDM()
-    cons, _, (R, r) = dm.closed_set(problem)
-    theta, name, weighing = dm._pilot(problem, cons, R, r)
+    cons, _, scaled = dm.closed_set(problem)
+    theta, name, weighing = dm._pilot(problem, cons, *scaled)
     assert name == "unit-free least squares"
     assert rel(theta, own) < 1e-9 and rel(weighing, whitened) < 1e-9
 

@@ -129,8 +129,8 @@ class NoiseModelDM:
         # pilot, closure, levels, check and first round: a strided subsample of streamed or large data (module doc)
         sample = (sensor if isinstance(sensor, IdentificationProblem) and sensor.N <= 4 * CHECK_SAMPLES else
                   sensor.subset(strided_rows(sensor.N, CHECK_SAMPLES)))
-        cons, done, (R, r) = self.closed_set(sample)
-        theta_pilot, pilot, weighing = self._pilot(sample, cons, R, r)
+        cons, done, whitened = self.closed_set(sample)
+        theta_pilot, pilot, weighing = self._pilot(sample, cons, *whitened)
         start, paper = self._inside(theta_pilot, cons), None  # paper: the paper's optimum of every sample, once made
         try:
             budget = None if pilot == "dm-paper" else LEVELS_MAX_ITER
@@ -178,11 +178,12 @@ class NoiseModelDM:
                             None if why else guard, extra)
 
     def closed_set(self, sample):
-        """(cons closed over what f cannot see (model.closure), done completing θ, the pilot's ``_scaled`` statistics)."""
-        R, r = _scaled(sample)  # ‖r‖² = Σ τw_iᵀτw_i: f(0) of the whitened least squares, the closure's scale
+        """(cons closed over what f cannot see (model.closure), done completing θ, (R, r, T = ``torque_scale``))."""
+        T = torque_scale(sample)
+        R, r = _scaled(sample, T)  # ‖r‖² = Σ τw_iᵀτw_i: f(0) of the whitened least squares, the closure's scale
         cons, done = on_closure(feasible_set(sample.parameters, self.constrained), R.T @ R, float(r @ r),
                                 sample.parameters.names, enabled=self.constrained)
-        return cons, done, (R, r)
+        return cons, done, (R, r, T)
 
     def _without_noise_model(self, problem, sensor, sample, cons, done, start, pilots, pilot, why, t0, paper):
         """``_pilots_estimator`` when no noise-model fit exists (``paper``: the paper's optimum of every sample, if made);
@@ -276,16 +277,15 @@ class NoiseModelDM:
             warnings.simplefilter("ignore", OptimumAtInfinityWarning)
             return np.asarray(fit_dual_metric_newton(problem, constrained=self.constrained, chunk=self.chunk).theta)
 
-    def _pilot(self, sensor, cons, R, r) -> tuple[np.ndarray, str, np.ndarray]:
+    def _pilot(self, sensor, cons, R, r, T) -> tuple[np.ndarray, str, np.ndarray]:
         """(θ, its name, the whitened pilot's θ): least squares on each coordinate's own force scale, and in the weight
-        (mean τ_i τ_iᵀ)⁻¹ (R, r), whose residual covariance only weighs the fallback. Whitening amplifies combinations in
+        T⁻¹ (T = mean τ_i τ_iᵀ; R, r), whose residual covariance only weighs the fallback. Whitening amplifies combinations in
         which the torques nearly cancel and the regressor is mostly velocity noise, where least squares attenuates
         (LandSalp's lateral wheel directions: lateral drags 0–30 % of the truth, ``dm`` 0.07 behind WLS from there).
         With a passive coordinate (τ_j ≡ 0) the paper's optimum for both: there f has several basins, and from least
         squares the Crazyflie's fit could not predict its pendulum."""
         if np.any(np.all(sensor.tau == 0, axis=0)):
             return (paper := self._paper_optimum(sensor)), "dm-paper", paper
-        T = torque_scale(sensor)
         own = np.diag(np.diag(T))  # each coordinate's own mean τ_j²
         return (self._least_squares(sensor, cons, *_scaled(sensor, own), own), "unit-free least squares",
                 self._least_squares(sensor, cons, R, r, T))
@@ -353,12 +353,12 @@ def _status(info: dict) -> str:  # "optimal_inaccurate": the interior point stop
     return "optimal_inaccurate" if info.get("status") == "optimal_inaccurate" else "optimal"
 
 
-def _scaled(problem, weight=None) -> tuple[np.ndarray, np.ndarray]:
+def _scaled(problem, weight) -> tuple[np.ndarray, np.ndarray]:
     """(R, r): the triangular factor of [Yw τw], RᵀR = [Yw τw]ᵀ[Yw τw], split into its first p columns and its last, so
-    that ‖Yw θ − τw‖² = ‖R θ − r‖² (and ‖r‖² = ‖τw‖²); Yw, τw the equations whitened by ``weight`` = L Lᵀ (default: the
-    torques' second moment, ``torque_scale``: Yw_i = L⁻¹Y_i, τw_i = L⁻¹τ_i), stacked: the pilots' least squares and
-    the closure's statistics, by a QR over blocks of samples (the singular values of Yw, without a copy of Y)."""
-    L, p = np.linalg.cholesky(torque_scale(problem) if weight is None else weight), problem.p
+    that ‖Yw θ − τw‖² = ‖R θ − r‖² (and ‖r‖² = ‖τw‖²); Yw, τw the equations whitened by ``weight`` = L Lᵀ (Yw_i = L⁻¹Y_i,
+    τw_i = L⁻¹τ_i), stacked: the pilots' least squares and the closure's statistics, by a QR over blocks of samples (the
+    singular values of Yw, without a copy of Y)."""
+    L, p = np.linalg.cholesky(weight), problem.p
     augmented = (np.linalg.solve(L, np.concatenate([block.Y[rows], block.tau[rows][:, :, None]], axis=2))
                  for block, rows, _ in sample_blocks(problem, CHUNK_QR))  # L⁻¹[Y_i τ_i]
     R = triangular_factor((A.reshape(-1, p + 1) for A in augmented), p + 1)
