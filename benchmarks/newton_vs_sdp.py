@@ -6,6 +6,11 @@
 solver, N) runs in its own Python process, one at a time (``dualid.bench.runner.run_in_subprocess``: the same
 problems, estimators and timing as ``dualid bench``: wall time of ``estimator.fit(problem)`` as a user calls
 it, the metric guard included). The machine's load average is recorded before and after each run.
+
+Where Newton's time goes (``breakdown``, in this process after the runs, best of 3): one pass of the derivatives
+(f, ∇f, ∇²f over every sample) at θ̂, and the metric guard that ``DualMetric.fit`` adds (its WLS reference fit and
+the generalised-eigenvalue pass). A fit needs about one pass per iteration (plus, with a warm start, the
+subsample's): passes × pass + guard is what the fit cannot go below with these kernels.
 """
 
 from __future__ import annotations
@@ -17,12 +22,34 @@ import tempfile
 import time
 from pathlib import Path
 
-from dualid.bench.runner import BASE_SAMPLES, machine, run_in_subprocess
+from dualid.bench.runner import BASE_SAMPLES, base_samples, build_problem, machine, run_in_subprocess
+from dualid.estimators import DualMetric
+from dualid.estimators.least_squares import wls_reference
+from dualid.estimators.newton import dual_metric_derivatives
+from dualid.metric_guard import guard_sample, reference_guard
 from dualid.report.metadata import git_commit
 
 
 def _load() -> float:
     return os.getloadavg()[0]
+
+
+def _best(f, repeat: int = 3) -> float:
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        f()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def breakdown(name: str, N: int, cache: Path) -> dict:
+    """{"pass_s": one order-2 derivative pass over all samples at θ̂, "guard_s": the metric guard of ``DualMetric.fit``}."""
+    problem = build_problem(base_samples(name, cache, min(N, BASE_SAMPLES)), N)
+    theta = DualMetric(allow_unidentifiable=True).fit(problem).theta
+    some, _ = guard_sample(problem)
+    return {"pass_s": _best(lambda: dual_metric_derivatives(problem, theta, 2)),
+            "guard_s": _best(lambda: reference_guard(problem, theta, wls_reference(some, True)[0], "wls fit"))}
 
 
 def main() -> None:
@@ -48,6 +75,10 @@ def main() -> None:
                 row.update(started_utc=t0, load_before=before, load_after=_load())
                 print(json.dumps(row), flush=True)
                 rows.append(row)
+            if "newton" in args.solvers.split(","):
+                parts = {"problem": name, "N": N, "solver": "newton breakdown", **breakdown(name, N, cache)}
+                print(json.dumps(parts), flush=True)
+                rows.append(parts)
     command = "OPENBLAS_NUM_THREADS=1 python benchmarks/newton_vs_sdp.py " + " ".join(
         f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items() if k not in ("out", "force"))
     out_json.write_text(json.dumps({"command": command, "machine": machine(), "rows": rows}, indent=1))
@@ -57,7 +88,8 @@ def main() -> None:
              f"Command: `{command}` (dualid {commit or 'unknown'}, {m['cpu']}, {m['cores']} cores; one process per run, "
              "one run at a time).", "",
              "| problem | N | Newton [s] (it.) | Clarabel [s] (it.) | Clarabel ÷ Newton | objective gap (N − C)/C | "
-             "peak RSS N / C [GB] | load before → after |", "| --- | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
+             "peak RSS N / C [GB] | load before → after | one pass / guard [ms] |",
+             "| --- | ---: | ---: | ---: | ---: | ---: | ---: | --- | ---: |"]
     by = {(r["problem"], r["N"], r["solver"]): r for r in rows}
     for name in args.problems.split(","):
         for N in sizes:
@@ -74,7 +106,9 @@ def main() -> None:
                     gap = f"{(fa - fb) / fb:.1e}"
             rss = f"{a.get('peak_rss_GB', float('nan')):.2f} / {b.get('peak_rss_GB', float('nan')):.2f}"
             loads = f"{a.get('load_before', float('nan')):.1f} → {b.get('load_after', float('nan')):.1f}"
-            lines.append(f"| {name} | {N:,} | {cell(a)} | {cell(b)} | {ratio} | {gap} | {rss} | {loads} |")
+            parts = by.get((name, N, "newton breakdown"), {})
+            split = f"{1e3 * parts['pass_s']:.1f} / {1e3 * parts['guard_s']:.1f}" if parts else "—"
+            lines.append(f"| {name} | {N:,} | {cell(a)} | {cell(b)} | {ratio} | {gap} | {rss} | {loads} | {split} |")
     args.out.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
