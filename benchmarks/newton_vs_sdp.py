@@ -20,6 +20,7 @@ import json
 import os
 import tempfile
 import time
+import timeit
 from pathlib import Path
 
 from dualid.bench.runner import BASE_SAMPLES, base_samples, build_problem, machine, run_in_subprocess
@@ -34,22 +35,14 @@ def _load() -> float:
     return os.getloadavg()[0]
 
 
-def _best(f, repeat: int = 3) -> float:
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        f()
-        times.append(time.perf_counter() - t0)
-    return min(times)
-
-
 def breakdown(name: str, N: int, cache: Path) -> dict:
     """{"pass_s": one order-2 derivative pass over all samples at θ̂, "guard_s": the metric guard of ``DualMetric.fit``}."""
     problem = build_problem(base_samples(name, cache, min(N, BASE_SAMPLES)), N)
     theta = DualMetric(allow_unidentifiable=True).fit(problem).theta
     some, _ = guard_sample(problem)
-    return {"pass_s": _best(lambda: dual_metric_derivatives(problem, theta, 2)),
-            "guard_s": _best(lambda: reference_guard(problem, theta, wls_reference(some, True)[0], "wls fit"))}
+    return {"pass_s": min(timeit.repeat(lambda: dual_metric_derivatives(problem, theta, 2), number=1, repeat=3)),
+            "guard_s": min(timeit.repeat(lambda: reference_guard(problem, theta, wls_reference(some, True)[0], "wls fit"),
+                                         number=1, repeat=3))}
 
 
 def main() -> None:
