@@ -157,7 +157,8 @@ def main() -> None:
     rows = measure(sources, args.repeat)
     if not args.no_main_job:
         rows.append(main_job())
-    record = {"command": shlex.join(["python", "benchmarks/speed.py", *sys.argv[1:]]), "commit": git_commit(ROOT / "src" / "dualid") or "(no git)",
+    record = {"command": shlex.join(["python", "benchmarks/speed.py", *sys.argv[1:]]),
+              "commit": git_commit(ROOT / "src" / "dualid") or "(no git)",
               "baseline": str(args.baseline_src) if args.baseline_src else None, "machine": machine(),
               "load_average": os.getloadavg(), "time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
               "rows": rows}

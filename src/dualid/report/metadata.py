@@ -34,14 +34,10 @@ def git_commit(where: Path = PACKAGE_DIR) -> str | None:
     whose commit says nothing about dualid) or git is missing."""
     where = Path(where).resolve()
     try:
-        def git(*args: str) -> str:
-            return subprocess.run(["git", "-C", str(where), *args], capture_output=True, text=True, timeout=10,
-                                  check=True).stdout.strip()
-
-        if Path(git("rev-parse", "--show-toplevel")).resolve() / "src" / "dualid" != where:
+        if Path(_git(where, "rev-parse", "--show-toplevel")).resolve() / "src" / "dualid" != where:
             return None
-        commit = git("rev-parse", "HEAD")
-        dirty = bool(git("status", "--porcelain", "--untracked-files=no", "--", "."))
+        commit = _git(where, "rev-parse", "HEAD")
+        dirty = bool(_git(where, "status", "--porcelain", "--untracked-files=no", "--", "."))
     except (OSError, subprocess.SubprocessError):
         return None
     return commit + ("-dirty" if dirty else "") if commit else None
